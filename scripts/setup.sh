@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Installs every Debian 12 package PERF needs to build, test and run. Idempotent and
+# non-interactive: packages already present are left alone; apt-get update runs first.
+set -euo pipefail
+
+PACKAGES=(
+  build-essential cmake ninja-build ccache pkg-config git
+  libopenimageio-dev openimageio-tools   # image I/O and filtered resize; oiiotool for tests
+  libopencv-dev                          # undistortion, image metrics
+  libeigen3-dev                          # geometry
+  libceres-dev                           # derivative checks, reference solves
+  libcli11-dev                           # the CLI
+  nlohmann-json3-dev                     # scene.json
+  libtbb-dev                             # CPU threads
+  libopenvdb-dev libboost-dev libopenvdb-tools  # volume export and meshing (+ vdb_print)
+  libgtest-dev libgmock-dev libbenchmark-dev    # tests and benchmarks
+  colmap                                 # photos -> sparse model (perf sfm), model_converter in tests
+  clang                                  # libFuzzer target for the binary readers (optional)
+)
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "setup: all ${#PACKAGES[@]} packages already installed"
+  exit 0
+fi
+
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+echo "setup: installing ${missing[*]}"
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -q
+$SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"

@@ -1,0 +1,34 @@
+// Image input/output through OpenImageIO: JPEG, PNG (8/16-bit), TIFF, EXR and whatever else
+// OIIO reads; RGB, RGBA or grey. Pixels are returned as stored (no EXIF reorientation), which
+// is the orientation COLMAP used when it detected features.
+#pragma once
+
+#include <filesystem>
+
+#include "sfm_import/image.h"
+
+namespace perf {
+
+struct ImageInfo {
+  int width = 0, height = 0, channels = 0;
+  PixelFormat format = PixelFormat::kUInt8;
+};
+
+// Reads only the header. Throws InputError if the file is not a readable image.
+ImageInfo ReadImageInfo(const std::filesystem::path& path);
+
+// Reads the whole image as float. `info` (optional) receives the stored format.
+Image ReadImage(const std::filesystem::path& path, ImageInfo* info = nullptr);
+
+// Writes atomically; the file format follows the extension. Values are clamped to [0, 1] for
+// integer formats.
+void WriteImage(const std::filesystem::path& path, const Image& image, PixelFormat format);
+
+// Filtered resize (OIIO's ImageBufAlgo::resize, default filter: blackman-harris for
+// downscaling) to exactly `width` x `height`.
+Image ResizeImage(const Image& image, int width, int height);
+
+// File extensions (lower case, with dot) recognised as images when scanning folders.
+bool HasImageExtension(const std::filesystem::path& path);
+
+}  // namespace perf
