@@ -1,1 +1,127 @@
-// placeholder: being written in this session
+#include "sfm_import/image_io.h"
+
+#include <OpenImageIO/imagebuf.h>
+#include <OpenImageIO/imagebufalgo.h>
+#include <OpenImageIO/imageio.h>
+
+#include <algorithm>
+#include <array>
+#include <cctype>
+
+#include "common/atomic_file.h"
+#include "common/errors.h"
+
+namespace fs = std::filesystem;
+namespace OIIO = OIIO_NAMESPACE;
+
+namespace perf {
+namespace {
+
+PixelFormat FromTypeDesc(const OIIO::TypeDesc& t) {
+  if (t == OIIO::TypeDesc::UINT8 || t == OIIO::TypeDesc::INT8) return PixelFormat::kUInt8;
+  if (t == OIIO::TypeDesc::UINT16 || t == OIIO::TypeDesc::INT16) return PixelFormat::kUInt16;
+  if (t == OIIO::TypeDesc::HALF) return PixelFormat::kHalf;
+  return PixelFormat::kFloat;
+}
+
+OIIO::TypeDesc ToTypeDesc(PixelFormat f) {
+  switch (f) {
+    case PixelFormat::kUInt8: return OIIO::TypeDesc::UINT8;
+    case PixelFormat::kUInt16: return OIIO::TypeDesc::UINT16;
+    case PixelFormat::kHalf: return OIIO::TypeDesc::HALF;
+    case PixelFormat::kFloat: return OIIO::TypeDesc::FLOAT;
+  }
+  return OIIO::TypeDesc::FLOAT;
+}
+
+std::unique_ptr<OIIO::ImageInput> OpenInput(const fs::path& path) {
+  if (!fs::exists(path)) {
+    throw IoError(path.string(), "image file not found", "check the --images folder and the names in the model");
+  }
+  auto in = OIIO::ImageInput::open(path.string());
+  if (!in) {
+    throw InputError(path.string(), "", "", "not a readable image (" + OIIO::geterror() + ")",
+                     "re-export it as JPEG, PNG, TIFF or EXR, or remove it from the model");
+  }
+  return in;
+}
+
+}  // namespace
+
+ImageInfo ReadImageInfo(const fs::path& path) {
+  auto in = OpenInput(path);
+  const OIIO::ImageSpec& spec = in->spec();
+  ImageInfo info{spec.width, spec.height, spec.nchannels, FromTypeDesc(spec.format)};
+  in->close();
+  if (info.width <= 0 || info.height <= 0 || info.channels <= 0) {
+    throw InputError(path.string(), "size", StrCat(info.width, "x", info.height, "x", info.channels),
+                     "image has no pixels");
+  }
+  return info;
+}
+
+Image ReadImage(const fs::path& path, ImageInfo* info) {
+  auto in = OpenInput(path);
+  const OIIO::ImageSpec spec = in->spec();
+  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) {
+    throw InputError(path.string(), "size", StrCat(spec.width, "x", spec.height), "image has no pixels");
+  }
+  // Grey, grey+alpha, RGB and RGBA are kept; extra channels beyond 4 are dropped.
+  const int channels = std::min(spec.nchannels, 4);
+  Image image(spec.width, spec.height, channels);
+  // Reads the first subimage/miplevel as stored: no EXIF reorientation (COLMAP does none).
+  if (!in->read_image(0, 0, 0, channels, OIIO::TypeDesc::FLOAT, image.pixels.data())) {
+    throw InputError(path.string(), "pixels", "", "cannot decode the image (" + in->geterror() + ")",
+                     "the file may be truncated or corrupt; re-export it");
+  }
+  in->close();
+  if (info) *info = ImageInfo{spec.width, spec.height, channels, FromTypeDesc(spec.format)};
+  return image;
+}
+
+void WriteImage(const fs::path& path, const Image& image, PixelFormat format) {
+  PERF_CHECK(!image.empty());
+  WriteAtomically(path, [&](const fs::path& tmp) {
+    auto out = OIIO::ImageOutput::create(tmp.string());
+    if (!out) {
+      throw IoError(path.string(), "no image writer for this extension (" + OIIO::geterror() + ")");
+    }
+    OIIO::ImageSpec spec(image.width, image.height, image.channels, ToTypeDesc(format));
+    if (image.channels == 4) spec.alpha_channel = 3;
+    if (image.channels == 2) spec.alpha_channel = 1;
+    if (!out->open(tmp.string(), spec)) {
+      throw IoError(path.string(), "cannot create the image file (" + out->geterror() + ")",
+                    "check that the folder is writable");
+    }
+    // OIIO clamps and quantises float to integer formats on write.
+    if (!out->write_image(OIIO::TypeDesc::FLOAT, image.pixels.data()) || !out->close()) {
+      throw IoError(path.string(), "writing the image failed (" + out->geterror() + ")", "disk full?");
+    }
+  });
+}
+
+Image ResizeImage(const Image& image, int width, int height) {
+  PERF_CHECK(width > 0 && height > 0 && !image.empty());
+  if (width == image.width && height == image.height) return image;
+  OIIO::ImageSpec src_spec(image.width, image.height, image.channels, OIIO::TypeDesc::FLOAT);
+  OIIO::ImageBuf src(src_spec, const_cast<float*>(image.pixels.data()));
+  OIIO::ImageSpec dst_spec(width, height, image.channels, OIIO::TypeDesc::FLOAT);
+  Image out(width, height, image.channels);
+  OIIO::ImageBuf dst(dst_spec, out.pixels.data());
+  // An empty filter name lets OIIO choose: blackman-harris for minification, which is what a
+  // photographer's downscale would use (no aliasing, little blur).
+  if (!OIIO::ImageBufAlgo::resize(dst, src, "", 0.f, OIIO::ROI::All(), 0)) {
+    throw InternalError("OpenImageIO resize failed: " + dst.geterror());
+  }
+  return out;
+}
+
+bool HasImageExtension(const fs::path& path) {
+  static const std::array<std::string_view, 10> kExt = {".jpg", ".jpeg", ".png", ".tif", ".tiff",
+                                                        ".exr", ".bmp", ".webp", ".hdr", ".dpx"};
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  return std::find(kExt.begin(), kExt.end(), ext) != kExt.end();
+}
+
+}  // namespace perf

@@ -17,7 +17,8 @@ struct ImageInfo {
 // Reads only the header. Throws InputError if the file is not a readable image.
 ImageInfo ReadImageInfo(const std::filesystem::path& path);
 
-// Reads the whole image as float. `info` (optional) receives the stored format.
+// Reads the whole image as float. `info` (optional) receives the stored format. Images with
+// alpha come back with associated (premultiplied) colour, OpenImageIO's default.
 Image ReadImage(const std::filesystem::path& path, ImageInfo* info = nullptr);
 
 // Writes atomically; the file format follows the extension. Values are clamped to [0, 1] for

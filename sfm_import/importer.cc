@@ -1,1 +1,467 @@
-// placeholder: being written in this session
+#include "sfm_import/importer.h"
+
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <set>
+#include <sstream>
+
+#include "common/atomic_file.h"
+#include "common/errors.h"
+#include "sfm_import/camera_models.h"
+#include "sfm_import/colmap_model.h"
+#include "sfm_import/image_io.h"
+#include "sfm_import/nerf_reader.h"
+#include "sfm_import/undistort.h"
+
+namespace fs = std::filesystem;
+
+namespace perf {
+namespace {
+
+constexpr const char* kCommandLine = "command line";
+
+// One photo to bring into the workspace.
+struct ImageJob {
+  fs::path source;         // the photo on disk
+  std::string out_rel;     // workspace-relative output path
+  std::string alpha_rel;   // workspace-relative alpha path, empty for none
+  const Undistorter* undistorter = nullptr;  // nullptr: no undistortion
+  int out_width = 0, out_height = 0;
+};
+
+// The size after --downscale / --max-size.
+void OutputSize(const ImportOptions& o, int w, int h, int* ow, int* oh) {
+  double s = 1.0 / o.downscale;
+  if (o.max_size > 0) s = std::min(1.0, static_cast<double>(o.max_size) / std::max(w, h));
+  *ow = std::max(1, static_cast<int>(std::lround(w * s)));
+  *oh = std::max(1, static_cast<int>(std::lround(h * s)));
+}
+
+// All image files under `dir`, as '/'-separated paths relative to it (COLMAP's image names).
+std::set<std::string> ListImages(const fs::path& dir) {
+  std::set<std::string> names;
+  for (const auto& e : fs::recursive_directory_iterator(dir, fs::directory_options::skip_permission_denied)) {
+    if (e.is_regular_file() && HasImageExtension(e.path())) {
+      names.insert(fs::relative(e.path(), dir).generic_string());
+    }
+  }
+  return names;
+}
+
+std::string OutputExtension(PixelFormat f) { return f == PixelFormat::kHalf || f == PixelFormat::kFloat ? ".exr" : ".png"; }
+PixelFormat OutputFormat(PixelFormat f) {
+  return f == PixelFormat::kFloat ? PixelFormat::kHalf : f;  // half is plenty for photos
+}
+
+std::string ReplaceExtension(const std::string& name, const std::string& ext) {
+  return fs::path(name).replace_extension(ext).generic_string();
+}
+
+// Splits alpha off and composites colour over `bg`. OpenImageIO returns associated
+// (premultiplied) alpha by default, so the composite is C + (1 - a) bg. Grey becomes RGB.
+Image ToRgb(const Image& in, const Eigen::Vector3d& bg, Image* alpha) {
+  const bool has_alpha = in.channels == 2 || in.channels == 4;
+  const int colour = has_alpha ? in.channels - 1 : in.channels;
+  Image rgb(in.width, in.height, 3);
+  if (has_alpha && alpha) *alpha = Image(in.width, in.height, 1);
+  for (int y = 0; y < in.height; ++y) {
+    for (int x = 0; x < in.width; ++x) {
+      const float a = has_alpha ? in.at(x, y, in.channels - 1) : 1.f;
+      for (int c = 0; c < 3; ++c) {
+        const float v = in.at(x, y, colour == 1 ? 0 : c);
+        rgb.at(x, y, c) = has_alpha ? v + (1.f - a) * static_cast<float>(bg[c]) : v;
+      }
+      if (has_alpha && alpha) alpha->at(x, y, 0) = a;
+    }
+  }
+  return rgb;
+}
+
+void ProcessImage(const ImageJob& job, const ImportOptions& o, const fs::path& ws, PixelFormat* fmt) {
+  ImageInfo info;
+  Image img = ReadImage(job.source, &info);
+  if (job.undistorter && !job.undistorter->is_identity()) img = job.undistorter->Apply(img);
+  img = ResizeImage(img, job.out_width, job.out_height);
+  Image alpha;
+  Image rgb = ToRgb(img, o.background, job.alpha_rel.empty() ? nullptr : &alpha);
+  const PixelFormat out = OutputFormat(info.format);
+  fs::create_directories((ws / job.out_rel).parent_path());
+  WriteImage(ws / job.out_rel, rgb, out);
+  if (!alpha.empty()) {
+    fs::create_directories((ws / job.alpha_rel).parent_path());
+    WriteImage(ws / job.alpha_rel, alpha, out == PixelFormat::kUInt8 ? PixelFormat::kUInt8 : PixelFormat::kUInt16);
+  }
+  if (fmt) *fmt = info.format;
+}
+
+void RunJobs(const std::vector<ImageJob>& jobs, const ImportOptions& o) {
+  std::atomic<int> done{0};
+  const int total = static_cast<int>(jobs.size());
+  tbb::parallel_for(0, total, [&](int i) {
+    ProcessImage(jobs[i], o, o.workspace, nullptr);
+    const int d = ++done;
+    if (o.progress) o.progress(d, total);
+  });
+}
+
+// Every N-th image in name order is held out (the NeRF / mip-NeRF 360 convention).
+void AssignSplit(std::vector<SceneImage>* images, int holdout) {
+  std::sort(images->begin(), images->end(), [](const SceneImage& a, const SceneImage& b) { return a.name < b.name; });
+  for (size_t i = 0; i < images->size(); ++i) {
+    (*images)[i].split = holdout > 0 && i % holdout == 0 ? Split::kTest : Split::kTrain;
+  }
+}
+
+std::vector<BoundsCamera> BoundsCameras(const Scene& scene) {
+  std::vector<BoundsCamera> out;
+  for (const auto& im : scene.images) {
+    const SceneCamera& c = scene.camera(im.camera_id);
+    out.push_back({im.world_from_cam, c.fx, c.fy, c.cx, c.cy, c.width, c.height});
+  }
+  return out;
+}
+
+void PlaceBoundsAndShells(const ImportOptions& o, const std::vector<BoundsPoint>& points,
+                          const std::string& source, ImportResult* r) {
+  BoundsOptions bo = o.bounds;
+  if (o.box_axis_aligned) bo.align_to_up = false;
+  const bool manual_box = o.box_center && o.box_size;
+  if (!manual_box) {
+    r->bounds = EstimateBounds(BoundsCameras(r->scene), points, bo, source);
+  } else {
+    r->bounds.box.rotation = Eigen::Matrix3d::Identity();
+  }
+  SceneBox& box = r->bounds.box;
+  if (o.box_center) box.center = *o.box_center;
+  if (o.box_size) box.size = *o.box_size;
+  if (o.box_center || o.box_size) box.method = manual_box ? "given on the command line" : box.method + " (partly overridden)";
+  if (manual_box || o.box_center || o.box_size) {
+    // Shells must still enclose the cameras and the inlier points around the new box.
+    double enclose = 0;
+    for (const auto& im : r->scene.images) enclose = std::max(enclose, (im.world_from_cam.col(3) - box.center).norm());
+    r->bounds.shells = PlaceShells(box, enclose, bo);
+  }
+  if (o.shell_radii) {
+    r->bounds.shells.center = box.center;
+    r->bounds.shells.radii = *o.shell_radii;
+  }
+  const double half_diag = 0.5 * box.size.norm();
+  if (r->bounds.shells.radii.front() <= half_diag) {
+    r->warnings.push_back(StrCat("the innermost shell (radius ", r->bounds.shells.radii.front(),
+                                 ") cuts the box (half diagonal ", half_diag,
+                                 "); rays leaving the box may miss it"));
+  }
+  r->scene.box = box;
+  r->scene.shells = r->bounds.shells;
+}
+
+// ---- COLMAP ----
+
+void ImportColmap(const ImportOptions& o, ImportResult* r) {
+  const fs::path model_dir = o.colmap_dir;
+  const colmap::ModelFormat format = colmap::DetectModelFormat(model_dir);
+  colmap::Reconstruction rec = colmap::ReadReconstruction(model_dir);
+
+  fs::path images_dir = o.images_dir;
+  if (images_dir.empty()) images_dir = model_dir.parent_path().parent_path() / "images";
+  if (!fs::is_directory(images_dir)) {
+    throw InputError(kCommandLine, "--images", images_dir.string(), "not a folder",
+                     "pass the folder of photos the COLMAP model was made from");
+  }
+  const std::set<std::string> on_disk = ListImages(images_dir);
+  if (on_disk.empty()) {
+    throw InputError(images_dir.string(), "", "", "no image files found (JPEG, PNG, TIFF, EXR...)",
+                     "pass the folder of photos the COLMAP model was made from with --images");
+  }
+
+  std::vector<std::string> missing;
+  std::set<std::string> in_model;
+  for (const auto& [id, im] : rec.images) {
+    in_model.insert(im.name);
+    if (!on_disk.count(im.name)) missing.push_back(im.name);
+  }
+  if (!missing.empty()) {
+    std::string list;
+    for (size_t i = 0; i < missing.size() && i < 5; ++i) list += (i ? ", " : "") + missing[i];
+    if (missing.size() > 5) list += ", ...";
+    if (!o.skip_missing || missing.size() == rec.images.size()) {
+      throw InputError(images_dir.string(), "image", missing.front(),
+                       StrCat(missing.size(), " of ", rec.images.size(),
+                              " images in the model are not in the folder: ", list),
+                       o.skip_missing ? "none of the model's images is there: check --images"
+                                      : "point --images at the folder COLMAP used, or pass --skip-missing to import the others");
+    }
+    r->warnings.push_back(StrCat("skipped ", missing.size(), " images missing on disk: ", list));
+  }
+  std::vector<std::string> extra;
+  for (const auto& n : on_disk) {
+    if (!in_model.count(n)) extra.push_back(n);
+  }
+  if (!extra.empty()) {
+    r->warnings.push_back(StrCat(extra.size(), " images in ", images_dir.string(),
+                                 " are not in the model (not registered by COLMAP?) and are ignored, e.g. ", extra.front()));
+  }
+
+  // Check each image's size against its camera: equal, or an exact integer downscale
+  // (mip-NeRF 360's images_4/), which scales the intrinsics.
+  std::map<uint32_t, std::pair<int, int>> disk_size;  // camera -> size of its images on disk
+  std::map<uint32_t, std::string> size_witness;
+  PixelFormat source_format = PixelFormat::kUInt8;
+  for (const auto& [id, im] : rec.images) {
+    if (!on_disk.count(im.name)) continue;
+    const fs::path p = images_dir / im.name;
+    const ImageInfo info = ReadImageInfo(p);
+    source_format = info.format;
+    const colmap::Camera& cam = rec.cameras.at(im.camera_id);
+    const auto [it, inserted] = disk_size.emplace(im.camera_id, std::make_pair(info.width, info.height));
+    if (!inserted && it->second != std::make_pair(info.width, info.height)) {
+      throw InputError(p.string(), "size", StrCat(info.width, "x", info.height),
+                       StrCat("differs from ", size_witness[im.camera_id], " (", it->second.first, "x",
+                              it->second.second, ") which shares camera ", im.camera_id),
+                       "images of one camera must all have one size");
+    }
+    size_witness.emplace(im.camera_id, im.name);
+    if (static_cast<uint64_t>(info.width) == cam.width && static_cast<uint64_t>(info.height) == cam.height) continue;
+    bool integer_downscale = false;
+    for (int k = 2; k <= 64 && !integer_downscale; ++k) {
+      integer_downscale = std::abs(static_cast<double>(cam.width) / k - info.width) < 1.0 &&
+                          std::abs(static_cast<double>(cam.height) / k - info.height) < 1.0;
+    }
+    if (!integer_downscale) {
+      throw InputError(p.string(), "size", StrCat(info.width, "x", info.height),
+                       StrCat("camera ", im.camera_id, " in the model is ", cam.width, "x", cam.height,
+                              ", and this is neither that size nor an integer downscale of it"),
+                       "pass the images the model was made from (or a folder like images_4/ that is an exact downscale)");
+    }
+  }
+
+  // Cameras: scale to the size on disk, undistort to pinhole, then apply --downscale.
+  std::map<uint32_t, Undistorter> undistorters;
+  for (const auto& [cam_id, size] : disk_size) {
+    colmap::Camera cam = rec.cameras.at(cam_id);
+    const auto* model = colmap::FindCameraModel(cam.model_id);
+    const double sx = static_cast<double>(size.first) / cam.width;
+    const double sy = static_cast<double>(size.second) / cam.height;
+    if (sx != 1.0 || sy != 1.0) {
+      // COLMAP's pixel convention (corner at 0) makes scaling f and c by the size ratio exact.
+      if (colmap::NumFocalParams(model->id) == 3) {
+        cam.params[0] *= 0.5 * (sx + sy);
+        cam.params[1] *= sx;
+        cam.params[2] *= sy;
+      } else {
+        cam.params[0] *= sx;
+        cam.params[1] *= sy;
+        cam.params[2] *= sx;
+        cam.params[3] *= sy;
+      }
+      cam.width = static_cast<uint64_t>(size.first);
+      cam.height = static_cast<uint64_t>(size.second);
+    }
+    Undistorter u = Undistorter::Create(cam, StrCat((model_dir / "cameras").string(), " camera ", cam_id));
+    const PinholeIntrinsics& pin = u.pinhole();
+    SceneCamera sc;
+    sc.id = static_cast<int>(cam_id);
+    OutputSize(o, pin.width, pin.height, &sc.width, &sc.height);
+    const double ox = static_cast<double>(sc.width) / pin.width, oy = static_cast<double>(sc.height) / pin.height;
+    sc.fx = pin.fx * ox;
+    sc.fy = pin.fy * oy;
+    sc.cx = pin.cx * ox;
+    sc.cy = pin.cy * oy;
+    sc.source = {std::string(model->name), cam.params, static_cast<int>(cam.width), static_cast<int>(cam.height)};
+    r->scene.cameras.push_back(sc);
+    undistorters.emplace(cam_id, std::move(u));
+  }
+
+  const std::string ext = OutputExtension(source_format);
+  std::vector<ImageJob> jobs;
+  for (const auto& [id, im] : rec.images) {
+    if (!on_disk.count(im.name)) continue;
+    const Eigen::Quaterniond q(im.qvec[0], im.qvec[1], im.qvec[2], im.qvec[3]);
+    const Eigen::Matrix3d r_cw = q.normalized().toRotationMatrix();
+    const Eigen::Vector3d t_cw(im.tvec[0], im.tvec[1], im.tvec[2]);
+    SceneImage si;
+    si.name = im.name;
+    si.path = "images/" + ReplaceExtension(im.name, ext);
+    si.source_path = fs::absolute(images_dir / im.name).lexically_normal().string();
+    si.camera_id = static_cast<int>(im.camera_id);
+    si.world_from_cam.leftCols<3>() = r_cw.transpose();
+    si.world_from_cam.col(3) = -r_cw.transpose() * t_cw;
+    const SceneCamera& sc = r->scene.camera(si.camera_id);
+    jobs.push_back({images_dir / im.name, si.path, "", &undistorters.at(im.camera_id), sc.width, sc.height});
+    r->scene.images.push_back(std::move(si));
+  }
+
+  r->scene.source = {"colmap", fs::absolute(model_dir).lexically_normal().string(),
+                     fs::absolute(images_dir).lexically_normal().string(),
+                     format == colmap::ModelFormat::kBinary ? "binary" : "text", o.downscale};
+  std::vector<BoundsPoint> points;
+  points.reserve(rec.points3D.size());
+  for (const auto& [id, p] : rec.points3D) {
+    points.push_back({Eigen::Vector3d(p.xyz[0], p.xyz[1], p.xyz[2]), static_cast<int>(p.track.size()), p.error});
+  }
+  PlaceBoundsAndShells(o, points, model_dir.string(), r);
+  EnsureWritableDirectory(o.workspace / "images");
+  RunJobs(jobs, o);
+}
+
+// ---- NeRF json ----
+
+void ImportNerf(const ImportOptions& o, ImportResult* r) {
+  const NerfTransforms t = ReadNerfTransforms(o.nerf_json);
+  const std::string source = o.nerf_json.string();
+  // All frames share one camera; check the sizes agree.
+  std::optional<ImageInfo> first;
+  std::string first_name;
+  PixelFormat fmt = PixelFormat::kUInt8;
+  bool any_alpha = false;
+  for (size_t i = 0; i < t.frames.size(); ++i) {
+    const ImageInfo info = ReadImageInfo(t.frames[i].image_path);
+    fmt = info.format;
+    any_alpha = any_alpha || info.channels == 2 || info.channels == 4;
+    if (!first) {
+      first = info;
+      first_name = t.frames[i].image_path.string();
+    } else if (info.width != first->width || info.height != first->height) {
+      throw InputError(t.frames[i].image_path.string(), "size", StrCat(info.width, "x", info.height),
+                       StrCat("differs from ", first_name, " (", first->width, "x", first->height, ")"),
+                       "all frames of a transforms.json must have one size");
+    }
+  }
+  SceneCamera sc;
+  sc.id = 1;
+  double fx, fy, cx, cy;
+  t.Intrinsics(first->width, first->height, source, &fx, &fy, &cx, &cy);
+  sc.source = {"PINHOLE", {fx, fy, cx, cy}, first->width, first->height};
+  OutputSize(o, first->width, first->height, &sc.width, &sc.height);
+  const double sx = static_cast<double>(sc.width) / first->width, sy = static_cast<double>(sc.height) / first->height;
+  sc.fx = fx * sx;
+  sc.fy = fy * sy;
+  sc.cx = cx * sx;
+  sc.cy = cy * sy;
+  r->scene.cameras.push_back(sc);
+
+  const fs::path base = o.nerf_json.parent_path();
+  const std::string ext = OutputExtension(fmt);
+  std::vector<ImageJob> jobs;
+  std::set<std::string> names;
+  for (const auto& f : t.frames) {
+    SceneImage si;
+    si.name = fs::relative(f.image_path, base).generic_string();
+    if (!names.insert(si.name).second) {
+      throw InputError(source, "frames.file_path", f.file_path, "listed twice");
+    }
+    si.path = "images/" + ReplaceExtension(si.name, ext);
+    if (any_alpha) si.alpha_path = "alpha/" + ReplaceExtension(si.name, ".png");
+    si.source_path = fs::absolute(f.image_path).lexically_normal().string();
+    si.camera_id = sc.id;
+    si.world_from_cam = f.world_from_cam;
+    jobs.push_back({f.image_path, si.path, si.alpha_path, nullptr, sc.width, sc.height});
+    r->scene.images.push_back(std::move(si));
+  }
+  r->scene.source = {"nerf", fs::absolute(o.nerf_json).lexically_normal().string(),
+                     fs::absolute(base).lexically_normal().string(), "json", o.downscale};
+  ImportOptions no = o;
+  no.bounds.align_to_up = false;  // the json's world frame is meaningful: keep its axes
+  PlaceBoundsAndShells(no, {}, source, r);
+  EnsureWritableDirectory(o.workspace / "images");
+  if (any_alpha) EnsureWritableDirectory(o.workspace / "alpha");
+  RunJobs(jobs, o);
+}
+
+}  // namespace
+
+void ImportOptions::Check() const {
+  const bool colmap = !colmap_dir.empty(), nerf = !nerf_json.empty();
+  if (colmap == nerf) {
+    throw InputError(kCommandLine, "--colmap/--nerf", "", colmap ? "both given" : "neither given",
+                     "pass either --colmap SPARSE_DIR --images DIR, or --nerf transforms.json");
+  }
+  if (nerf && !images_dir.empty()) {
+    throw InputError(kCommandLine, "--images", images_dir.string(),
+                     "not used with --nerf (image paths come from the json)");
+  }
+  if (workspace.empty()) throw InputError(kCommandLine, "--workspace", "", "missing", "pass the output folder");
+  if (downscale < 1) throw InputError(kCommandLine, "--downscale", std::to_string(downscale), "must be >= 1");
+  if (max_size < 0) throw InputError(kCommandLine, "--max-size", std::to_string(max_size), "must be >= 0");
+  if (max_size > 0 && downscale != 1) {
+    throw InputError(kCommandLine, "--max-size", std::to_string(max_size), "cannot be combined with --downscale");
+  }
+  if (holdout < 0 || holdout == 1) {
+    throw InputError(kCommandLine, "--holdout", std::to_string(holdout),
+                     "must be 0 (no test views) or >= 2 (every N-th view held out)");
+  }
+  if ((background.array() < 0).any() || (background.array() > 1).any()) {
+    throw InputError(kCommandLine, "--background", "", "colour components must be in [0, 1]");
+  }
+  if (box_size && ((box_size->array() <= 0).any() || !box_size->allFinite())) {
+    throw InputError(kCommandLine, "--box-size", "", "box sides must be positive");
+  }
+  if (box_center && !box_center->allFinite()) throw InputError(kCommandLine, "--box-center", "", "not finite");
+  if (shell_radii) {
+    double prev = 0;
+    for (double v : *shell_radii) {
+      if (!(v > prev)) {
+        throw InputError(kCommandLine, "--shell-radii", std::to_string(v), "radii must be positive and strictly increasing");
+      }
+      prev = v;
+    }
+    if (shell_radii->empty()) throw InputError(kCommandLine, "--shell-radii", "", "empty");
+  }
+  if (bounds.num_shells < 1) {
+    throw InputError(kCommandLine, "--shells", std::to_string(bounds.num_shells), "must be >= 1");
+  }
+}
+
+ImportResult RunImport(const ImportOptions& o) {
+  o.Check();
+  const auto start = std::chrono::steady_clock::now();
+  EnsureWritableDirectory(o.workspace);
+  std::unique_ptr<tbb::global_control> threads;
+  if (o.num_threads > 0) {
+    threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, o.num_threads);
+  }
+  ImportResult r;
+  r.scene.background = o.background;
+  if (!o.colmap_dir.empty()) {
+    ImportColmap(o, &r);
+  } else {
+    ImportNerf(o, &r);
+  }
+  AssignSplit(&r.scene.images, o.holdout);
+  // scene.json last: a workspace with a scene.json has all of its images.
+  WriteScene(o.workspace / "scene.json", r.scene);
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return r;
+}
+
+std::string ImportSummary(const ImportResult& r) {
+  const Scene& s = r.scene;
+  int test = 0;
+  for (const auto& im : s.images) test += im.split == Split::kTest ? 1 : 0;
+  std::ostringstream out;
+  out.precision(4);
+  out << "imported " << s.images.size() << " images (" << s.images.size() - test << " train, " << test
+      << " test) from " << s.source.type << " (" << s.source.format << ") in " << r.seconds << " s\n";
+  for (const auto& c : s.cameras) {
+    out << "  camera " << c.id << ": " << c.source.model << " " << c.source.width << "x" << c.source.height
+        << " -> PINHOLE " << c.width << "x" << c.height << " fx " << c.fx << " fy " << c.fy << " cx " << c.cx
+        << " cy " << c.cy << "\n";
+  }
+  out << "  box: centre (" << s.box.center.transpose() << "), size (" << s.box.size.transpose() << ")"
+      << (s.box.rotation.isIdentity(1e-9) ? ", world axes" : ", aligned to the cameras' up") << "\n"
+      << "       " << s.box.method << "\n";
+  out << "  shells: " << s.shells.radii.size() << ", radii";
+  for (double v : s.shells.radii) out << " " << v;
+  out << "\n";
+  for (const auto& w : r.warnings) out << "  warning: " << w << "\n";
+  return out.str();
+}
+
+}  // namespace perf

@@ -1,0 +1,50 @@
+#include <CLI/CLI.hpp>
+#include <iostream>
+
+#include "pipeline/commands.h"
+#include "pipeline/progress.h"
+#include "sfm_import/colmap_runner.h"
+
+namespace perf {
+
+void AddSfmCommand(CLI::App& app) {
+  auto o = std::make_shared<SfmOptions>();
+  auto quiet = std::make_shared<bool>(false);
+  CLI::App* cmd = app.add_subcommand(
+      "sfm",
+      "Make a COLMAP sparse model from a folder of photos with the colmap CLI (CPU SIFT): "
+      "features, matching, mapping. The largest model becomes WORKSPACE/sparse/0; COLMAP's log is "
+      "WORKSPACE/colmap/colmap.log. Then run `perf import --colmap WORKSPACE/sparse/0 --images DIR`.");
+  cmd->add_option("--images", o->images, "Folder of photos")->required();
+  cmd->add_option("-w,--workspace", o->workspace, "Workspace folder")->required();
+  cmd->add_option("--camera-model", o->camera_model, "COLMAP camera model for the photos")->capture_default_str();
+  cmd->add_flag("--per-image-camera", [o](std::int64_t) { o->single_camera = false; },
+                "One camera per photo (default: one shared camera)");
+  cmd->add_option("--matcher", o->matcher,
+                  "auto (exhaustive up to --exhaustive-max images, else sequential), exhaustive or sequential")
+      ->capture_default_str();
+  cmd->add_option("--exhaustive-max", o->exhaustive_max_images,
+                  "Largest set matched exhaustively by --matcher auto (CPU: ~0.28 s per pair)")->capture_default_str();
+  cmd->add_option("--overlap", o->sequential_overlap, "Sequential matching overlap (quadratic overlap on)")
+      ->capture_default_str();
+  cmd->add_option("--max-image-size", o->max_image_size, "Longest side used for feature extraction")
+      ->capture_default_str();
+  cmd->add_option("--max-features", o->max_num_features, "Most SIFT features per image")->capture_default_str();
+  cmd->add_option("--min-registered", o->min_registered_images, "Fewer registered images is an error")
+      ->capture_default_str();
+  cmd->add_option("-j,--threads", o->num_threads, "Threads for colmap (-1: all cores)")->capture_default_str();
+  cmd->add_option("--colmap-binary", o->colmap_binary, "The colmap executable")->capture_default_str();
+  cmd->add_flag("--force", o->force, "Run again even if WORKSPACE/sparse/0 exists");
+  cmd->add_flag("-q,--quiet", *quiet, "No progress output");
+  cmd->callback([o, quiet]() {
+    Progress progress("sfm", *quiet);
+    o->progress = [&progress](const std::string& line) { progress.Message(line); };
+    const SfmResult r = RunSfm(*o);
+    if (!*quiet) {
+      std::cout << "registered " << r.num_registered_images << " of " << r.num_input_images << " images, "
+                << r.num_points << " points in " << r.seconds << " s\nmodel: " << r.sparse_dir.string() << "\n";
+    }
+  });
+}
+
+}  // namespace perf

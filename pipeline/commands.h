@@ -1,0 +1,14 @@
+// The `perf` subcommands. Each Add*Command registers its options and a callback on `app`;
+// errors propagate as perf::Error and are turned into messages and exit codes by main().
+#pragma once
+
+namespace CLI {
+class App;
+}
+
+namespace perf {
+
+void AddImportCommand(CLI::App& app);
+void AddSfmCommand(CLI::App& app);
+
+}  // namespace perf

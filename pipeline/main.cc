@@ -1,0 +1,37 @@
+// The `perf` command line: one executable, one subcommand per stage (DESIGN.md "Stages").
+#include <CLI/CLI.hpp>
+#include <iostream>
+
+#include "common/errors.h"
+#include "common/version.h"
+#include "pipeline/commands.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{
+      "PERF: Performant, Explicit Radiance Fields. Photos or a COLMAP model in; a radiance field, "
+      "foreground masks and DCC assets out.",
+      "perf"};
+  app.set_version_flag("--version", std::string("perf ") + PERF_VERSION_STRING);
+  app.require_subcommand(1);
+  perf::AddSfmCommand(app);
+  perf::AddImportCommand(app);
+  // Exit codes: 0 ok, 1 internal error (a bug), 2 bad input, 3 file system, 4 other failure.
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  } catch (const perf::InputError& e) {
+    std::cerr << "error: " << e.what() << "\n";
+    return 2;
+  } catch (const perf::IoError& e) {
+    std::cerr << "error: " << e.what() << "\n";
+    return 3;
+  } catch (const perf::InternalError& e) {
+    std::cerr << "error: " << e.what() << "\nThis is a bug in perf; please report it with the command line.\n";
+    return 1;
+  } catch (const std::exception& e) {
+    std::cerr << "error: " << e.what() << "\n";
+    return 4;
+  }
+  return 0;
+}

@@ -1,0 +1,73 @@
+// Placement of the reconstruction box and the environment shells (DESIGN.md "Representation").
+//
+// The region of interest is what most cameras look at. For a COLMAP model it is the robust
+// sparse points (seen by several images, low reprojection error) that lie inside the view
+// frustums of most cameras, trimmed by percentiles; for a NeRF json (no points) it is the part
+// of space inside most frustums, sampled on a grid. In a 360-degree capture the walls of the room
+// are seen by only the cameras facing them, so they drop out, while the object in the middle is
+// seen by nearly all. The box is aligned with the capture's "up" (the mean of the cameras' up
+// vectors) when that is well defined, since COLMAP's world frame is arbitrary.
+//
+// Shells: concentric around the box centre, the innermost just outside the box, the outermost
+// beyond every inlier sparse point (and the cameras), radii growing with the square of the
+// index (paper figure 3).
+#pragma once
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "sfm_import/scene.h"
+
+namespace perf {
+
+struct BoundsCamera {
+  Eigen::Matrix<double, 3, 4> world_from_cam;  // x right, y down, z forward
+  double fx, fy, cx, cy;
+  int width, height;
+};
+
+struct BoundsPoint {
+  Eigen::Vector3d xyz;
+  int track_length = 0;
+  double error = -1;  // reprojection error in pixels; < 0 if unknown
+};
+
+struct BoundsOptions {
+  int min_track_length = 3;        // points seen by fewer images are ignored...
+  double max_reproj_error = 2.0;   // ...and so are points with a larger error (pixels)
+  double min_visible_fraction = 0.75;  // of cameras whose frustum must contain an ROI point
+  double grid_visible_fraction = 0.9;  // same, for the camera-only (no points) estimate
+  double percentile = 1.0;         // trimmed from each end per axis (percent)
+  double padding = 0.05;           // box grows by this fraction of its size on each side
+  bool align_to_up = true;         // rotate the box to the cameras' mean up vector
+  int num_shells = 4;
+  double outer_margin = 1.1;       // outermost shell = this x farthest inlier point / camera
+  double min_outer_factor = 4.0;   // outermost shell >= this x innermost
+};
+
+struct BoundsResult {
+  SceneBox box;
+  SceneShells shells;
+  Eigen::Vector3d axes_point = Eigen::Vector3d::Zero();  // closest to all optical axes
+  bool object_centric = false;     // cameras look at a common point (360 capture)
+  int num_points_used = 0;         // ROI points that defined the box (0: camera-only)
+};
+
+// The point closest (least squares) to all cameras' optical axes. Returns false when the axes
+// are (nearly) parallel and no such point is defined.
+bool ClosestPointToAxes(const std::vector<BoundsCamera>& cameras, Eigen::Vector3d* point);
+
+// True if `p` projects inside the camera's image, in front of it.
+bool InFrustum(const BoundsCamera& camera, const Eigen::Vector3d& p);
+
+// Places box and shells. `points` may be empty (NeRF json). `source` names the input in
+// messages. Throws InputError when the points give no extent (all coincident).
+BoundsResult EstimateBounds(const std::vector<BoundsCamera>& cameras,
+                            const std::vector<BoundsPoint>& points, const BoundsOptions& options,
+                            const std::string& source);
+
+// Shells for a given box and a radius they must enclose (farthest inlier / camera).
+SceneShells PlaceShells(const SceneBox& box, double enclose_radius, const BoundsOptions& options);
+
+}  // namespace perf

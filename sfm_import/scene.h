@@ -1,0 +1,90 @@
+// The workspace's scene description, scene.json: what `perf import` writes and every later
+// stage reads. Versioned and self-describing; the schema is documented in docs/scene-json.md.
+//
+// Conventions: camera frame x right, y down, z forward; pixel centre of the upper-left pixel at
+// (0.5, 0.5); poses stored as `world_from_cam` (3x4, camera-to-world); world units and frame are
+// those of the source (COLMAP's arbitrary frame, or the NeRF json's).
+#pragma once
+
+#include <Eigen/Core>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace perf {
+
+inline constexpr int kSceneVersion = 1;
+
+// The camera as the source described it, kept so that exports can map back into the original
+// (distorted) photos.
+struct SourceCamera {
+  std::string model;           // COLMAP model name, e.g. "OPENCV"; "PINHOLE" for NeRF json
+  std::vector<double> params;  // in that model's order, at width x height
+  int width = 0, height = 0;
+};
+
+struct SceneCamera {
+  int id = 0;
+  int width = 0, height = 0;         // workspace images (after undistortion and downscale)
+  double fx = 0, fy = 0, cx = 0, cy = 0;  // pinhole, in workspace pixels
+  SourceCamera source;
+};
+
+enum class Split { kTrain, kTest };
+
+struct SceneImage {
+  std::string name;         // as in the source (COLMAP image name or NeRF file_path)
+  std::string path;         // workspace image, relative to the workspace
+  std::string source_path;  // the original photo (absolute)
+  std::string alpha_path;   // relative to the workspace; empty if the source had no alpha
+  int camera_id = 0;
+  Eigen::Matrix<double, 3, 4> world_from_cam = Eigen::Matrix<double, 3, 4>::Identity();
+  Split split = Split::kTrain;
+};
+
+// Axis-aligned in the box's own frame: world point p is inside when
+// |R^T (p - center)| <= size / 2 componentwise, R = rotation (world_from_box).
+struct SceneBox {
+  Eigen::Vector3d center = Eigen::Vector3d::Zero();
+  Eigen::Vector3d size = Eigen::Vector3d::Ones();
+  Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();
+  std::string method;  // how it was placed (for the summary and for users)
+};
+
+// Concentric spheres around `center`, radii strictly increasing; the outermost is opaque.
+struct SceneShells {
+  Eigen::Vector3d center = Eigen::Vector3d::Zero();
+  std::vector<double> radii;
+};
+
+struct SceneSource {
+  std::string type;    // "colmap" or "nerf"
+  std::string path;    // the sparse model folder or transforms.json (absolute)
+  std::string images;  // the image folder (absolute)
+  std::string format;  // "binary", "text" or "json"
+  int downscale = 1;   // the integer factor applied on import (1: none)
+};
+
+struct Scene {
+  int version = kSceneVersion;
+  SceneSource source;
+  std::string color_encoding = "srgb";  // pixel values as stored in the photos
+  Eigen::Vector3d background = Eigen::Vector3d::Ones();  // what RGBA images were composited over
+  SceneBox box;
+  SceneShells shells;
+  std::vector<SceneCamera> cameras;
+  std::vector<SceneImage> images;
+
+  const SceneCamera& camera(int id) const;  // throws InternalError if missing
+};
+
+// Serialises to JSON text (pretty, full precision).
+std::string SceneToJson(const Scene& scene);
+// Parses and validates (version, references, finite values); `name` is used in messages.
+Scene SceneFromJson(const std::string& text, const std::string& name);
+
+// Path overloads: WriteScene is atomic.
+void WriteScene(const std::filesystem::path& path, const Scene& scene);
+Scene ReadScene(const std::filesystem::path& path);
+
+}  // namespace perf
