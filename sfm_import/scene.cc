@@ -1,5 +1,6 @@
 #include "sfm_import/scene.h"
 
+#include <Eigen/LU>
 #include <cmath>
 #include <nlohmann/json.hpp>
 

@@ -1,0 +1,68 @@
+// Helpers shared by the tests: a self-deleting temporary folder, the shared data location,
+// and running the `perf` binary.
+#pragma once
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <random>
+#include <string>
+
+namespace perf::test {
+
+class TempDir {
+ public:
+  TempDir() {
+    std::random_device rd;
+    path_ = std::filesystem::temp_directory_path() /
+            ("perf_test_" + std::to_string(::getpid()) + "_" + std::to_string(rd()));
+    std::filesystem::create_directories(path_);
+  }
+  ~TempDir() {
+    std::error_code ec;
+    std::filesystem::remove_all(path_, ec);
+  }
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+  const std::filesystem::path& path() const { return path_; }
+  std::filesystem::path operator/(const std::string& s) const { return path_ / s; }
+
+ private:
+  std::filesystem::path path_;
+};
+
+// ../shared/data beside the checkout (CI has it); empty if absent.
+inline std::filesystem::path SharedData(const std::string& sub) {
+  const std::filesystem::path p = std::filesystem::path(PERF_SHARED_DATA_DIR) / sub;
+  return std::filesystem::exists(p) ? p : std::filesystem::path();
+}
+
+#define PERF_REQUIRE_DATA(var, sub)                                                         \
+  const std::filesystem::path var = ::perf::test::SharedData(sub);                          \
+  if (var.empty()) GTEST_SKIP() << "shared data " << sub << " not found beside the checkout (" \
+                                << PERF_SHARED_DATA_DIR << "); skipping"
+
+struct CommandResult {
+  int exit_code = -1;
+  std::string output;  // stdout and stderr together
+};
+
+// Runs a shell command line, capturing its output.
+inline CommandResult RunCommand(const std::string& cmd) {
+  CommandResult r;
+  FILE* pipe = ::popen((cmd + " 2>&1").c_str(), "r");
+  if (!pipe) return r;
+  std::array<char, 4096> buf;
+  size_t n;
+  while ((n = std::fread(buf.data(), 1, buf.size(), pipe)) > 0) r.output.append(buf.data(), n);
+  const int status = ::pclose(pipe);
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+inline std::string PerfBinary() { return std::string(PERF_BINARY_DIR) + "/perf"; }
+
+}  // namespace perf::test
