@@ -4,6 +4,7 @@
 #include "common/errors.h"
 #include "pipeline/commands.h"
 #include "pipeline/progress.h"
+#include "sfm_import/box_preview.h"
 #include "sfm_import/importer.h"
 
 namespace perf {
@@ -32,6 +33,7 @@ void AddImportCommand(CLI::App& app) {
     std::string background = "white";
     std::vector<double> box_center, box_size, shell_radii;
     bool quiet = false;
+    bool preview_box = false;
   };
   auto args = std::make_shared<Args>();
   ImportOptions& o = args->o;
@@ -48,7 +50,7 @@ void AddImportCommand(CLI::App& app) {
   cmd->add_option("--downscale", o.downscale, "Integer downscale of the images (OIIO filtered resize)")
       ->capture_default_str();
   cmd->add_option("--max-size", o.max_size, "Downscale so the longer side is at most this many pixels (instead of --downscale)");
-  cmd->add_option("--holdout", o.holdout, "Hold out every N-th image (sorted by name) for testing; 0 for none")
+  cmd->add_option("--holdout", o.holdout, "Hold out every N-th image for testing (COLMAP: sorted by name; NeRF: json order, r_0, r_8, ...); 0 for none")
       ->capture_default_str();
   cmd->add_flag("--skip-missing", o.skip_missing, "Import the other images when some in the model are missing on disk");
   cmd->add_option("--background", args->background,
@@ -63,6 +65,8 @@ void AddImportCommand(CLI::App& app) {
   cmd->add_option("--min-track-length", o.bounds.min_track_length,
                   "Sparse points seen by fewer images are ignored when placing the box")->capture_default_str();
   cmd->add_option("-j,--threads", o.num_threads, "Worker threads (0: all cores)")->capture_default_str();
+  cmd->add_flag("--preview-box", args->preview_box,
+                "Also write WORKSPACE/preview/box_*.png: the box drawn over the held-out views");
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
   cmd->callback([args]() {
     ImportOptions& o = args->o;
@@ -75,6 +79,10 @@ void AddImportCommand(CLI::App& app) {
     const ImportResult r = RunImport(o);
     progress.Finish();
     if (!args->quiet) std::cout << ImportSummary(r) << "workspace: " << o.workspace.string() << "\n";
+    if (args->preview_box) {
+      const auto files = WriteBoxPreviews(r.scene, o.workspace);
+      if (!args->quiet) std::cout << "box previews: " << (o.workspace / "preview").string() << " (" << files.size() << " images)\n";
+    }
   });
 }
 

@@ -111,9 +111,9 @@ void RunJobs(const std::vector<ImageJob>& jobs, const ImportOptions& o) {
   });
 }
 
-// Every N-th image in name order is held out (the NeRF / mip-NeRF 360 convention).
+// Every N-th image in the given order is held out: COLMAP images sorted by name (the mip-NeRF
+// 360 convention), NeRF frames in the json's order (r_0, r_8, r_16, ...).
 void AssignSplit(std::vector<SceneImage>* images, int holdout) {
-  std::sort(images->begin(), images->end(), [](const SceneImage& a, const SceneImage& b) { return a.name < b.name; });
   for (size_t i = 0; i < images->size(); ++i) {
     (*images)[i].split = holdout > 0 && i % holdout == 0 ? Split::kTest : Split::kTrain;
   }
@@ -298,6 +298,8 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
     r->scene.images.push_back(std::move(si));
   }
 
+  std::sort(r->scene.images.begin(), r->scene.images.end(),
+            [](const SceneImage& a, const SceneImage& b) { return a.name < b.name; });
   r->scene.source = {"colmap", fs::absolute(model_dir).lexically_normal().string(),
                      fs::absolute(images_dir).lexically_normal().string(),
                      format == colmap::ModelFormat::kBinary ? "binary" : "text", o.downscale};

@@ -29,7 +29,7 @@ struct ImportOptions {
 
   int downscale = 1;  // integer factor (1: full resolution)
   int max_size = 0;   // alternatively: the target long side in pixels (0: unused)
-  int holdout = 8;    // every N-th image (sorted by name) is held out for testing; 0: none
+  int holdout = 8;    // every N-th image is held out for testing (COLMAP: by name; NeRF: json order); 0: none
   bool skip_missing = false;  // import the others when model images are missing on disk
   Eigen::Vector3d background = Eigen::Vector3d::Ones();  // RGBA photos are composited over it
 
