@@ -29,7 +29,11 @@ function(perf_add_test name)
     set(ARG_TIMEOUT 600)
   endif()
   include(GoogleTest)
-  gtest_discover_tests(${name}
-    PROPERTIES LABELS "${ARG_LABELS}" TIMEOUT ${ARG_TIMEOUT}
-    DISCOVERY_TIMEOUT 60)
+  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60)
+  # gtest_discover_tests splits list-valued PROPERTIES (LABELS "slow;integration"), so labels
+  # and timeout are applied after discovery by a file CTest includes.
+  set(props_file "${CMAKE_CURRENT_BINARY_DIR}/${name}_props.cmake")
+  file(WRITE "${props_file}"
+    "set_tests_properties(\${${name}_TESTS} PROPERTIES LABELS \"${ARG_LABELS}\" TIMEOUT ${ARG_TIMEOUT})\n")
+  set_property(DIRECTORY APPEND PROPERTY TEST_INCLUDE_FILES "${props_file}")
 endfunction()

@@ -1,0 +1,70 @@
+// The `perf` executable as a user runs it: help, version, exit codes and messages.
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "tests/test_util.h"
+
+namespace perf {
+namespace {
+
+using test::RunCommand;
+
+TEST(Cli, VersionAndHelp) {
+  auto r = RunCommand(test::PerfBinary() + " --version");
+  EXPECT_EQ(r.exit_code, 0);
+  EXPECT_NE(r.output.find("perf 0."), std::string::npos) << r.output;
+  r = RunCommand(test::PerfBinary() + " --help");
+  EXPECT_EQ(r.exit_code, 0);
+  for (const char* sub : {"import", "sfm"}) EXPECT_NE(r.output.find(sub), std::string::npos) << r.output;
+  for (const char* sub : {"import", "sfm"}) {
+    r = RunCommand(test::PerfBinary() + " " + sub + " --help");
+    EXPECT_EQ(r.exit_code, 0) << sub;
+    EXPECT_NE(r.output.find("--workspace"), std::string::npos) << r.output;
+  }
+}
+
+TEST(Cli, NoSubcommandIsAnError) {
+  const auto r = RunCommand(test::PerfBinary());
+  EXPECT_NE(r.exit_code, 0);
+}
+
+TEST(Cli, BadInputGivesExitCode2AndNamesTheFile) {
+  test::TempDir dir;
+  std::filesystem::create_directories(dir / "sparse");
+  std::ofstream(dir / "sparse" / "cameras.bin") << "xx";
+  auto r = RunCommand(test::PerfBinary() + " import --colmap " + (dir / "sparse").string() + " --images " +
+                      dir.path().string() + " -w " + (dir / "ws").string());
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("error: "), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("images.bin"), std::string::npos) << r.output;  // which file is missing
+
+  r = RunCommand(test::PerfBinary() + " import --nerf x.json --colmap y -w " + (dir / "ws").string());
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("--colmap/--nerf"), std::string::npos) << r.output;
+
+  r = RunCommand(test::PerfBinary() + " import --nerf x.json --background pink -w " + (dir / "ws").string());
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("--background = pink"), std::string::npos) << r.output;
+}
+
+TEST(Cli, MissingFileGivesExitCode3) {
+  test::TempDir dir;
+  const auto r = RunCommand(test::PerfBinary() + " import --nerf " + (dir / "none.json").string() + " -w " +
+                            (dir / "ws").string());
+  EXPECT_EQ(r.exit_code, 3) << r.output;
+  EXPECT_NE(r.output.find("none.json"), std::string::npos) << r.output;
+}
+
+TEST(Cli, ImportsTheShippedExample) {
+  const std::filesystem::path example = std::filesystem::path(PERF_SOURCE_DIR) / "examples" / "bonsai_mini";
+  ASSERT_TRUE(std::filesystem::exists(example / "sparse" / "0")) << example;
+  test::TempDir dir;
+  const auto r = RunCommand(test::PerfBinary() + " import -q --colmap " + (example / "sparse" / "0").string() +
+                            " -w " + (dir / "ws").string());
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(std::filesystem::exists(dir / "ws" / "scene.json"));
+}
+
+}  // namespace
+}  // namespace perf
