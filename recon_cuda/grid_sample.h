@@ -1,0 +1,41 @@
+// Trilinear sampling of the dense voxel grid (DESIGN.md "Representation"): N^3 cells, each
+// holding (r, g, b, sigma) at its centre (i + 0.5, j + 0.5, k + 0.5) in grid units, clamped at
+// the border. Returns the 8 cells and weights so derivatives can be scattered back.
+#pragma once
+
+#include "recon_cuda/ray_types.h"
+
+namespace perf::recon {
+
+template <class T>
+struct GridSample {
+  int64_t cell[8];  // cell indices (may repeat at the border)
+  T w[8];           // weights, sum to 1
+};
+
+// g: position in grid units, the box being [0, n]^3.
+template <class T>
+PERF_HD_INLINE GridSample<T> TrilinearWeights(int n, Vec3<T> g) {
+  int lo[3], hi[3];
+  T f[3];
+  for (int a = 0; a < 3; ++a) LinearCoord(g[a], n, &lo[a], &hi[a], &f[a]);
+  GridSample<T> s;
+  for (int c = 0; c < 8; ++c) {
+    const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+    s.cell[c] = GridCell(n, dx ? hi[0] : lo[0], dy ? hi[1] : lo[1], dz ? hi[2] : lo[2]);
+    s.w[c] = (dx ? f[0] : 1 - f[0]) * (dy ? f[1] : 1 - f[1]) * (dz ? f[2] : 1 - f[2]);
+  }
+  return s;
+}
+
+// params: [N^3, 4] (the grid part of x); out: (r, g, b, sigma).
+template <class T>
+PERF_HD_INLINE void GatherGrid(const T* params, const GridSample<T>& s, T out[4]) {
+  for (int ch = 0; ch < 4; ++ch) out[ch] = 0;
+  for (int c = 0; c < 8; ++c) {
+    const T* p = params + GridParam(s.cell[c], 0);
+    for (int ch = 0; ch < 4; ++ch) out[ch] += s.w[c] * p[ch];
+  }
+}
+
+}  // namespace perf::recon

@@ -1,0 +1,303 @@
+// Per-ray math of the reconstruction (DESIGN.md "One ray", "Derivatives"): pinhole ray, box
+// slab test, jittered march, front-to-back compositing through the grid and the shells (paper
+// eq. 3-4), the auxiliary residual (paper "Auxiliary terms") and the backward sweep of paper
+// Algorithm 1. Host and device (PERF_HD), templated on the scalar: float on the GPU, double in
+// tests. The backends add only launches, memory and reductions around these functions.
+#pragma once
+
+#include "recon_cuda/grid_sample.h"
+#include "recon_cuda/ray_types.h"
+#include "recon_cuda/shells.h"
+
+namespace perf::recon {
+
+inline constexpr int kMaxShells = 8;  // callers check num_shells <= kMaxShells before launching
+
+// Pinhole after undistortion (scene.h conventions): camera x right, y down, z forward; pixel px
+// covers [px, px + 1), so the upper-left pixel's centre is (0.5, 0.5).
+template <class T>
+struct PinholeCamera {
+  T fx, fy, cx, cy;
+  T world_from_cam[12];  // row-major 3x4 [R | t], camera centre = t
+};
+
+// The box of scene.h: world p is box-local q = R^T (p - center), inside when |q| <= size / 2.
+template <class T>
+struct BoxFrame {
+  Vec3<T> center;
+  Mat3<T> world_from_box;  // R
+  Vec3<T> size;            // world units along the box axes
+};
+
+// Everything the ray math reads; trivially copyable (kernels take it by value).
+template <class T>
+struct VolumeView {
+  const T* params;  // [ParamCount(n, m, num_shells)]: grid [n^3, 4] then shells [K, 6, m, m, 4]
+  int n;            // grid cells per axis
+  Vec3<T> size;     // box size, world units (same as BoxFrame::size)
+  int num_shells;   // K <= kMaxShells; the outermost (K - 1) is opaque
+  int m;            // texels per face side
+  Vec3<T> shell_center;            // box-local frame: R^T (shells.center - box.center)
+  T shell_radii[kMaxShells];       // world units, increasing
+};
+
+// A ray in two coordinate systems sharing one parameter t, which is world distance from the
+// camera centre (the world direction is unit length and both maps are affine):
+//   box-local metric: q(t) = origin + t dir, q = R^T (p - center);
+//   grid units:       g(t) = grid_origin + t grid_dir, g = (q + size / 2) * n / size per axis,
+//                     so the box is [0, n]^3 and cell (i, j, k) spans [i, i+1) x [j, j+1) x ...
+template <class T>
+struct BoxRay {
+  Vec3<T> origin, dir;
+  Vec3<T> grid_origin, grid_dir;
+  PERF_HD_INLINE Vec3<T> GridPoint(T t) const { return grid_origin + grid_dir * t; }
+};
+
+// World ray through pixel (px, py) at jitter (jx, jy) in [0, 1)^2: x = px + jx, y = py + jy,
+// camera direction ((x - cx) / fx, (y - cy) / fy, 1), rotated to world and normalised.
+template <class T>
+PERF_HD_INLINE void PixelRay(const PinholeCamera<T>& cam, int px, int py, T jx, T jy, Vec3<T>* origin,
+                             Vec3<T>* dir) {
+  const Vec3<T> dc{(T(px) + jx - cam.cx) / cam.fx, (T(py) + jy - cam.cy) / cam.fy, T(1)};
+  const T* m = cam.world_from_cam;
+  *origin = {m[3], m[7], m[11]};
+  *dir = Normalized(Vec3<T>{m[0] * dc.x + m[1] * dc.y + m[2] * dc.z, m[4] * dc.x + m[5] * dc.y + m[6] * dc.z,
+                            m[8] * dc.x + m[9] * dc.y + m[10] * dc.z});
+}
+
+template <class T>
+PERF_HD_INLINE BoxRay<T> ToBoxRay(const BoxFrame<T>& box, int n, Vec3<T> world_origin, Vec3<T> world_dir) {
+  BoxRay<T> r;
+  r.origin = MulMatTransposed(box.world_from_box, world_origin - box.center);
+  r.dir = MulMatTransposed(box.world_from_box, Normalized(world_dir));
+  const Vec3<T> scale = Div(Vec3<T>{T(n), T(n), T(n)}, box.size);
+  r.grid_origin = Mul(r.origin + box.size * T(0.5), scale);
+  r.grid_dir = Mul(r.dir, scale);
+  return r;
+}
+
+template <class T>
+struct SlabHit {
+  T t_min, t_max;
+  bool hit;
+};
+
+// Ray o + t d against [0, n]^3, t >= 0 (a ray starting inside enters at t = 0). A zero direction
+// component constrains nothing when the origin is within that slab and misses otherwise, with
+// no division by zero (no reliance on IEEE infinities, which fast-math kernels may not keep).
+template <class T>
+PERF_HD_INLINE SlabHit<T> SlabTest(Vec3<T> o, Vec3<T> d, T n) {
+  T t0 = 0, t1 = T(3.0e38);  // below float's max
+  for (int a = 0; a < 3; ++a) {
+    if (d[a] == 0) {
+      if (o[a] < 0 || o[a] > n) return {0, 0, false};
+      continue;
+    }
+    T ta = (0 - o[a]) / d[a], tb = (n - o[a]) / d[a];
+    if (ta > tb) {
+      const T s = ta;
+      ta = tb;
+      tb = s;
+    }
+    t0 = Max(t0, ta);
+    t1 = Min(t1, tb);
+  }
+  return {t0, t1, t1 > t0};
+}
+
+// The march: segments of length delta (the shortest cell side, world distance) from t_min; the
+// last is cut at t_max. Sample k lies in segment k at start + u_k * length, u_k uniform in
+// [0, 1): i.e. t = t_min + (k + 0.5 + (u_k - 0.5)) delta, within half a step of its regular
+// position. Its delta_k is the segment length, so sum delta_k = t_max - t_min exactly.
+template <class T>
+struct March {
+  T t_min, t_max, delta;
+  int count;
+  bool hit;
+};
+template <class T>
+struct MarchStep {
+  T t, delta;
+};
+struct Jitter {
+  uint32_t seed, ray;
+  bool enabled;  // false: u_k = 0.5 (rendering)
+};
+
+template <class T>
+PERF_HD_INLINE March<T> MakeMarch(const VolumeView<T>& vol, const BoxRay<T>& ray) {
+  const SlabHit<T> s = SlabTest(ray.grid_origin, ray.grid_dir, T(vol.n));
+  const T delta = Min(vol.size.x, Min(vol.size.y, vol.size.z)) / T(vol.n);
+  March<T> m{s.t_min, s.t_max, delta, 0, s.hit};
+  if (s.hit) m.count = static_cast<int>(Ceil((s.t_max - s.t_min) / delta));
+  return m;
+}
+
+template <class T>
+PERF_HD_INLINE MarchStep<T> StepAt(const March<T>& m, int k, const Jitter& jit) {
+  const T start = m.t_min + T(k) * m.delta;
+  const T len = Max(T(0), Min(m.delta, m.t_max - start));
+  const T u = jit.enabled ? Uniform01<T>(jit.seed, jit.ray, static_cast<uint32_t>(k)) : T(0.5);
+  return {start + u * len, len};
+}
+
+// Shell lookups along one ray, innermost first; a missed shell is transparent (a = 0).
+template <class T>
+struct ShellStack {
+  bool hit[kMaxShells];
+  CubeCoord<T> coord[kMaxShells];
+  T e[kMaxShells][3];
+  T a[kMaxShells];  // the outermost is forced to 1
+  T p[kMaxShells];  // P_k = prod_{m<k} (1 - a_m)
+  T s[3];           // S = sum_k P_k a_k e_k
+};
+
+template <class T>
+PERF_HD_INLINE void EvalShells(const VolumeView<T>& vol, const BoxRay<T>& ray, const March<T>& march,
+                               ShellStack<T>* st) {
+  const T t_start = march.hit ? march.t_max : T(0);
+  T p = 1;
+  for (int c = 0; c < 3; ++c) st->s[c] = 0;
+  for (int k = 0; k < vol.num_shells; ++k) {
+    T t;
+    st->p[k] = p;
+    st->hit[k] = SphereExit(ray.origin, ray.dir, vol.shell_center, vol.shell_radii[k], t_start, &t);
+    if (!st->hit[k]) {
+      st->a[k] = 0;
+      for (int c = 0; c < 3; ++c) st->e[k][c] = 0;
+      continue;
+    }
+    st->coord[k] = DirectionToCube(ray.origin + ray.dir * t - vol.shell_center);
+    T v[4];
+    GatherTexels(vol.params, BilinearWeights(vol.n, vol.m, k, st->coord[k]), v);
+    st->a[k] = k == vol.num_shells - 1 ? T(1) : v[3];
+    for (int c = 0; c < 3; ++c) {
+      st->e[k][c] = v[c];
+      st->s[c] += p * st->a[k] * v[c];
+    }
+    p *= 1 - st->a[k];
+  }
+}
+
+template <class T>
+struct RayOutput {
+  T h[3];         // composited colour H
+  T t_box;        // transmittance through the box only
+  T depth;        // optical depth through the box, sum sigma_i delta_i
+  T shells[3];    // S, the shells' colour before the box's transmittance
+  T residual[4];  // H - C (3), then L = lambda (1 - 4 (T_box - 0.5)^2)
+};
+
+// Front to back (paper eq. 3-4): alpha_i = 1 - exp(-sigma_i delta_i), T_i = exp(-sum_{j<i}
+// sigma_j delta_j), H = sum_i T_i alpha_i c_i + T_box S. target: the pixel colour C [3].
+template <class T>
+PERF_HD RayOutput<T> Forward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitter& jit,
+                             const T* target, T lambda) {
+  RayOutput<T> out;
+  const March<T> march = MakeMarch(vol, ray);
+  T depth = 0;
+  for (int c = 0; c < 3; ++c) out.h[c] = 0;
+  for (int k = 0; k < march.count; ++k) {
+    const MarchStep<T> st = StepAt(march, k, jit);
+    T v[4];
+    GatherGrid(vol.params, TrilinearWeights(vol.n, ray.GridPoint(st.t)), v);
+    const T od = v[3] * st.delta;
+    const T weight = Exp(-depth) * (1 - Exp(-od));
+    for (int c = 0; c < 3; ++c) out.h[c] += weight * v[c];
+    depth += od;
+  }
+  out.depth = depth;
+  out.t_box = Exp(-depth);
+  ShellStack<T> shells;
+  EvalShells(vol, ray, march, &shells);
+  for (int c = 0; c < 3; ++c) {
+    out.shells[c] = shells.s[c];
+    out.h[c] += out.t_box * shells.s[c];
+    out.residual[c] = out.h[c] - target[c];
+  }
+  const T q = out.t_box - T(0.5);
+  out.residual[3] = lambda * (1 - 4 * q * q);
+  return out;
+}
+
+// Backward sweep: calls visit(index, dH_r, dH_g, dH_b, dL) with the partials of the four
+// residuals with respect to parameter x[index] (dr_c/dx = dH_c/dx since C is constant). An index
+// can be visited several times per ray (neighbouring samples share cells); the row of J is the
+// SUM of the visits. Consumers linear in the partials (J^T r, J p, J^T u) are exact visit by
+// visit; diag(J^T J) from squaring each visit is a (Jacobi-preconditioner) approximation unless
+// the consumer merges duplicates first.
+//
+// Derivation. Let D_i = sum_{j<i} sigma_j delta_j, T_i = exp(-D_i), T_box = exp(-D_n),
+// G_i = sum_{j>i} T_j alpha_j c_j + T_box S, the colour arriving from behind sample i.
+//   dH/dc_i     = T_i alpha_i                                      (only c_i's own channel)
+//   dH/dsigma_i = delta_i T_i (1 - alpha_i) c_i  [from T_i alpha_i c_i, d alpha_i = delta_i (1 - alpha_i)]
+//               - delta_i G_i                    [every T_j, j > i, and T_box carry exp(-sigma_i delta_i)]
+//   dT_box/dsigma_i = -delta_i T_box, dL/dT_box = -8 lambda (T_box - 0.5), so
+//   dL/dsigma_i = 8 lambda (T_box - 0.5) delta_i T_box.
+// Algorithm 1 walks i = n-1..0 with V = D_n, V -= sigma_i delta_i giving D_i, and G starting at
+// the shells' T_box S (not 0, DESIGN.md), G += T_i alpha_i c_i after sample i.
+// Shells: S = sum_k P_k a_k e_k, P_k = prod_{m<k} (1 - a_m). With B_k = the shells' colour behind
+// shell k as seen from just outside it, B_{K-1} = 0, B_{k-1} = a_k e_k + (1 - a_k) B_k:
+//   S = sum_{j<k} P_j a_j e_j + P_k (a_k e_k + (1 - a_k) B_k), hence
+//   dH/de_k = T_box P_k a_k,   dH/da_k = T_box P_k (e_k - B_k)
+// (= T_box [P_k e_k - sum_{j>k} prod_{m<j, m!=k} (1 - a_m) a_j e_j]); the outermost a is fixed
+// at 1, so its opacity texels get no partial. Shells do not enter T_box, so dL/d(texel) = 0.
+// Every sample/shell partial is distributed to its 8 cells / 4 texels times the interpolation
+// weight (values are linear in the parameters).
+template <class T, class Visitor>
+PERF_HD void Backward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitter& jit, T lambda,
+                      const RayOutput<T>& fwd, Visitor& visit) {
+  const March<T> march = MakeMarch(vol, ray);
+  const T tb = fwd.t_box;
+  ShellStack<T> shells;
+  EvalShells(vol, ray, march, &shells);
+  T behind[3] = {0, 0, 0};  // B_k
+  for (int k = vol.num_shells - 1; k >= 0; --k) {
+    if (!shells.hit[k]) continue;  // transparent: B passes through unchanged
+    const TexelSample<T> ts = BilinearWeights(vol.n, vol.m, k, shells.coord[k]);
+    const T* e = shells.e[k];
+    const T a = shells.a[k];
+    const T de = tb * shells.p[k] * a;
+    const bool opaque = k == vol.num_shells - 1;
+    T da[3];
+    for (int c = 0; c < 3; ++c) da[c] = tb * shells.p[k] * (e[c] - behind[c]);
+    for (int q = 0; q < 4; ++q) {
+      const T w = ts.w[q];
+      visit(ts.param[q] + 0, de * w, T(0), T(0), T(0));
+      visit(ts.param[q] + 1, T(0), de * w, T(0), T(0));
+      visit(ts.param[q] + 2, T(0), T(0), de * w, T(0));
+      if (!opaque) visit(ts.param[q] + 3, da[0] * w, da[1] * w, da[2] * w, T(0));
+    }
+    for (int c = 0; c < 3; ++c) behind[c] = a * e[c] + (1 - a) * behind[c];
+  }
+
+  T g[3];
+  for (int c = 0; c < 3; ++c) g[c] = tb * fwd.shells[c];
+  const T dl_dsigma_per_delta = 8 * lambda * (tb - T(0.5)) * tb;
+  T v_depth = fwd.depth;
+  for (int k = march.count - 1; k >= 0; --k) {
+    const MarchStep<T> st = StepAt(march, k, jit);
+    const GridSample<T> gs = TrilinearWeights(vol.n, ray.GridPoint(st.t));
+    T v[4];
+    GatherGrid(vol.params, gs, v);
+    const T od = v[3] * st.delta;
+    v_depth -= od;
+    const T ti = Exp(-v_depth);
+    const T keep = Exp(-od);  // 1 - alpha_i
+    const T dc = ti * (1 - keep);
+    T ds[3];
+    for (int c = 0; c < 3; ++c) ds[c] = st.delta * (ti * keep * v[c] - g[c]);
+    const T dl = dl_dsigma_per_delta * st.delta;
+    for (int q = 0; q < 8; ++q) {
+      const T w = gs.w[q];
+      const int64_t base = GridParam(gs.cell[q], 0);
+      visit(base + 0, dc * w, T(0), T(0), T(0));
+      visit(base + 1, T(0), dc * w, T(0), T(0));
+      visit(base + 2, T(0), T(0), dc * w, T(0));
+      visit(base + 3, ds[0] * w, ds[1] * w, ds[2] * w, dl * w);
+    }
+    for (int c = 0; c < 3; ++c) g[c] += dc * v[c];
+  }
+}
+
+}  // namespace perf::recon

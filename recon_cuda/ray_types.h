@@ -1,0 +1,122 @@
+// Small value types, scalar helpers, the jitter hash and the parameter layout shared by the
+// per-ray math (ray_math.h, grid_sample.h, shells.h). Host and device; templated on the scalar
+// (float on the GPU, double in the tests). No std containers, no exceptions, no Eigen.
+#pragma once
+
+#include <math.h>
+#include <stdint.h>
+
+#include "recon_cuda/hd.h"
+
+namespace perf::recon {
+
+// Plain C math overloads: callable from device code without relying on std:: in kernels.
+PERF_HD_INLINE float Exp(float x) { return expf(x); }
+PERF_HD_INLINE double Exp(double x) { return exp(x); }
+PERF_HD_INLINE float Sqrt(float x) { return sqrtf(x); }
+PERF_HD_INLINE double Sqrt(double x) { return sqrt(x); }
+PERF_HD_INLINE float Floor(float x) { return floorf(x); }
+PERF_HD_INLINE double Floor(double x) { return floor(x); }
+PERF_HD_INLINE float Ceil(float x) { return ceilf(x); }
+PERF_HD_INLINE double Ceil(double x) { return ceil(x); }
+PERF_HD_INLINE float Abs(float x) { return fabsf(x); }
+PERF_HD_INLINE double Abs(double x) { return fabs(x); }
+template <class T>
+PERF_HD_INLINE T Min(T a, T b) { return b < a ? b : a; }
+template <class T>
+PERF_HD_INLINE T Max(T a, T b) { return a < b ? b : a; }
+template <class T>
+PERF_HD_INLINE T Clamp(T x, T lo, T hi) { return Min(Max(x, lo), hi); }
+
+template <class T>
+struct Vec3 {
+  T x, y, z;
+  PERF_HD_INLINE T operator[](int i) const { return i == 0 ? x : (i == 1 ? y : z); }
+  PERF_HD_INLINE T& operator[](int i) { return i == 0 ? x : (i == 1 ? y : z); }
+};
+template <class T>
+PERF_HD_INLINE Vec3<T> operator+(Vec3<T> a, Vec3<T> b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
+template <class T>
+PERF_HD_INLINE Vec3<T> operator-(Vec3<T> a, Vec3<T> b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
+template <class T>
+PERF_HD_INLINE Vec3<T> operator*(Vec3<T> a, T s) { return {a.x * s, a.y * s, a.z * s}; }
+template <class T>
+PERF_HD_INLINE Vec3<T> Mul(Vec3<T> a, Vec3<T> b) { return {a.x * b.x, a.y * b.y, a.z * b.z}; }
+template <class T>
+PERF_HD_INLINE Vec3<T> Div(Vec3<T> a, Vec3<T> b) { return {a.x / b.x, a.y / b.y, a.z / b.z}; }
+template <class T>
+PERF_HD_INLINE T Dot(Vec3<T> a, Vec3<T> b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+template <class T>
+PERF_HD_INLINE Vec3<T> Normalized(Vec3<T> a) { return a * (T(1) / Sqrt(Dot(a, a))); }
+
+// Row-major 3x3.
+template <class T>
+struct Mat3 {
+  T m[9];
+};
+template <class T>
+PERF_HD_INLINE Vec3<T> MulMat(const Mat3<T>& r, Vec3<T> v) {
+  return {r.m[0] * v.x + r.m[1] * v.y + r.m[2] * v.z, r.m[3] * v.x + r.m[4] * v.y + r.m[5] * v.z,
+          r.m[6] * v.x + r.m[7] * v.y + r.m[8] * v.z};
+}
+template <class T>
+PERF_HD_INLINE Vec3<T> MulMatTransposed(const Mat3<T>& r, Vec3<T> v) {
+  return {r.m[0] * v.x + r.m[3] * v.y + r.m[6] * v.z, r.m[1] * v.x + r.m[4] * v.y + r.m[7] * v.z,
+          r.m[2] * v.x + r.m[5] * v.y + r.m[8] * v.z};
+}
+
+// Clamped linear interpolation along one axis of n samples at positions i + 0.5 (cell or texel
+// centres), s in sample units: values below the first centre or beyond the last take the border
+// sample. lo == hi at the border (and when n == 1); f is the weight of hi.
+template <class T>
+PERF_HD_INLINE void LinearCoord(T s, int n, int* lo, int* hi, T* f) {
+  const T c = Clamp(s - T(0.5), T(0), T(n - 1));
+  int i = static_cast<int>(Floor(c));
+  i = i < 0 ? 0 : (i > n - 1 ? n - 1 : i);
+  *lo = i;
+  *hi = i + 1 < n ? i + 1 : n - 1;
+  *f = c - T(i);
+}
+
+// Jitter: a stateless hash of (seed, ray, sample) so that every pass of one Gauss-Newton
+// iteration sees the same random numbers (DESIGN.md "Gauss-Newton step"). murmur3's fmix32
+// finaliser applied to a chained combination of the three words.
+PERF_HD_INLINE uint32_t Fmix32(uint32_t h) {
+  h ^= h >> 16;
+  h *= 0x85ebca6bu;
+  h ^= h >> 13;
+  h *= 0xc2b2ae35u;
+  h ^= h >> 16;
+  return h;
+}
+PERF_HD_INLINE uint32_t Hash(uint32_t seed, uint32_t ray, uint32_t sample) {
+  uint32_t h = Fmix32(seed * 0x9e3779b9u + 0x7f4a7c15u);
+  h = Fmix32(h ^ (ray * 0xcc9e2d51u + 0x1b873593u));
+  return Fmix32(h ^ (sample * 0x27d4eb2fu + 0x165667b1u));
+}
+// The top 24 bits as a float in [0, 1): exact in float, never rounds up to 1.
+PERF_HD_INLINE float HashToUnit(uint32_t h) { return static_cast<float>(h >> 8) * (1.0f / 16777216.0f); }
+template <class T>
+PERF_HD_INLINE T Uniform01(uint32_t seed, uint32_t ray, uint32_t sample) {
+  return static_cast<T>(HashToUnit(Hash(seed, ray, sample)));
+}
+
+// Parameter layout (one flat vector x per backend, DESIGN.md "Representation"):
+//   grid cell (i, j, k), x fastest, cell = (k N + j) N + i, holds (r, g, b, sigma) at 4 cell + ch;
+//   after the grid, shell s (0 innermost), face f (see shells.h), texel (u, v) holds (r, g, b, a)
+//   at 4 N^3 + 4 ((s 6 + f) M^2 + v M + u) + ch.
+// 64-bit indices: 4 N^3 overflows 32 bits from N = 1024.
+PERF_HD_INLINE int64_t GridCell(int n, int i, int j, int k) {
+  return (static_cast<int64_t>(k) * n + j) * n + i;
+}
+PERF_HD_INLINE int64_t GridParam(int64_t cell, int ch) { return 4 * cell + ch; }
+PERF_HD_INLINE int64_t GridParamCount(int n) { return 4 * static_cast<int64_t>(n) * n * n; }
+PERF_HD_INLINE int64_t ShellParam(int n, int m, int shell, int face, int u, int v, int ch) {
+  return GridParamCount(n) +
+         4 * ((static_cast<int64_t>(shell) * 6 + face) * m * m + static_cast<int64_t>(v) * m + u) + ch;
+}
+PERF_HD_INLINE int64_t ParamCount(int n, int m, int num_shells) {
+  return GridParamCount(n) + 4 * static_cast<int64_t>(num_shells) * 6 * m * m;
+}
+
+}  // namespace perf::recon
