@@ -84,7 +84,7 @@ Image ToRgb(const Image& in, const Eigen::Vector3d& bg, Image* alpha) {
   return rgb;
 }
 
-void ProcessImage(const ImageJob& job, const ImportOptions& o, const fs::path& ws, PixelFormat* fmt) {
+void ProcessImage(const ImageJob& job, const ImportOptions& o, const fs::path& ws) {
   ImageInfo info;
   Image img = ReadImage(job.source, &info);
   if (job.undistorter && !job.undistorter->is_identity()) img = job.undistorter->Apply(img);
@@ -98,14 +98,13 @@ void ProcessImage(const ImageJob& job, const ImportOptions& o, const fs::path& w
     fs::create_directories((ws / job.alpha_rel).parent_path());
     WriteImage(ws / job.alpha_rel, alpha, out == PixelFormat::kUInt8 ? PixelFormat::kUInt8 : PixelFormat::kUInt16);
   }
-  if (fmt) *fmt = info.format;
 }
 
 void RunJobs(const std::vector<ImageJob>& jobs, const ImportOptions& o) {
   std::atomic<int> done{0};
   const int total = static_cast<int>(jobs.size());
   tbb::parallel_for(0, total, [&](int i) {
-    ProcessImage(jobs[i], o, o.workspace, nullptr);
+    ProcessImage(jobs[i], o, o.workspace);
     const int d = ++done;
     if (o.progress) o.progress(d, total);
   });
