@@ -41,6 +41,13 @@ class IoError : public Error {
   std::string path_;
 };
 
+// Not enough memory (or another machine resource) for what was asked: names what was needed,
+// what is available, and what to change.
+class ResourceError : public Error {
+ public:
+  using Error::Error;
+};
+
 // A broken invariant in PERF itself (a bug), with the source location.
 class InternalError : public Error {
  public:

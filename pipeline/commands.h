@@ -10,5 +10,7 @@ namespace perf {
 
 void AddImportCommand(CLI::App& app);
 void AddSfmCommand(CLI::App& app);
+void AddReconstructCommand(CLI::App& app);
+void AddRenderCommand(CLI::App& app);
 
 }  // namespace perf

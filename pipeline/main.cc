@@ -15,7 +15,10 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   perf::AddSfmCommand(app);
   perf::AddImportCommand(app);
-  // Exit codes: 0 ok, 1 internal error (a bug), 2 bad input, 3 file system, 4 other failure.
+  perf::AddReconstructCommand(app);
+  perf::AddRenderCommand(app);
+  // Exit codes: 0 ok, 1 internal error (a bug), 2 bad input, 3 file system, 4 other failure,
+  // 5 not enough memory.
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -26,6 +29,9 @@ int main(int argc, char** argv) {
   } catch (const perf::IoError& e) {
     std::cerr << "error: " << e.what() << "\n";
     return 3;
+  } catch (const perf::ResourceError& e) {
+    std::cerr << "error: " << e.what() << "\n";
+    return 5;
   } catch (const perf::InternalError& e) {
     std::cerr << "error: " << e.what() << "\nThis is a bug in perf; please report it with the command line.\n";
     return 1;

@@ -179,6 +179,34 @@ PERF_HD_INLINE void EvalShells(const VolumeView<T>& vol, const BoxRay<T>& ray, c
   }
 }
 
+
+// Pixel jitter: the hash's sample ids 0xfffffffe (x) and 0xffffffff (y) are reserved for it; the
+// march uses ids 0 .. count-1, so the two never collide for any grid up to 2^32 samples a ray.
+inline constexpr uint32_t kPixelJitterX = 0xfffffffeu;
+inline constexpr uint32_t kPixelJitterY = 0xffffffffu;
+
+// The ray of pixel (px, py) as every pass of one iteration sees it: jittered inside the pixel
+// when jit.enabled (training), through the pixel centre otherwise (rendering).
+template <class T>
+PERF_HD_INLINE BoxRay<T> PixelBoxRay(const PinholeCamera<T>& cam, const BoxFrame<T>& box, int n, int px, int py,
+                                     const Jitter& jit) {
+  const T jx = jit.enabled ? Uniform01<T>(jit.seed, jit.ray, kPixelJitterX) : T(0.5);
+  const T jy = jit.enabled ? Uniform01<T>(jit.seed, jit.ray, kPixelJitterY) : T(0.5);
+  Vec3<T> o, d;
+  PixelRay(cam, px, py, jx, jy, &o, &d);
+  return ToBoxRay(box, n, o, d);
+}
+
+// What the forward saw at one march sample, kept so that a backward sweep on the same thread
+// need not gather the grid or call exp again (the CPU backend records; the GPU recomputes).
+template <class T>
+struct SampleRecord {
+  T t, delta;
+  T v[4];   // (r, g, b, sigma) interpolated at t
+  T trans;  // T_i, the transmittance in front of the sample
+  T keep;   // exp(-sigma_i delta_i) = 1 - alpha_i
+};
+
 template <class T>
 struct RayOutput {
   T h[3];         // composited colour H
@@ -186,26 +214,38 @@ struct RayOutput {
   T depth;        // optical depth through the box, sum sigma_i delta_i
   T shells[3];    // S, the shells' colour before the box's transmittance
   T residual[4];  // H - C (3), then L = lambda (1 - 4 (T_box - 0.5)^2)
+  int count;      // samples composited (the march may stop early, see Forward)
 };
 
 // Front to back (paper eq. 3-4): alpha_i = 1 - exp(-sigma_i delta_i), T_i = exp(-sum_{j<i}
 // sigma_j delta_j), H = sum_i T_i alpha_i c_i + T_box S. target: the pixel colour C [3].
+// stop: the march ends once T_i < stop (early ray termination; 0 marches the whole box). What is
+// left behind then weighs less than `stop`, and the derivatives are those of the truncated sum.
+// record: optional [MakeMarch(vol, ray).count] scratch that Backward can read instead of
+// recomputing.
 template <class T>
-PERF_HD RayOutput<T> Forward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitter& jit,
-                             const T* target, T lambda) {
+PERF_HD RayOutput<T> Forward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitter& jit, const T* target,
+                             T lambda, T stop = T(0), SampleRecord<T>* record = nullptr) {
   RayOutput<T> out;
   const March<T> march = MakeMarch(vol, ray);
-  T depth = 0;
+  T depth = 0, trans = 1;
   for (int c = 0; c < 3; ++c) out.h[c] = 0;
-  for (int k = 0; k < march.count; ++k) {
+  int k = 0;
+  while (k < march.count) {
     const MarchStep<T> st = StepAt(march, k, jit);
     T v[4];
     GatherGrid(vol.params, TrilinearWeights(vol.n, ray.GridPoint(st.t)), v);
     const T od = v[3] * st.delta;
-    const T weight = Exp(-depth) * (1 - Exp(-od));
+    const T keep = Exp(-od);
+    const T weight = trans * (1 - keep);
     for (int c = 0; c < 3; ++c) out.h[c] += weight * v[c];
+    if (record) record[k] = {st.t, st.delta, {v[0], v[1], v[2], v[3]}, trans, keep};
     depth += od;
+    trans *= keep;
+    ++k;
+    if (trans < stop) break;
   }
+  out.count = k;
   out.depth = depth;
   out.t_box = Exp(-depth);
   ShellStack<T> shells;
@@ -220,12 +260,34 @@ PERF_HD RayOutput<T> Forward(const VolumeView<T>& vol, const BoxRay<T>& ray, con
   return out;
 }
 
-// Backward sweep: calls visit(index, dH_r, dH_g, dH_b, dL) with the partials of the four
-// residuals with respect to parameter x[index] (dr_c/dx = dH_c/dx since C is constant). An index
-// can be visited several times per ray (neighbouring samples share cells); the row of J is the
-// SUM of the visits. Consumers linear in the partials (J^T r, J p, J^T u) are exact visit by
-// visit; diag(J^T J) from squaring each visit is a (Jacobi-preconditioner) approximation unless
-// the consumer merges duplicates first.
+// The partials of one march sample before they are spread over its 8 cells with the trilinear
+// weights w: d r_c / d c_c = w dc (the same for the three channels; a sample's colour enters only
+// its own channel's residual), d r_c / d sigma = w ds[c], d L / d sigma = w dl.
+template <class T>
+struct SamplePartials {
+  T dc;
+  T ds[3];
+  T dl;
+};
+
+// The partials of one shell hit before the bilinear weights w: d r_c / d e_c = w de,
+// d r_c / d a = w da[c] (none when the shell is the opaque outermost one); L does not depend on
+// the shells.
+template <class T>
+struct ShellPartials {
+  T de;
+  T da[3];
+  bool opaque;
+};
+
+// Backward sweep (paper Algorithm 1). Calls
+//   visit.Shell(k, const CubeCoord<T>&, const TexelSample<T>&, const ShellPartials<T>&)
+//                                                                    for each shell hit, outermost first;
+//   visit.Sample(k, const MarchStep<T>&, const GridSample<T>&, const SamplePartials<T>&)
+//                                                                    for each sample, last first.
+// A parameter can be reached several times per ray (neighbouring samples share cells; border
+// cells repeat within one sample); the row of J is the SUM of those contributions.
+// record: what Forward recorded for this ray (same vol, ray and jit), or nullptr to recompute.
 //
 // Derivation. Let D_i = sum_{j<i} sigma_j delta_j, T_i = exp(-D_i), T_box = exp(-D_n),
 // G_i = sum_{j>i} T_j alpha_j c_j + T_box S, the colour arriving from behind sample i.
@@ -242,11 +304,10 @@ PERF_HD RayOutput<T> Forward(const VolumeView<T>& vol, const BoxRay<T>& ray, con
 //   dH/de_k = T_box P_k a_k,   dH/da_k = T_box P_k (e_k - B_k)
 // (= T_box [P_k e_k - sum_{j>k} prod_{m<j, m!=k} (1 - a_m) a_j e_j]); the outermost a is fixed
 // at 1, so its opacity texels get no partial. Shells do not enter T_box, so dL/d(texel) = 0.
-// Every sample/shell partial is distributed to its 8 cells / 4 texels times the interpolation
-// weight (values are linear in the parameters).
+// Values are linear in the parameters, so each partial is spread with the interpolation weights.
 template <class T, class Visitor>
 PERF_HD void Backward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitter& jit, T lambda,
-                      const RayOutput<T>& fwd, Visitor& visit) {
+                      const RayOutput<T>& fwd, Visitor& visit, const SampleRecord<T>* record = nullptr) {
   const March<T> march = MakeMarch(vol, ray);
   const T tb = fwd.t_box;
   ShellStack<T> shells;
@@ -254,50 +315,80 @@ PERF_HD void Backward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitt
   T behind[3] = {0, 0, 0};  // B_k
   for (int k = vol.num_shells - 1; k >= 0; --k) {
     if (!shells.hit[k]) continue;  // transparent: B passes through unchanged
-    const TexelSample<T> ts = BilinearWeights(vol.n, vol.m, k, shells.coord[k]);
     const T* e = shells.e[k];
     const T a = shells.a[k];
-    const T de = tb * shells.p[k] * a;
-    const bool opaque = k == vol.num_shells - 1;
-    T da[3];
-    for (int c = 0; c < 3; ++c) da[c] = tb * shells.p[k] * (e[c] - behind[c]);
-    for (int q = 0; q < 4; ++q) {
-      const T w = ts.w[q];
-      visit(ts.param[q] + 0, de * w, T(0), T(0), T(0));
-      visit(ts.param[q] + 1, T(0), de * w, T(0), T(0));
-      visit(ts.param[q] + 2, T(0), T(0), de * w, T(0));
-      if (!opaque) visit(ts.param[q] + 3, da[0] * w, da[1] * w, da[2] * w, T(0));
-    }
+    ShellPartials<T> sp;
+    sp.de = tb * shells.p[k] * a;
+    sp.opaque = k == vol.num_shells - 1;
+    for (int c = 0; c < 3; ++c) sp.da[c] = tb * shells.p[k] * (e[c] - behind[c]);
+    visit.Shell(k, shells.coord[k], BilinearWeights(vol.n, vol.m, k, shells.coord[k]), sp);
     for (int c = 0; c < 3; ++c) behind[c] = a * e[c] + (1 - a) * behind[c];
   }
 
   T g[3];
   for (int c = 0; c < 3; ++c) g[c] = tb * fwd.shells[c];
-  const T dl_dsigma_per_delta = 8 * lambda * (tb - T(0.5)) * tb;
+  const T dl_per_delta = 8 * lambda * (tb - T(0.5)) * tb;
   T v_depth = fwd.depth;
-  for (int k = march.count - 1; k >= 0; --k) {
-    const MarchStep<T> st = StepAt(march, k, jit);
-    const GridSample<T> gs = TrilinearWeights(vol.n, ray.GridPoint(st.t));
-    T v[4];
-    GatherGrid(vol.params, gs, v);
-    const T od = v[3] * st.delta;
-    v_depth -= od;
-    const T ti = Exp(-v_depth);
-    const T keep = Exp(-od);  // 1 - alpha_i
-    const T dc = ti * (1 - keep);
-    T ds[3];
-    for (int c = 0; c < 3; ++c) ds[c] = st.delta * (ti * keep * v[c] - g[c]);
-    const T dl = dl_dsigma_per_delta * st.delta;
+  for (int k = fwd.count - 1; k >= 0; --k) {
+    MarchStep<T> st;
+    T v[4], ti, keep;
+    GridSample<T> gs;
+    if (record) {
+      const SampleRecord<T>& r = record[k];
+      st = {r.t, r.delta};
+      for (int ch = 0; ch < 4; ++ch) v[ch] = r.v[ch];
+      gs = TrilinearWeights(vol.n, ray.GridPoint(st.t));
+      ti = r.trans;
+      keep = r.keep;
+    } else {
+      st = StepAt(march, k, jit);
+      gs = TrilinearWeights(vol.n, ray.GridPoint(st.t));
+      GatherGrid(vol.params, gs, v);
+      const T od = v[3] * st.delta;
+      v_depth -= od;
+      ti = Exp(-v_depth);
+      keep = Exp(-od);
+    }
+    SamplePartials<T> sp;
+    sp.dc = ti * (1 - keep);
+    for (int c = 0; c < 3; ++c) sp.ds[c] = st.delta * (ti * keep * v[c] - g[c]);
+    sp.dl = dl_per_delta * st.delta;
+    visit.Sample(k, st, gs, sp);
+    for (int c = 0; c < 3; ++c) g[c] += sp.dc * v[c];
+  }
+}
+
+// Adapts a per-parameter callable f(index, dr_r, dr_g, dr_b, dL) to Backward's visitor: each
+// call is one contribution to row entries J[r_c][index] (sum the calls for the row).
+template <class T, class F>
+struct PerParamVisitor {
+  F& f;
+  PERF_HD_INLINE void Shell(int, const CubeCoord<T>&, const TexelSample<T>& ts, const ShellPartials<T>& p) {
+    for (int q = 0; q < 4; ++q) {
+      const T w = ts.w[q];
+      f(ts.param[q] + 0, p.de * w, T(0), T(0), T(0));
+      f(ts.param[q] + 1, T(0), p.de * w, T(0), T(0));
+      f(ts.param[q] + 2, T(0), T(0), p.de * w, T(0));
+      if (!p.opaque) f(ts.param[q] + 3, p.da[0] * w, p.da[1] * w, p.da[2] * w, T(0));
+    }
+  }
+  PERF_HD_INLINE void Sample(int, const MarchStep<T>&, const GridSample<T>& gs, const SamplePartials<T>& p) {
     for (int q = 0; q < 8; ++q) {
       const T w = gs.w[q];
       const int64_t base = GridParam(gs.cell[q], 0);
-      visit(base + 0, dc * w, T(0), T(0), T(0));
-      visit(base + 1, T(0), dc * w, T(0), T(0));
-      visit(base + 2, T(0), T(0), dc * w, T(0));
-      visit(base + 3, ds[0] * w, ds[1] * w, ds[2] * w, dl * w);
+      f(base + 0, p.dc * w, T(0), T(0), T(0));
+      f(base + 1, T(0), p.dc * w, T(0), T(0));
+      f(base + 2, T(0), T(0), p.dc * w, T(0));
+      f(base + 3, p.ds[0] * w, p.ds[1] * w, p.ds[2] * w, p.dl * w);
     }
-    for (int c = 0; c < 3; ++c) g[c] += dc * v[c];
   }
+};
+
+template <class T, class F>
+PERF_HD_INLINE void BackwardPerParam(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitter& jit, T lambda,
+                                     const RayOutput<T>& fwd, F& f) {
+  PerParamVisitor<T, F> v{f};
+  Backward(vol, ray, jit, lambda, fwd, v);
 }
 
 }  // namespace perf::recon

@@ -25,7 +25,7 @@ __global__ void JtrCheckKernel(VolumeView<float> vol, BoxFrame<float> box, const
   const Jitter jit{seed, static_cast<uint32_t>(i), true};
   const RayOutput<float> out = Forward(vol, ray, jit, targets + 3 * i, lambda);
   AtomicScatter visit{grad, {out.residual[0], out.residual[1], out.residual[2], out.residual[3]}};
-  Backward(vol, ray, jit, lambda, out, visit);
+  BackwardPerParam(vol, ray, jit, lambda, out, visit);
 }
 
 }  // namespace

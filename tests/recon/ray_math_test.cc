@@ -95,7 +95,7 @@ TEST(RayMathTest, EveryPartialMatchesCentralDifferences) {
     const Jitter jit{1234u, static_cast<uint32_t>(r), true};
     const RayOutput<double> out = Forward(s.vol, rays[r], jit, target, lambda);
     DenseRow row(s.x.size());
-    Backward(s.vol, rays[r], jit, lambda, out, row);
+    BackwardPerParam(s.vol, rays[r], jit, lambda, out, row);
     for (size_t p = 0; p < s.x.size(); ++p) {
       const double keep = s.x[p];
       s.x[p] = keep + h;

@@ -1,0 +1,134 @@
+// `perf reconstruct WORKSPACE` and `perf render WORKSPACE`.
+#include <CLI/CLI.hpp>
+#include <iomanip>
+#include <iostream>
+
+#include "common/errors.h"
+#include "pipeline/commands.h"
+#include "pipeline/progress.h"
+#include "recon_cuda/reconstruct.h"
+#include "recon_cuda/render_views.h"
+
+namespace perf {
+
+void AddReconstructCommand(CLI::App& app) {
+  struct Args {
+    recon::ReconstructOptions o;
+    std::string workspace;
+    std::string solver = "gn";
+    bool no_aux = false, no_pyramid = false, quiet = false;
+  };
+  auto args = std::make_shared<Args>();
+  recon::ReconstructOptions& o = args->o;
+  CLI::App* cmd = app.add_subcommand(
+      "reconstruct",
+      "Fit the voxel grid and environment shells to a workspace made by perf import: hierarchical "
+      "Gauss-Newton with preconditioned CG, coarse to fine, checkpointed after every level.");
+  cmd->add_option("workspace", args->workspace, "Workspace folder (made by perf import)")->required();
+  cmd->add_option("--device", o.device, "cpu, cuda or auto")->capture_default_str();
+  cmd->add_option("-j,--threads", o.threads, "CPU worker threads (0: all cores)")->capture_default_str();
+  cmd->add_option("--levels", o.levels, "Hierarchy levels, each doubling the resolution (0: 2 on CPU, 4 on GPU)")
+      ->capture_default_str();
+  cmd->add_option("--start-resolution", o.start_resolution, "Grid cells per axis (and texels per face side) at level 1")
+      ->capture_default_str();
+  cmd->add_option("--iterations", o.iterations, "Solver iterations per level (Gauss-Newton iterations or Adam steps)")
+      ->capture_default_str();
+  cmd->add_option("--solver", args->solver, "gn (Gauss-Newton, the paper's) or adam (first-order baseline)")
+      ->capture_default_str();
+  cmd->add_option("--seed", o.init.seed, "Seed of the random start and of the jitter")->capture_default_str();
+  cmd->add_flag("--resume", o.resume, "Continue after the last checkpoint in WORKSPACE/recon");
+  cmd->add_option("--preview-every", o.preview_every,
+                  "Write WORKSPACE/preview/recon_l<level>_i<iteration>.png of a held-out view every K iterations")
+      ->capture_default_str();
+  cmd->add_option("--eval-every", o.eval_every, "Log the held-out PSNR every K iterations (0: at the end of each level)")
+      ->capture_default_str();
+  cmd->add_option("--lambda", o.residuals.lambda, "Weight of the auxiliary opacity residual")->capture_default_str();
+  cmd->add_flag("--no-aux", args->no_aux, "Switch the auxiliary opacity residual off");
+  cmd->add_option("--stop-transmittance", o.residuals.stop_transmittance,
+                  "End a ray's march once its transmittance is below this (0: march the whole box)")
+      ->capture_default_str();
+  cmd->add_flag("--no-pyramid", args->no_pyramid, "Fit full-resolution photos at every level");
+  cmd->add_option("--max-cg-iterations", o.solver.max_cg_iterations, "PCG iterations per Gauss-Newton step at most")
+      ->capture_default_str();
+  cmd->add_option("--cg-exit-ratio", o.solver.cg_exit_ratio, "PCG leaves when |r|^2 falls by less than this factor")
+      ->capture_default_str();
+  cmd->add_option("--damping", o.solver.damping, "Levenberg-Marquardt damping of the diagonal (0: Gauss-Newton)")
+      ->capture_default_str();
+  cmd->add_option("--line-search-stride", o.solver.line_search_ray_stride,
+                  "Evaluate the line search on every k-th ray")->capture_default_str();
+  cmd->add_option("--lr-colour", o.solver.adam.lr_colour, "Adam learning rate of colours and shell opacities")
+      ->capture_default_str();
+  cmd->add_option("--lr-density", o.solver.adam.lr_density, "Adam learning rate of densities")->capture_default_str();
+  cmd->add_option("--init-opacity", o.init.box_opacity, "Opacity of the box across its shortest side at the start")
+      ->capture_default_str();
+  cmd->add_option("--min-box-opacity", o.min_box_opacity,
+                  "Render rule: rays whose box opacity is below this see only the shells")->capture_default_str();
+  cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
+  cmd->callback([args]() {
+    recon::ReconstructOptions& o = args->o;
+    o.workspace = args->workspace;
+    if (args->solver == "gn") {
+      o.solver.type = recon::SolverType::kGaussNewton;
+    } else if (args->solver == "adam") {
+      o.solver.type = recon::SolverType::kAdam;
+    } else {
+      throw InputError("command line", "--solver", args->solver, "unknown solver", "use gn or adam");
+    }
+    o.solver.adam.lr_opacity = o.solver.adam.lr_colour;
+    if (args->no_aux) o.residuals.lambda = 0;
+    if (args->no_pyramid) o.pyramid = false;
+    Progress progress("reconstruct", args->quiet);
+    o.on_event = [&](const recon::ReconstructOptions::Event& e) {
+      if (!e.message.empty()) {
+        progress.Message(e.message);
+        return;
+      }
+      std::ostringstream unit;
+      unit << "iterations, level " << e.level + 1 << "/" << e.levels << ", cost " << std::setprecision(5) << e.cost;
+      if (e.train_psnr > 0) unit << ", train PSNR " << std::setprecision(4) << e.train_psnr << " dB";
+      progress.Update(e.iteration, e.iterations, unit.str());
+    };
+    const recon::ReconstructResult r = recon::Reconstruct(o);
+    progress.Finish();
+    if (!args->quiet) std::cout << recon::ReconstructSummary(r);
+  });
+}
+
+void AddRenderCommand(CLI::App& app) {
+  struct Args {
+    recon::RenderViewsOptions o;
+    std::string workspace, checkpoint, out;
+    bool quiet = false;
+  };
+  auto args = std::make_shared<Args>();
+  recon::RenderViewsOptions& o = args->o;
+  CLI::App* cmd = app.add_subcommand(
+      "render", "Render cameras of a reconstructed workspace (held-out views by default) and score them against the photos.");
+  cmd->add_option("workspace", args->workspace, "Workspace folder")->required();
+  cmd->add_option("--split", o.split, "test, train or all")->capture_default_str();
+  cmd->add_option("--view", o.names, "Only this image (a scene.json name); repeatable");
+  cmd->add_option("--checkpoint", args->checkpoint, "Checkpoint to render (default: the last level in WORKSPACE/recon)");
+  cmd->add_option("-o,--out", args->out, "Output folder (default: WORKSPACE/renders)");
+  cmd->add_option("--min-box-opacity", o.min_box_opacity,
+                  "Rays whose box opacity is below this see only the shells (paper: 0.7; 0: off)")->capture_default_str();
+  cmd->add_flag("--opacity", o.write_opacity, "Also write <name>_opacity.png, the box opacity 1 - T (16-bit)");
+  cmd->add_option("--device", o.device, "cpu, cuda or auto")->capture_default_str();
+  cmd->add_option("-j,--threads", o.threads, "CPU worker threads (0: all cores)")->capture_default_str();
+  cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
+  cmd->callback([args]() {
+    recon::RenderViewsOptions& o = args->o;
+    o.workspace = args->workspace;
+    o.checkpoint = args->checkpoint;
+    o.out_dir = args->out;
+    Progress progress("render", args->quiet);
+    o.progress = [&](int done, int total) { progress.Update(done, total, "views"); };
+    const recon::RenderViewsResult r = recon::RenderViews(o);
+    progress.Finish();
+    if (args->quiet) return;
+    std::cout << "rendered " << r.scores.size() << " views from " << r.checkpoint.string() << "\n";
+    for (const recon::ViewScore& s : r.scores) std::cout << "  " << s.name << ": PSNR " << s.psnr << " dB\n";
+    if (!r.scores.empty()) std::cout << "mean PSNR " << r.mean_psnr << " dB\n";
+  });
+}
+
+}  // namespace perf

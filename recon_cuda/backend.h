@@ -1,0 +1,128 @@
+// One interface, two implementations (DESIGN.md "Backends"): the passes over all training rays
+// that the solver needs, and the few vector operations of PCG, line search and Adam, on vectors
+// the backend owns (host memory for `cpu`, device memory for `cuda`). The solver loop
+// (solver.h) is host code written once against this interface.
+//
+// Passes (DESIGN.md "Gauss-Newton step"):
+//   Linearize   cost, g = J^T r and diag(J^T J) at x, for one seed (the jitter of every ray);
+//   MultiplyJtJ J^T J p at the last linearisation point and seed, never forming J^T J;
+//   Cost        cost only (line search), optionally on a subset of the rays;
+//   Render      one camera without jitter.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "recon_cuda/training_data.h"
+#include "recon_cuda/volume.h"
+
+namespace perf::recon {
+
+// The residuals (DESIGN.md "One ray" step 5).
+struct ResidualSettings {
+  float lambda = 0.1f;  // weight of the auxiliary residual L; 0 switches it off
+  // Early ray termination: the march stops once the transmittance drops below this. What is
+  // behind then contributes less than this fraction to the pixel (and to every partial).
+  float stop_transmittance = 1e-4f;
+};
+
+// Everything a backend needs for one level of the hierarchy.
+struct LevelProblem {
+  VolumeShape shape;
+  VolumeGeometry geometry;
+  const RaySet* rays = nullptr;  // must outlive the level
+  ResidualSettings residuals;
+};
+
+using VecId = int;
+inline constexpr VecId kNoVector = -1;
+
+// Rays i with i % stride == offset (stride 1: all).
+struct RaySubset {
+  int stride = 1;
+  int offset = 0;
+};
+
+struct PassStats {
+  double cost = 0;        // 0.5 sum of squared residuals (colour and auxiliary)
+  double colour_sse = 0;  // sum of squared colour residuals (for PSNR: MSE = colour_sse / (3 rays))
+  int64_t rays = 0;       // rays evaluated
+  int64_t samples = 0;    // march samples composited
+  double seconds = 0;
+};
+
+struct MemoryEstimate {
+  int64_t vectors = 0;        // the solver's parameter vectors
+  int64_t scratch = 0;        // per-thread sums and other working memory
+  int64_t jacobian_cache = 0; // what MultiplyJtJ reuses from Linearize (0 when recomputing)
+  int64_t rays = 0;           // training rays
+  int64_t available = 0;      // what the backend may use (free RAM or device memory)
+  int64_t Total() const { return vectors + scratch + jacobian_cache + rays; }
+};
+
+struct AdamSettings {
+  float lr_colour = 0.02f, lr_density = 1.0f, lr_opacity = 0.02f;
+  float beta1 = 0.9f, beta2 = 0.999f, epsilon = 1e-8f;
+};
+
+struct RenderOutput {
+  int width = 0, height = 0;
+  std::vector<float> colour;   // [height, width, 3]
+  std::vector<float> opacity;  // [height, width]: 1 - T_box, the box's opacity along the ray
+};
+
+class Backend {
+ public:
+  virtual ~Backend() = default;
+
+  // "cpu (2 threads)", "cuda (NVIDIA H100 80GB HBM3)".
+  virtual std::string Describe() const = 0;
+
+  // What SetLevel would allocate. Pure: allocates nothing.
+  virtual MemoryEstimate EstimateMemory(const LevelProblem& problem, int num_vectors) const = 0;
+  // Drops the previous level's vectors and caches and allocates `num_vectors` parameter vectors
+  // (ids 0 .. num_vectors - 1, zero-filled). Throws ResourceError, naming the level, what it
+  // needs and what is available, when it does not fit.
+  virtual void SetLevel(const LevelProblem& problem, int num_vectors) = 0;
+  virtual const LevelProblem& level() const = 0;
+  // Whether MultiplyJtJ reuses the partials of Linearize (false: it recomputes them).
+  virtual bool CachesJacobian() const = 0;
+
+  // Vector operations; every vector has level().shape.ParamCount() floats.
+  virtual void Upload(VecId v, std::span<const float> host) = 0;
+  virtual void Download(VecId v, std::span<float> host) const = 0;
+  virtual void Fill(VecId v, float value) = 0;
+  virtual void Copy(VecId dst, VecId src) = 0;
+  virtual void Axpy(VecId y, double a, VecId x) = 0;  // y += a x
+  virtual void Xpby(VecId y, VecId x, double b) = 0;  // y = x + b y
+  // z = r / max(d, floor): the Jacobi preconditioner (paper "Preconditioner").
+  virtual void DivideClamped(VecId z, VecId r, VecId d, float floor) = 0;
+  // y += a (d .* x): Levenberg-Marquardt damping with the diagonal d.
+  virtual void AxpyDiag(VecId y, double a, VecId d, VecId x) = 0;
+  // Deterministic (independent of the thread count) in double.
+  virtual double Dot(VecId a, VecId b) const = 0;
+  virtual double MaxAbs(VecId v) const = 0;
+  // x = valid(x): sigma >= 0, colours and opacities in [0, 1].
+  virtual void Project(VecId x) = 0;
+  // One Adam step (Kingma & Ba) with per-kind learning rates, t = step number from 1.
+  virtual void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) = 0;
+
+  // Passes. `seed` fixes every ray's jitter; the same seed gives the same rays in every pass.
+  // g and diag: outputs, or kNoVector to skip (Adam needs no diagonal).
+  virtual PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag) = 0;
+  // out = J^T J p, J at the last Linearize's x and seed (x must not have changed since).
+  virtual PassStats MultiplyJtJ(VecId p, VecId out) = 0;
+  virtual PassStats Cost(VecId x, uint32_t seed, RaySubset subset = {}) = 0;
+  // No jitter; where the box's opacity along a ray is below min_box_opacity the box is treated
+  // as empty for that ray (paper "Rendering": 0.7), 0 renders it as is.
+  virtual RenderOutput Render(VecId x, const PinholeCamera<float>& camera, int width, int height,
+                              float min_box_opacity) = 0;
+};
+
+// "cpu", "cuda" or "auto" (cuda when a device is visible). threads: CPU worker threads, 0 = all.
+std::unique_ptr<Backend> MakeBackend(const std::string& device, int threads);
+
+}  // namespace perf::recon

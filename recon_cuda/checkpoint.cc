@@ -1,0 +1,194 @@
+#include "recon_cuda/checkpoint.h"
+
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <regex>
+
+#include "common/atomic_file.h"
+#include "common/errors.h"
+
+namespace perf::recon {
+namespace {
+
+static_assert(std::endian::native == std::endian::little, "checkpoints are written little-endian");
+
+constexpr char kMagic[8] = {'P', 'E', 'R', 'F', 'V', 'O', 'L', '\0'};
+constexpr uint32_t kHeaderBytes = 8 + 4 + 4 + 6 * 4 + (3 + 9 + 3 + 3 + kMaxShells) * 8 + 8 + 8;
+static_assert(kHeaderBytes == 264);
+
+uint64_t Fnv1a(const void* data, size_t n) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  uint64_t h = 0xcbf29ce484222325ull;
+  for (size_t i = 0; i < n; ++i) {
+    h ^= p[i];
+    h *= 0x100000001b3ull;
+  }
+  return h;
+}
+
+template <class T>
+void Put(std::string* buf, const T& v) {
+  buf->append(reinterpret_cast<const char*>(&v), sizeof(T));
+}
+
+class Reader {
+ public:
+  Reader(std::istream& in, const std::string& name) : in_(in), name_(name) {}
+  template <class T>
+  T Get(const char* field) {
+    T v;
+    if (!in_.read(reinterpret_cast<char*>(&v), sizeof(T))) Truncated(field);
+    return v;
+  }
+  [[noreturn]] void Truncated(const char* field) {
+    throw InputError(name_, field, "", "the checkpoint is truncated",
+                     "it was not written completely; delete it and run perf reconstruct again (--resume restarts "
+                     "from the previous level)");
+  }
+  [[noreturn]] void Bad(const char* field, const std::string& value, const std::string& problem) {
+    throw InputError(name_, field, value, problem,
+                     "the checkpoint is damaged or not a PERF checkpoint; delete it and run perf reconstruct again");
+  }
+  std::istream& in() { return in_; }
+
+ private:
+  std::istream& in_;
+  const std::string& name_;
+};
+
+}  // namespace
+
+void WriteCheckpoint(std::ostream& out, const Checkpoint& c) {
+  PERF_CHECK(static_cast<int64_t>(c.params.size()) == c.shape.ParamCount());
+  PERF_CHECK(static_cast<int>(c.shell_radii.size()) == c.shape.num_shells && c.shape.num_shells <= kMaxShells);
+  std::string h;
+  h.append(kMagic, 8);
+  Put(&h, kCheckpointVersion);
+  Put(&h, kHeaderBytes);
+  for (int32_t v : {c.level, c.shape.n, c.shape.m, c.shape.num_shells, c.iterations, c.solver}) Put(&h, v);
+  for (double v : c.box_center) Put(&h, v);
+  for (double v : c.box_rotation) Put(&h, v);
+  for (double v : c.box_size) Put(&h, v);
+  for (double v : c.shell_center) Put(&h, v);
+  for (int k = 0; k < kMaxShells; ++k) Put(&h, k < c.shape.num_shells ? c.shell_radii[k] : 0.0);
+  Put(&h, static_cast<uint64_t>(c.params.size()));
+  Put(&h, Fnv1a(c.params.data(), c.params.size() * sizeof(float)));
+  PERF_CHECK(h.size() == kHeaderBytes);
+  out.write(h.data(), static_cast<std::streamsize>(h.size()));
+  out.write(reinterpret_cast<const char*>(c.params.data()), static_cast<std::streamsize>(c.params.size() * sizeof(float)));
+}
+
+Checkpoint ReadCheckpoint(std::istream& in, const std::string& name) {
+  Reader r(in, name);
+  char magic[8];
+  if (!in.read(magic, 8)) r.Truncated("magic");
+  if (std::memcmp(magic, kMagic, 8) != 0) r.Bad("magic", std::string(magic, strnlen(magic, 8)), "not a PERF volume checkpoint");
+  const uint32_t version = r.Get<uint32_t>("version");
+  if (version != kCheckpointVersion) {
+    throw InputError(name, "version", std::to_string(version),
+                     StrCat("this perf reads checkpoint version ", kCheckpointVersion),
+                     "re-run perf reconstruct with this version of perf");
+  }
+  const uint32_t header = r.Get<uint32_t>("header bytes");
+  if (header != kHeaderBytes) r.Bad("header bytes", std::to_string(header), StrCat("expected ", kHeaderBytes));
+  Checkpoint c;
+  c.level = r.Get<int32_t>("level");
+  c.shape.n = r.Get<int32_t>("n");
+  c.shape.m = r.Get<int32_t>("m");
+  c.shape.num_shells = r.Get<int32_t>("num_shells");
+  c.iterations = r.Get<int32_t>("iterations");
+  c.solver = r.Get<int32_t>("solver");
+  if (c.level < 0 || c.level > 16) r.Bad("level", std::to_string(c.level), "out of range");
+  if (c.shape.n < 1 || c.shape.n > 4096) r.Bad("n", std::to_string(c.shape.n), "grid size out of range");
+  if (c.shape.m < 1 || c.shape.m > 16384) r.Bad("m", std::to_string(c.shape.m), "face size out of range");
+  if (c.shape.num_shells < 1 || c.shape.num_shells > kMaxShells) {
+    r.Bad("num_shells", std::to_string(c.shape.num_shells), StrCat("must be 1 to ", kMaxShells));
+  }
+  if (c.solver != 0 && c.solver != 1) r.Bad("solver", std::to_string(c.solver), "must be 0 or 1");
+  auto get_finite = [&](const char* field) {
+    const double v = r.Get<double>(field);
+    if (!std::isfinite(v)) r.Bad(field, StrCat(v), "not finite");
+    return v;
+  };
+  for (double& v : c.box_center) v = get_finite("box.center");
+  for (double& v : c.box_rotation) v = get_finite("box.rotation");
+  for (double& v : c.box_size) {
+    v = get_finite("box.size");
+    if (!(v > 0)) r.Bad("box.size", StrCat(v), "must be positive");
+  }
+  for (double& v : c.shell_center) v = get_finite("shells.center");
+  for (int k = 0; k < kMaxShells; ++k) {
+    const double radius = get_finite("shells.radii");
+    if (k < c.shape.num_shells) {
+      if (!(radius > 0) || (k > 0 && !(radius > c.shell_radii.back()))) {
+        r.Bad("shells.radii", StrCat(radius), "radii must be positive and increasing");
+      }
+      c.shell_radii.push_back(radius);
+    }
+  }
+  const uint64_t count = r.Get<uint64_t>("parameter count");
+  if (count != static_cast<uint64_t>(c.shape.ParamCount())) {
+    r.Bad("parameter count", std::to_string(count), StrCat("expected ", c.shape.ParamCount(), " for the shape"));
+  }
+  const uint64_t checksum = r.Get<uint64_t>("checksum");
+  c.params.resize(count);
+  if (!in.read(reinterpret_cast<char*>(c.params.data()), static_cast<std::streamsize>(count * sizeof(float)))) {
+    r.Truncated("parameters");
+  }
+  if (Fnv1a(c.params.data(), count * sizeof(float)) != checksum) {
+    r.Bad("checksum", "", "the parameters do not match the checksum");
+  }
+  if (in.peek() != std::char_traits<char>::eof()) r.Bad("size", "", "trailing bytes after the parameters");
+  return c;
+}
+
+void WriteCheckpoint(const std::filesystem::path& path, const Checkpoint& c) {
+  WriteAtomically(path, [&](const std::filesystem::path& tmp) {
+    std::ofstream out(tmp, std::ios::binary);
+    if (!out) throw IoError(tmp.string(), "cannot create the checkpoint", "check that the workspace is writable");
+    WriteCheckpoint(out, c);
+    out.flush();
+    if (!out) throw IoError(tmp.string(), "cannot write the checkpoint", "check the free disk space");
+  });
+}
+
+Checkpoint ReadCheckpoint(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw IoError(path.string(), "cannot open the checkpoint", "run perf reconstruct on the workspace first");
+  return ReadCheckpoint(in, path.string());
+}
+
+VolumeGeometry GeometryOf(const Checkpoint& c) {
+  VolumeGeometry g;
+  g.box.center = {static_cast<float>(c.box_center[0]), static_cast<float>(c.box_center[1]),
+                  static_cast<float>(c.box_center[2])};
+  for (int i = 0; i < 9; ++i) g.box.world_from_box.m[i] = static_cast<float>(c.box_rotation[i]);
+  g.box.size = {static_cast<float>(c.box_size[0]), static_cast<float>(c.box_size[1]), static_cast<float>(c.box_size[2])};
+  // Box-local shell centre: R^T (shell centre - box centre).
+  double d[3], local[3];
+  for (int a = 0; a < 3; ++a) d[a] = c.shell_center[a] - c.box_center[a];
+  for (int a = 0; a < 3; ++a) local[a] = c.box_rotation[a] * d[0] + c.box_rotation[3 + a] * d[1] + c.box_rotation[6 + a] * d[2];
+  g.shell_center = {static_cast<float>(local[0]), static_cast<float>(local[1]), static_cast<float>(local[2])};
+  for (double r : c.shell_radii) g.shell_radii.push_back(static_cast<float>(r));
+  return g;
+}
+
+std::filesystem::path CheckpointPath(const std::filesystem::path& workspace, int level) {
+  return workspace / "recon" / ("level_" + std::to_string(level) + ".perfvol");
+}
+
+int LastCheckpointLevel(const std::filesystem::path& workspace) {
+  int last = -1;
+  std::error_code ec;
+  const std::regex pattern("level_([0-9]+)\\.perfvol");
+  for (const auto& e : std::filesystem::directory_iterator(workspace / "recon", ec)) {
+    std::smatch m;
+    const std::string name = e.path().filename().string();
+    if (std::regex_match(name, m, pattern)) last = std::max(last, std::stoi(m[1]));
+  }
+  return last;
+}
+
+}  // namespace perf::recon

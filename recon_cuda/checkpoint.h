@@ -1,0 +1,59 @@
+// Checkpoints of the reconstruction: one file per completed level, recon/level_<k>.perfvol,
+// self-describing so that export and render need nothing else (the box and shells in world
+// units travel with the values).
+//
+// Format (version 1, little-endian):
+//   char[8]  magic "PERFVOL\0"
+//   u32      version (1)
+//   u32      header bytes (this fixed header, 264)
+//   i32      level, n, m, num_shells, iterations (GN iterations or Adam steps run at the level)
+//   i32      solver (0 Gauss-Newton, 1 Adam)
+//   f64[3]   box centre, f64[9] box rotation (world_from_box, row-major), f64[3] box size
+//   f64[3]   shell centre (world), f64[8] shell radii (unused ones 0)
+//   u64      parameter count (= ParamCount(n, m, num_shells))
+//   u64      FNV-1a 64 of the parameter bytes
+//   f32[count] parameters, layout of ray_types.h
+// The reader checks every field and names the file and field on any mismatch; writes are atomic.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <iosfwd>
+#include <vector>
+
+#include "recon_cuda/volume.h"
+
+namespace perf::recon {
+
+inline constexpr uint32_t kCheckpointVersion = 1;
+
+struct Checkpoint {
+  int level = 0;
+  int iterations = 0;
+  int solver = 0;  // 0 Gauss-Newton, 1 Adam
+  VolumeShape shape;
+  // World placement, double precision as in scene.json.
+  double box_center[3] = {0, 0, 0};
+  double box_rotation[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  double box_size[3] = {1, 1, 1};
+  double shell_center[3] = {0, 0, 0};
+  std::vector<double> shell_radii;
+  std::vector<float> params;
+};
+
+// Stream overloads; `name` is used in messages.
+void WriteCheckpoint(std::ostream& out, const Checkpoint& c);
+Checkpoint ReadCheckpoint(std::istream& in, const std::string& name);
+// Path overloads: the writer is atomic; the reader throws IoError / InputError naming the file.
+void WriteCheckpoint(const std::filesystem::path& path, const Checkpoint& c);
+Checkpoint ReadCheckpoint(const std::filesystem::path& path);
+
+// The geometry the checkpoint records (for MakeView).
+VolumeGeometry GeometryOf(const Checkpoint& c);
+
+// recon/level_<k>.perfvol in a workspace.
+std::filesystem::path CheckpointPath(const std::filesystem::path& workspace, int level);
+// The highest level with a checkpoint file, or -1.
+int LastCheckpointLevel(const std::filesystem::path& workspace);
+
+}  // namespace perf::recon

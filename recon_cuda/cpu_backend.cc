@@ -1,0 +1,561 @@
+#include "recon_cuda/cpu_backend.h"
+
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+#include "common/errors.h"
+#include "recon_cuda/jacobian.h"
+
+namespace perf::recon {
+
+int64_t AvailableMemory() {
+  std::ifstream in("/proc/meminfo");
+  std::string key, unit;
+  int64_t value = 0;
+  while (in >> key >> value >> unit) {
+    if (key == "MemAvailable:") return value * 1024;
+  }
+  return 0;
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double Since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+constexpr int64_t kBlockRays = 1024;      // rays per task; fixes the cost's summation order
+constexpr int64_t kVectorChunk = 1 << 15;  // elements per task in vector operations
+
+// Plain adds into a per-thread buffer.
+struct AddSink {
+  float* a;
+  void Add4(int64_t i, float x, float y, float z, float w) {
+    float* p = a + i;
+    p[0] += x;
+    p[1] += y;
+    p[2] += z;
+    p[3] += w;
+  }
+};
+
+// One ray's Jacobian, as recorded by Linearize.
+struct SampleJ {
+  float t;
+  SamplePartials<float> sp;
+};
+struct ShellJ {
+  CubeCoord<float> coord;  // face -1: the ray misses this shell
+  ShellPartials<float> sp;
+};
+
+// The recorded Jacobian of one block of rays.
+struct BlockJ {
+  std::vector<SampleJ> samples;
+  std::vector<uint32_t> end;  // [rays]: one past the ray's last sample in `samples`
+  std::vector<ShellJ> shells;  // [rays, num_shells]
+};
+
+struct Scratch {
+  std::vector<SampleRecord<float>> record;  // [max samples a ray]
+  std::vector<GridSample<float>> weights;   // [max samples a ray]
+  BlockJ row;                               // one ray, when recomputing
+  std::vector<float> acc[2];                // per-thread sums
+  uint64_t pass = 0;                        // the pass acc was zeroed for
+};
+
+// Collects a ray's partials: the gradient and diagonal scatter and, optionally, the record.
+struct LinearizeVisitor {
+  float r[4];
+  AddSink g;
+  AddSink* diag;       // nullptr: no diagonal
+  DiagMerger<float> merger;
+  BlockJ* out;         // nullptr: nothing recorded
+  ShellJ* out_shells;  // [num_shells] of this ray
+
+  void Shell(int k, const CubeCoord<float>& c, const TexelSample<float>& ts, const ShellPartials<float>& sp) {
+    ScatterJtuShell(ts, sp, r, g);
+    if (diag) DiagMerger<float>::Shell(ts, sp, *diag);
+    if (out_shells) out_shells[k] = {c, sp};
+  }
+  void Sample(int, const MarchStep<float>& st, const GridSample<float>& gs, const SamplePartials<float>& sp) {
+    ScatterJtuSample(gs, sp, r, g);
+    if (diag) merger.Sample(gs, sp, *diag);
+    if (out) out->samples.push_back({st.t, sp});
+  }
+};
+
+class CpuBackend final : public Backend {
+ public:
+  explicit CpuBackend(const CpuBackendOptions& o)
+      : options_(o),
+        threads_(o.threads > 0 ? o.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()))),
+        arena_(threads_) {}
+
+  std::string Describe() const override { return StrCat("cpu (", threads_, " thread", threads_ == 1 ? "" : "s", ")"); }
+
+  MemoryEstimate EstimateMemory(const LevelProblem& p, int num_vectors) const override {
+    MemoryEstimate e;
+    const int64_t params = p.shape.ParamCount();
+    e.vectors = num_vectors * params * 4;
+    e.scratch = int64_t{threads_} * 2 * params * 4;
+    e.rays = p.rays ? p.rays->Bytes() : 0;
+    if (options_.cache_jacobian && p.rays) e.jacobian_cache = CacheBytes(p);
+    e.available = options_.max_memory > 0 ? options_.max_memory : AvailableMemory() * 9 / 10;
+    return e;
+  }
+
+  void SetLevel(const LevelProblem& p, int num_vectors) override {
+    PERF_CHECK(p.rays != nullptr);
+    PERF_CHECK(p.shape.num_shells == p.geometry.num_shells() && p.shape.num_shells <= kMaxShells);
+    vectors_.clear();
+    blocks_.clear();
+    scratch_.clear();
+    level_ = p;
+    MemoryEstimate e = EstimateMemory(p, num_vectors);
+    const int64_t needed = e.vectors + e.scratch + e.rays;
+    if (e.available > 0 && needed > e.available) {
+      throw ResourceError(StrCat("level ", DescribeShape(p.shape), " needs ", needed >> 20, " MiB for the solver's ",
+                                 num_vectors, " vectors, per-thread sums and rays, but only ", e.available >> 20,
+                                 " MiB are available; use fewer --levels, fewer --threads, or a larger --downscale"));
+    }
+    cache_ = options_.cache_jacobian && (e.available == 0 || needed + e.jacobian_cache <= e.available);
+    vectors_.assign(num_vectors, std::vector<float>(p.shape.ParamCount(), 0.f));
+    const int64_t nblocks = (p.rays->size() + kBlockRays - 1) / kBlockRays;
+    if (cache_) blocks_.resize(nblocks);
+    const float* size = &p.geometry.box.size.x;
+    const float longest = std::max({size[0], size[1], size[2]}), shortest = std::min({size[0], size[1], size[2]});
+    // The march of any ray: its chord is at most the box diagonal.
+    max_samples_ = static_cast<int>(std::ceil(std::sqrt(3.0) * longest / shortest * p.shape.n)) + 2;
+    linearized_ = false;
+  }
+
+  const LevelProblem& level() const override { return level_; }
+  bool CachesJacobian() const override { return cache_; }
+
+  void Upload(VecId v, std::span<const float> host) override {
+    PERF_CHECK(host.size() == vec(v).size());
+    std::copy(host.begin(), host.end(), vec(v).begin());
+  }
+  void Download(VecId v, std::span<float> host) const override {
+    PERF_CHECK(host.size() == vec(v).size());
+    std::copy(vec(v).begin(), vec(v).end(), host.begin());
+  }
+  void Fill(VecId v, float value) override {
+    float* a = vec(v).data();
+    ForChunks([&](int64_t b, int64_t e) { std::fill(a + b, a + e, value); });
+  }
+  void Copy(VecId dst, VecId src) override {
+    float* d = vec(dst).data();
+    const float* s = vec(src).data();
+    ForChunks([&](int64_t b, int64_t e) { std::copy(s + b, s + e, d + b); });
+  }
+  void Axpy(VecId y, double a, VecId x) override {
+    float* py = vec(y).data();
+    const float* px = vec(x).data();
+    const float af = static_cast<float>(a);
+    ForChunks([&](int64_t b, int64_t e) {
+      for (int64_t i = b; i < e; ++i) py[i] += af * px[i];
+    });
+  }
+  void Xpby(VecId y, VecId x, double bb) override {
+    float* py = vec(y).data();
+    const float* px = vec(x).data();
+    const float bf = static_cast<float>(bb);
+    ForChunks([&](int64_t b, int64_t e) {
+      for (int64_t i = b; i < e; ++i) py[i] = px[i] + bf * py[i];
+    });
+  }
+  void DivideClamped(VecId z, VecId r, VecId d, float floor) override {
+    float* pz = vec(z).data();
+    const float* pr = vec(r).data();
+    const float* pd = vec(d).data();
+    ForChunks([&](int64_t b, int64_t e) {
+      for (int64_t i = b; i < e; ++i) pz[i] = pr[i] / std::max(pd[i], floor);
+    });
+  }
+  void AxpyDiag(VecId y, double a, VecId d, VecId x) override {
+    float* py = vec(y).data();
+    const float* pd = vec(d).data();
+    const float* px = vec(x).data();
+    const float af = static_cast<float>(a);
+    ForChunks([&](int64_t b, int64_t e) {
+      for (int64_t i = b; i < e; ++i) py[i] += af * pd[i] * px[i];
+    });
+  }
+  double Dot(VecId a, VecId b) const override {
+    const float* pa = vec(a).data();
+    const float* pb = vec(b).data();
+    return ReduceChunks([&](int64_t lo, int64_t hi) {
+      double s = 0;
+      for (int64_t i = lo; i < hi; ++i) s += static_cast<double>(pa[i]) * pb[i];
+      return s;
+    }, [](double x, double y) { return x + y; });
+  }
+  double MaxAbs(VecId v) const override {
+    const float* p = vec(v).data();
+    return ReduceChunks([&](int64_t lo, int64_t hi) {
+      float m = 0;
+      for (int64_t i = lo; i < hi; ++i) m = std::max(m, std::abs(p[i]));
+      return static_cast<double>(m);
+    }, [](double x, double y) { return std::max(x, y); });
+  }
+  void Project(VecId x) override {
+    float* p = vec(x).data();
+    const int64_t grid = level_.shape.GridParamCount();
+    ForChunks([&](int64_t b, int64_t e) {
+      for (int64_t i = b; i < e; ++i) {
+        // Grid sigma (every 4th value of the grid) is only bounded below.
+        p[i] = i < grid && i % 4 == 3 ? std::max(p[i], 0.f) : std::clamp(p[i], 0.f, 1.f);
+      }
+    });
+  }
+  void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) override {
+    float* px = vec(x).data();
+    const float* pg = vec(g).data();
+    float* pm = vec(m).data();
+    float* pv = vec(v).data();
+    const VolumeShape shape = level_.shape;
+    const float c1 = 1.f / (1.f - std::pow(s.beta1, static_cast<float>(t)));
+    const float c2 = 1.f / (1.f - std::pow(s.beta2, static_cast<float>(t)));
+    ForChunks([&](int64_t b, int64_t e) {
+      for (int64_t i = b; i < e; ++i) {
+        pm[i] = s.beta1 * pm[i] + (1 - s.beta1) * pg[i];
+        pv[i] = s.beta2 * pv[i] + (1 - s.beta2) * pg[i] * pg[i];
+        float lr = s.lr_colour;
+        switch (KindOf(shape, i)) {
+          case ParamKind::kGridDensity: lr = s.lr_density; break;
+          case ParamKind::kShellOpacity: lr = s.lr_opacity; break;
+          default: break;
+        }
+        px[i] -= lr * (pm[i] * c1) / (std::sqrt(pv[i] * c2) + s.epsilon);
+      }
+    });
+    Project(x);
+  }
+
+  PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag) override {
+    const auto t0 = Clock::now();
+    const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, vec(x).data());
+    const bool want_diag = diag != kNoVector;
+    const bool record = cache_ && want_diag;  // Adam (no diagonal) never multiplies by J^T J
+    const int sums = want_diag ? 2 : 1;
+    const uint64_t pass = BeginPass();
+    PassStats stats = ForBlocks(sums, pass, [&](int64_t block, int64_t begin, int64_t end, Scratch& s) {
+      BlockStats bs;
+      BlockJ* out = record ? &blocks_[block] : nullptr;
+      if (out) ClearBlock(out, end - begin);
+      for (int64_t i = begin; i < end; ++i) {
+        const BoxRay<float> ray = RayOf(i, seed);
+        const Jitter jit{seed, static_cast<uint32_t>(i), true};
+        const float* target = &level_.rays->colours[3 * i];
+        const RayOutput<float> fwd = Forward(vol, ray, jit, target, level_.residuals.lambda,
+                                             level_.residuals.stop_transmittance, s.record.data());
+        AddSink gsink{s.acc[0].data()}, dsink{want_diag ? s.acc[1].data() : nullptr};
+        LinearizeVisitor v{{fwd.residual[0], fwd.residual[1], fwd.residual[2], fwd.residual[3]},
+                           gsink,
+                           want_diag ? &dsink : nullptr,
+                           {},
+                           out,
+                           out ? &out->shells[(i - begin) * level_.shape.num_shells] : nullptr};
+        Backward(vol, ray, jit, level_.residuals.lambda, fwd, v, s.record.data());
+        if (want_diag) v.merger.Finish(dsink);
+        if (out) out->end[i - begin] = static_cast<uint32_t>(out->samples.size());
+        bs.Add(fwd);
+      }
+      return bs;
+    });
+    ReduceInto(pass, 0, g);
+    if (want_diag) ReduceInto(pass, 1, diag);
+    lin_x_ = x;
+    lin_seed_ = seed;
+    linearized_ = true;
+    recorded_ = record;
+    stats.seconds = Since(t0);
+    return stats;
+  }
+
+  PassStats MultiplyJtJ(VecId p, VecId out) override {
+    PERF_CHECK_MSG(linearized_, "MultiplyJtJ before Linearize");
+    const auto t0 = Clock::now();
+    const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, vec(lin_x_).data());
+    const float* pp = vec(p).data();
+    const int k_shells = level_.shape.num_shells;
+    const uint64_t pass = BeginPass();
+    PassStats stats = ForBlocks(1, pass, [&](int64_t block, int64_t begin, int64_t end, Scratch& s) {
+      BlockStats bs;
+      AddSink sink{s.acc[0].data()};
+      for (int64_t i = begin; i < end; ++i) {
+        const BoxRay<float> ray = RayOf(i, lin_seed_);
+        const SampleJ* samples;
+        const ShellJ* shells;
+        int count;
+        if (recorded_) {
+          const BlockJ& b = blocks_[block];
+          const int64_t r = i - begin;
+          const uint32_t first = r == 0 ? 0 : b.end[r - 1];
+          samples = b.samples.data() + first;
+          count = static_cast<int>(b.end[r] - first);
+          shells = &b.shells[r * k_shells];
+        } else {
+          RecomputeRow(vol, ray, i, s);
+          samples = s.row.samples.data();
+          count = static_cast<int>(s.row.samples.size());
+          shells = s.row.shells.data();
+        }
+        float u[4] = {0, 0, 0, 0};
+        for (int k = 0; k < k_shells; ++k) {
+          if (shells[k].coord.face < 0) continue;
+          AddJpShell(pp, BilinearWeights(vol.n, vol.m, k, shells[k].coord), shells[k].sp, u);
+        }
+        GridSample<float>* w = s.weights.data();
+        for (int j = 0; j < count; ++j) {
+          w[j] = TrilinearWeights(vol.n, ray.GridPoint(samples[j].t));
+          AddJpSample(pp, w[j], samples[j].sp, u);
+        }
+        for (int k = 0; k < k_shells; ++k) {
+          if (shells[k].coord.face < 0) continue;
+          ScatterJtuShell(BilinearWeights(vol.n, vol.m, k, shells[k].coord), shells[k].sp, u, sink);
+        }
+        for (int j = 0; j < count; ++j) ScatterJtuSample(w[j], samples[j].sp, u, sink);
+        bs.rays += 1;
+        bs.samples += count;
+      }
+      return bs;
+    });
+    ReduceInto(pass, 0, out);
+    stats.seconds = Since(t0);
+    return stats;
+  }
+
+  PassStats Cost(VecId x, uint32_t seed, RaySubset subset) override {
+    const auto t0 = Clock::now();
+    const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, vec(x).data());
+    PERF_CHECK(subset.stride >= 1 && subset.offset >= 0 && subset.offset < subset.stride);
+    PassStats stats = ForBlocks(0, 0, [&](int64_t, int64_t begin, int64_t end, Scratch&) {
+      BlockStats bs;
+      int64_t i = begin + ((subset.offset - begin % subset.stride) + subset.stride) % subset.stride;
+      for (; i < end; i += subset.stride) {
+        const RayOutput<float> fwd =
+            Forward(vol, RayOf(i, seed), Jitter{seed, static_cast<uint32_t>(i), true}, &level_.rays->colours[3 * i],
+                    level_.residuals.lambda, level_.residuals.stop_transmittance);
+        bs.Add(fwd);
+      }
+      return bs;
+    });
+    stats.seconds = Since(t0);
+    return stats;
+  }
+
+  RenderOutput Render(VecId x, const PinholeCamera<float>& camera, int width, int height,
+                      float min_box_opacity) override {
+    const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, vec(x).data());
+    RenderOutput r;
+    r.width = width;
+    r.height = height;
+    r.colour.resize(static_cast<size_t>(width) * height * 3);
+    r.opacity.resize(static_cast<size_t>(width) * height);
+    const float zero[3] = {0, 0, 0};
+    arena_.execute([&] {
+      tbb::parallel_for(0, height, [&](int y) {
+        for (int px = 0; px < width; ++px) {
+          const Jitter none{0, 0, false};
+          const BoxRay<float> ray = PixelBoxRay(camera, level_.geometry.box, vol.n, px, y, none);
+          const RayOutput<float> o = Forward(vol, ray, none, zero, 0.f, level_.residuals.stop_transmittance);
+          const float opacity = 1 - o.t_box;
+          const size_t i = static_cast<size_t>(y) * width + px;
+          const bool empty = opacity < min_box_opacity;
+          for (int c = 0; c < 3; ++c) r.colour[3 * i + c] = empty ? o.shells[c] : o.h[c];
+          r.opacity[i] = opacity;
+        }
+      });
+    });
+    return r;
+  }
+
+ private:
+  struct BlockStats {
+    double cost = 0, colour_sse = 0;
+    int64_t rays = 0, samples = 0;
+    void Add(const RayOutput<float>& o) {
+      double sse = 0;
+      for (int c = 0; c < 3; ++c) sse += static_cast<double>(o.residual[c]) * o.residual[c];
+      colour_sse += sse;
+      cost += 0.5 * (sse + static_cast<double>(o.residual[3]) * o.residual[3]);
+      rays += 1;
+      samples += o.count;
+    }
+  };
+
+  std::vector<float>& vec(VecId v) {
+    PERF_CHECK(v >= 0 && v < static_cast<int>(vectors_.size()));
+    return vectors_[v];
+  }
+  const std::vector<float>& vec(VecId v) const {
+    PERF_CHECK(v >= 0 && v < static_cast<int>(vectors_.size()));
+    return vectors_[v];
+  }
+
+  BoxRay<float> RayOf(int64_t i, uint32_t seed) const {
+    const RayPixel& px = level_.rays->pixels[i];
+    return PixelBoxRay(level_.rays->cameras[px.camera], level_.geometry.box, level_.shape.n, px.x, px.y,
+                       Jitter{seed, static_cast<uint32_t>(i), true});
+  }
+
+  void ClearBlock(BlockJ* b, int64_t rays) const {
+    b->samples.clear();
+    b->end.assign(rays, 0);
+    b->shells.assign(rays * level_.shape.num_shells, ShellJ{{-1, 0.f, 0.f}, {}});
+  }
+
+  // The partials of ray i at the linearisation point, into s.row (no recorded Jacobian).
+  void RecomputeRow(const VolumeView<float>& vol, const BoxRay<float>& ray, int64_t i, Scratch& s) const {
+    const Jitter jit{lin_seed_, static_cast<uint32_t>(i), true};
+    ClearBlock(&s.row, 1);
+    const RayOutput<float> fwd = Forward(vol, ray, jit, &level_.rays->colours[3 * i], level_.residuals.lambda,
+                                         level_.residuals.stop_transmittance, s.record.data());
+    RecordOnly visitor{&s.row};
+    Backward(vol, ray, jit, level_.residuals.lambda, fwd, visitor, s.record.data());
+  }
+  // Records a ray's partials without scattering anything.
+  struct RecordOnly {
+    BlockJ* row;
+    void Shell(int k, const CubeCoord<float>& c, const TexelSample<float>&, const ShellPartials<float>& sp) {
+      row->shells[k] = {c, sp};
+    }
+    void Sample(int, const MarchStep<float>& st, const GridSample<float>&, const SamplePartials<float>& sp) {
+      row->samples.push_back({st.t, sp});
+    }
+  };
+
+  // Bytes of the recorded Jacobian: every ray's march length (no jitter needed for the count;
+  // early termination only shortens it) times the per-sample record, plus the shell records.
+  int64_t CacheBytes(const LevelProblem& p) const {
+    const std::vector<float> none;
+    const VolumeView<float> vol = MakeView(p.shape, p.geometry, nullptr);
+    const int64_t n = p.rays->size();
+    std::vector<int64_t> per_block((n + kBlockRays - 1) / kBlockRays, 0);
+    arena_.execute([&] {
+      tbb::parallel_for(int64_t{0}, static_cast<int64_t>(per_block.size()), [&](int64_t b) {
+        int64_t count = 0;
+        for (int64_t i = b * kBlockRays; i < std::min(n, (b + 1) * kBlockRays); ++i) {
+          const RayPixel& px = p.rays->pixels[i];
+          const BoxRay<float> ray = PixelBoxRay(p.rays->cameras[px.camera], p.geometry.box, p.shape.n, px.x, px.y,
+                                                Jitter{0, 0, false});
+          count += MakeMarch(vol, ray).count;
+        }
+        per_block[b] = count;
+      });
+    });
+    int64_t samples = 0;
+    for (int64_t c : per_block) samples += c;
+    return samples * static_cast<int64_t>(sizeof(SampleJ)) +
+           n * (static_cast<int64_t>(sizeof(uint32_t)) + p.shape.num_shells * static_cast<int64_t>(sizeof(ShellJ)));
+  }
+
+  uint64_t BeginPass() { return ++pass_; }
+
+  // Runs fn(block, begin, end, scratch) over all blocks of rays; `sums` per-thread buffers are
+  // zeroed on a thread's first block of `pass`. Block statistics are combined in block order.
+  template <class Fn>
+  PassStats ForBlocks(int sums, uint64_t pass, Fn&& fn) {
+    const int64_t n = level_.rays->size();
+    const int64_t nblocks = (n + kBlockRays - 1) / kBlockRays;
+    std::vector<BlockStats> per_block(nblocks);
+    const int64_t params = level_.shape.ParamCount();
+    arena_.execute([&] {
+      tbb::parallel_for(tbb::blocked_range<int64_t>(0, nblocks, 1), [&](const tbb::blocked_range<int64_t>& r) {
+        Scratch& s = scratch_.local();
+        if (static_cast<int>(s.record.size()) < max_samples_) {
+          s.record.resize(max_samples_);
+          s.weights.resize(max_samples_);
+        }
+        if (sums > 0 && s.pass != pass) {
+          for (int a = 0; a < sums; ++a) s.acc[a].assign(params, 0.f);
+          s.pass = pass;
+        }
+        for (int64_t b = r.begin(); b < r.end(); ++b) {
+          per_block[b] = fn(b, b * kBlockRays, std::min(n, (b + 1) * kBlockRays), s);
+        }
+      });
+    });
+    PassStats stats;
+    for (const BlockStats& b : per_block) {
+      stats.cost += b.cost;
+      stats.colour_sse += b.colour_sse;
+      stats.rays += b.rays;
+      stats.samples += b.samples;
+    }
+    return stats;
+  }
+
+  // out = sum of the per-thread buffers `which` used in `pass`.
+  void ReduceInto(uint64_t pass, int which, VecId out) {
+    std::vector<const float*> parts;
+    for (Scratch& s : scratch_) {
+      if (s.pass == pass && !s.acc[which].empty()) parts.push_back(s.acc[which].data());
+    }
+    float* o = vec(out).data();
+    ForChunks([&](int64_t b, int64_t e) {
+      if (parts.empty()) {
+        std::fill(o + b, o + e, 0.f);
+        return;
+      }
+      std::copy(parts[0] + b, parts[0] + e, o + b);
+      for (size_t k = 1; k < parts.size(); ++k) {
+        const float* q = parts[k];
+        for (int64_t i = b; i < e; ++i) o[i] += q[i];
+      }
+    });
+  }
+
+  template <class Fn>
+  void ForChunks(Fn&& fn) const {
+    const int64_t n = level_.shape.ParamCount();
+    arena_.execute([&] {
+      tbb::parallel_for(int64_t{0}, (n + kVectorChunk - 1) / kVectorChunk,
+                        [&](int64_t c) { fn(c * kVectorChunk, std::min(n, (c + 1) * kVectorChunk)); });
+    });
+  }
+  // Per-chunk partial results combined in chunk order: the same answer for any thread count.
+  template <class Fn, class Combine>
+  double ReduceChunks(Fn&& fn, Combine&& combine) const {
+    const int64_t n = level_.shape.ParamCount();
+    std::vector<double> part((n + kVectorChunk - 1) / kVectorChunk, 0.0);
+    arena_.execute([&] {
+      tbb::parallel_for(int64_t{0}, static_cast<int64_t>(part.size()),
+                        [&](int64_t c) { part[c] = fn(c * kVectorChunk, std::min(n, (c + 1) * kVectorChunk)); });
+    });
+    double r = 0;
+    for (double p : part) r = combine(r, p);
+    return r;
+  }
+
+  CpuBackendOptions options_;
+  int threads_;
+  mutable tbb::task_arena arena_;
+  LevelProblem level_;
+  std::vector<std::vector<float>> vectors_;
+  std::vector<BlockJ> blocks_;
+  tbb::enumerable_thread_specific<Scratch> scratch_;
+  bool cache_ = false, linearized_ = false, recorded_ = false;
+  int max_samples_ = 0;
+  VecId lin_x_ = kNoVector;
+  uint32_t lin_seed_ = 0;
+  uint64_t pass_ = 0;
+};
+
+}  // namespace
+
+std::unique_ptr<Backend> MakeCpuBackend(const CpuBackendOptions& options) {
+  return std::make_unique<CpuBackend>(options);
+}
+
+}  // namespace perf::recon

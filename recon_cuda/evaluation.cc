@@ -1,0 +1,50 @@
+#include "recon_cuda/evaluation.h"
+
+#include <cmath>
+
+#include "common/errors.h"
+
+namespace perf::recon {
+
+double Psnr(const RenderOutput& render, const Image& truth) {
+  PERF_CHECK(render.width == truth.width && render.height == truth.height && truth.channels == 3);
+  double sse = 0;
+  for (size_t i = 0; i < render.colour.size(); ++i) {
+    const double d = static_cast<double>(std::clamp(render.colour[i], 0.f, 1.f)) - truth.pixels[i];
+    sse += d * d;
+  }
+  const double mse = sse / static_cast<double>(render.colour.size());
+  return mse > 0 ? -10.0 * std::log10(mse) : 99.0;
+}
+
+Image ToImage(const RenderOutput& render) {
+  Image im(render.width, render.height, 3);
+  im.pixels = render.colour;
+  return im;
+}
+
+Image OpacityImage(const RenderOutput& render) {
+  Image im(render.width, render.height, 1);
+  im.pixels = render.opacity;
+  return im;
+}
+
+std::vector<ViewScore> ScoreViews(Backend* backend, VecId x, const std::vector<PosedImage>& views,
+                                  float min_box_opacity, std::vector<RenderOutput>* renders) {
+  std::vector<ViewScore> scores;
+  for (const PosedImage& v : views) {
+    RenderOutput r = backend->Render(x, v.camera, v.image.width, v.image.height, min_box_opacity);
+    scores.push_back({v.name, Psnr(r, v.image)});
+    if (renders) renders->push_back(std::move(r));
+  }
+  return scores;
+}
+
+double MeanPsnr(const std::vector<ViewScore>& scores) {
+  if (scores.empty()) return 0;
+  double s = 0;
+  for (const ViewScore& v : scores) s += v.psnr;
+  return s / static_cast<double>(scores.size());
+}
+
+}  // namespace perf::recon

@@ -1,0 +1,29 @@
+// Rendering posed views with a backend and scoring them against their photos: the held-out PSNR
+// of the reconstruction log, the previews written during a solve, and `perf render`.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "recon_cuda/backend.h"
+
+namespace perf::recon {
+
+struct ViewScore {
+  std::string name;
+  double psnr = 0;  // over all pixels and the three channels, values in [0, 1]
+};
+
+double Psnr(const RenderOutput& render, const Image& truth);
+Image ToImage(const RenderOutput& render);          // RGB
+Image OpacityImage(const RenderOutput& render);     // one channel: 1 - T_box
+
+// Renders every view at its own size (no jitter, paper's min box opacity rule) and scores it.
+// renders: optional, receives the renders in order.
+std::vector<ViewScore> ScoreViews(Backend* backend, VecId x, const std::vector<PosedImage>& views,
+                                  float min_box_opacity, std::vector<RenderOutput>* renders = nullptr);
+
+// The mean of the per-view PSNRs (the NeRF convention); 0 for no views.
+double MeanPsnr(const std::vector<ViewScore>& scores);
+
+}  // namespace perf::recon

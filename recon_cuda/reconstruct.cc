@@ -1,0 +1,368 @@
+#include "recon_cuda/reconstruct.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "common/atomic_file.h"
+#include "common/errors.h"
+#include "recon_cuda/checkpoint.h"
+#include "recon_cuda/evaluation.h"
+#include "sfm_import/image_io.h"
+
+namespace perf::recon {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+using Clock = std::chrono::steady_clock;
+double Since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+void Fail(const char* option, const std::string& value, const std::string& problem, const std::string& hint = {}) {
+  throw InputError("command line", option, value, problem, hint);
+}
+
+// Appends JSON lines; each line is flushed so a killed run keeps every finished iteration.
+class JsonLog {
+ public:
+  JsonLog(const fs::path& path, bool append) : path_(path) {
+    out_.open(path, append ? std::ios::app : std::ios::trunc);
+    if (!out_) throw IoError(path.string(), "cannot write the reconstruction log", "check that the workspace is writable");
+  }
+  void Write(const json& j) {
+    out_ << j.dump() << '\n';
+    out_.flush();
+    if (!out_) throw IoError(path_.string(), "cannot write the reconstruction log", "check the free disk space");
+  }
+
+ private:
+  fs::path path_;
+  std::ofstream out_;
+};
+
+// The largest power-of-two downscale (at most `max_factor`) that keeps a voxel of the grid at
+// least one pixel wide in the median training view, measured at the box centre.
+int PyramidFactor(const std::vector<PosedImage>& images, const VolumeGeometry& geo, int n, int max_factor) {
+  if (images.empty() || max_factor <= 1) return 1;
+  std::vector<double> px_per_voxel;
+  const double voxel = std::min({geo.box.size.x, geo.box.size.y, geo.box.size.z}) / n;
+  for (const PosedImage& im : images) {
+    const float* m = im.camera.world_from_cam;
+    const double dx = m[3] - geo.box.center.x, dy = m[7] - geo.box.center.y, dz = m[11] - geo.box.center.z;
+    const double dist = std::max(1e-9, std::sqrt(dx * dx + dy * dy + dz * dz));
+    px_per_voxel.push_back(im.camera.fx * voxel / dist);
+  }
+  std::nth_element(px_per_voxel.begin(), px_per_voxel.begin() + px_per_voxel.size() / 2, px_per_voxel.end());
+  const double median = px_per_voxel[px_per_voxel.size() / 2];
+  int f = 1;
+  while (2 * f <= max_factor && median / (2 * f) >= 1.0) f *= 2;
+  return f;
+}
+
+std::string FormatBytes(int64_t b) {
+  std::ostringstream s;
+  s.precision(3);
+  if (b >= (int64_t{1} << 30)) s << static_cast<double>(b) / (1 << 30) << " GiB";
+  else s << static_cast<double>(b) / (1 << 20) << " MiB";
+  return s.str();
+}
+
+json IterationJson(const LevelReport& lr, const SolverOptions& so, const IterationSummary& s, double elapsed) {
+  return json{{"event", "iteration"},
+              {"level", lr.level},
+              {"n", lr.shape.n},
+              {"solver", SolverName(so.type)},
+              {"iteration", s.iteration},
+              {"cost", s.cost},
+              {"cost_after", s.cost_after},
+              {"train_psnr", s.train_psnr},
+              {"cg_iterations", s.cg_iterations},
+              {"step", s.step},
+              {"line_search_steps", s.line_search_steps},
+              {"accepted", s.accepted},
+              {"rays", lr.rays},
+              {"samples", s.samples},
+              {"elapsed", elapsed},
+              {"seconds",
+               {{"linearize", s.seconds_linearize},
+                {"cg", s.seconds_cg},
+                {"line_search", s.seconds_line_search},
+                {"update", s.seconds_update},
+                {"psnr", s.seconds_psnr},
+                {"total", s.seconds_total}}}};
+}
+
+Checkpoint MakeCheckpoint(const Scene& scene, int level, const VolumeShape& shape, int iterations, SolverType type,
+                          std::vector<float> params) {
+  Checkpoint c;
+  c.level = level;
+  c.shape = shape;
+  c.iterations = iterations;
+  c.solver = type == SolverType::kAdam ? 1 : 0;
+  for (int a = 0; a < 3; ++a) {
+    c.box_center[a] = scene.box.center[a];
+    c.box_size[a] = scene.box.size[a];
+    c.shell_center[a] = scene.shells.center[a];
+  }
+  for (int i = 0; i < 9; ++i) c.box_rotation[i] = scene.box.rotation(i / 3, i % 3);
+  c.shell_radii = scene.shells.radii;
+  c.params = std::move(params);
+  return c;
+}
+
+// A checkpoint made from another scene (re-imported workspace) must not be resumed.
+void CheckMatchesScene(const Checkpoint& c, const Scene& scene, const fs::path& path) {
+  double worst = 0;
+  for (int a = 0; a < 3; ++a) {
+    worst = std::max({worst, std::abs(c.box_center[a] - scene.box.center[a]), std::abs(c.box_size[a] - scene.box.size[a])});
+  }
+  if (worst > 1e-9 * std::max(1.0, scene.box.size.norm()) ||
+      c.shell_radii.size() != scene.shells.radii.size()) {
+    throw InputError(path.string(), "box", "", "the checkpoint was made for a different box or shells than scene.json",
+                     "the workspace was re-imported; run perf reconstruct without --resume");
+  }
+}
+
+}  // namespace
+
+int DefaultLevels(const std::string& backend_name) { return backend_name.rfind("cuda", 0) == 0 ? 4 : 2; }
+
+void ReconstructOptions::Check() const {
+  if (workspace.empty()) Fail("WORKSPACE", "", "missing", "pass the workspace made by perf import");
+  if (levels < 0 || levels > 6) Fail("--levels", std::to_string(levels), "must be 1 to 6 (or 0 for the default)");
+  if (start_resolution < 2 || start_resolution > 1024) {
+    Fail("--start-resolution", std::to_string(start_resolution), "must be 2 to 1024");
+  }
+  if (iterations < 0) Fail("--iterations", std::to_string(iterations), "must be >= 0");
+  if (preview_every < 0) Fail("--preview-every", std::to_string(preview_every), "must be >= 0");
+  if (eval_every < 0) Fail("--eval-every", std::to_string(eval_every), "must be >= 0");
+  if (!(residuals.lambda >= 0)) Fail("--lambda", StrCat(residuals.lambda), "must be >= 0");
+  if (!(residuals.stop_transmittance >= 0 && residuals.stop_transmittance < 1)) {
+    Fail("--stop-transmittance", StrCat(residuals.stop_transmittance), "must be in [0, 1)");
+  }
+  if (!(min_box_opacity >= 0 && min_box_opacity <= 1)) {
+    Fail("--min-box-opacity", StrCat(min_box_opacity), "must be in [0, 1]");
+  }
+  solver.Check();
+}
+
+ReconstructResult Reconstruct(const ReconstructOptions& o) {
+  o.Check();
+  const auto emit = [&](const ReconstructOptions::Event& e) {
+    if (o.on_event) o.on_event(e);
+  };
+  const auto say = [&](const std::string& line) {
+    ReconstructOptions::Event e;
+    e.message = line;
+    emit(e);
+  };
+
+  const fs::path scene_path = o.workspace / "scene.json";
+  if (!fs::exists(scene_path)) {
+    throw IoError(scene_path.string(), "not found", "run perf import on this workspace first");
+  }
+  const Scene scene = ReadScene(scene_path);
+  const VolumeGeometry geometry = VolumeGeometry::FromScene(scene);
+  std::unique_ptr<Backend> backend = MakeBackend(o.device, o.threads);
+  ReconstructResult result;
+  result.backend = backend->Describe();
+  const int levels = o.levels > 0 ? o.levels : DefaultLevels(result.backend);
+  const int num_shells = geometry.num_shells();
+  const auto shape_of = [&](int level) {
+    return VolumeShape{o.start_resolution << level, o.start_resolution << level, num_shells};
+  };
+
+  EnsureWritableDirectory(o.workspace / "recon");
+  int start = 0;
+  std::vector<float> x;
+  const int last = LastCheckpointLevel(o.workspace);
+  if (o.resume && last >= 0) {
+    const fs::path path = CheckpointPath(o.workspace, last);
+    Checkpoint c = ReadCheckpoint(path);
+    CheckMatchesScene(c, scene, path);
+    if (c.shape != shape_of(last) || c.level != last) {
+      throw InputError(path.string(), "n", std::to_string(c.shape.n),
+                       StrCat("level ", last, " of this run would be ", shape_of(last).n, "^3"),
+                       "resume with the same --start-resolution, or run without --resume");
+    }
+    if (last + 1 >= levels) {
+      result.already_complete = true;
+      result.final_checkpoint = path;
+      say(StrCat("all ", levels, " levels are done (", path.string(), "); nothing to resume"));
+      return result;
+    }
+    start = last + 1;
+    x = Resample(c.shape, c.params, shape_of(start));
+    say(StrCat("resuming after level ", last, " (", path.string(), ")"));
+  } else {
+    // A fresh start: checkpoints of an earlier run would be mistaken for this one's.
+    for (int l = 0; l <= std::max(last, 16); ++l) fs::remove(CheckpointPath(o.workspace, l));
+  }
+  JsonLog log(o.workspace / "recon" / "log.jsonl", o.resume && start > 0);
+  if (start > 0) log.Write({{"event", "resume"}, {"level", start}});
+
+  say("loading images");
+  const std::vector<PosedImage> train = LoadImages(scene, o.workspace, Split::kTrain);
+  const std::vector<PosedImage> test = LoadImages(scene, o.workspace, Split::kTest);
+  if (train.empty()) {
+    throw InputError(scene_path.string(), "images", "0 train images", "nothing to reconstruct from",
+                     "re-run perf import with --holdout 0 or more images");
+  }
+  const std::vector<PosedImage>& preview_views = test.empty() ? train : test;
+  say(StrCat("backend: ", result.backend, "; ", train.size(), " training and ", test.size(), " held-out views; ",
+             levels, " levels from ", o.start_resolution, "^3"));
+
+  double elapsed = 0;  // solver time so far (excludes held-out evaluation and previews)
+  for (int level = start; level < levels; ++level) {
+    const auto t_level = Clock::now();
+    double eval_seconds = 0;
+    const VolumeShape shape = shape_of(level);
+    if (level == 0 || x.empty()) {
+      InitOptions init = o.init;
+      x = InitialParams(shape, geometry, init);
+    }
+    LevelReport lr;
+    lr.level = level;
+    lr.shape = shape;
+    lr.image_downscale = o.pyramid ? PyramidFactor(train, geometry, shape.n, 1 << (levels - 1 - level)) : 1;
+    RaySet rays;
+    if (lr.image_downscale > 1) {
+      std::vector<PosedImage> small;
+      for (const PosedImage& im : train) small.push_back(Downscaled(im, lr.image_downscale));
+      rays = MakeRaySet(small);
+    } else {
+      rays = MakeRaySet(train);
+    }
+    lr.rays = rays.size();
+    LevelProblem problem{shape, geometry, &rays, o.residuals};
+    const int vectors = RequiredVectors(o.solver.type);
+    const MemoryEstimate mem = backend->EstimateMemory(problem, vectors);
+    backend->SetLevel(problem, vectors);
+    say(StrCat("level ", level + 1, "/", levels, ": ", DescribeShape(shape), ", ", lr.rays, " rays",
+               lr.image_downscale > 1 ? StrCat(" (images / ", lr.image_downscale, ")") : std::string(),
+               "; memory: vectors ", FormatBytes(mem.vectors), ", per-thread sums ", FormatBytes(mem.scratch),
+               ", Jacobian cache ",
+               backend->CachesJacobian() ? FormatBytes(mem.jacobian_cache) : std::string("off (recomputing)"),
+               mem.available > 0 ? StrCat(" of ", FormatBytes(mem.available), " available") : std::string()));
+
+    SolverOptions so = o.solver;
+    so.max_iterations = o.iterations;
+    so.seed = Hash(o.init.seed, static_cast<uint32_t>(level), 0x1e7e1u);
+    const VecId x_id = kSolverX;
+    auto held_out = [&]() {
+      const auto t0 = Clock::now();
+      const double psnr = MeanPsnr(ScoreViews(backend.get(), x_id, test, o.min_box_opacity));
+      eval_seconds += Since(t0);
+      return psnr;
+    };
+    double solve_elapsed_at_level_start = elapsed + Since(t_level);
+    double iter_time = 0;
+    auto callback = [&](const IterationSummary& s) {
+      iter_time += s.seconds_total;
+      json line = IterationJson(lr, so, s, solve_elapsed_at_level_start + iter_time);
+      const bool last_it = s.iteration + 1 == so.max_iterations;
+      if (!test.empty() && o.eval_every > 0 && ((s.iteration + 1) % o.eval_every == 0 || last_it)) {
+        line["test_psnr"] = held_out();
+      }
+      if (o.preview_every > 0 && ((s.iteration + 1) % o.preview_every == 0 || last_it)) {
+        const auto t0 = Clock::now();
+        const PosedImage& v = preview_views.front();
+        const RenderOutput r = backend->Render(x_id, v.camera, v.image.width, v.image.height, o.min_box_opacity);
+        const fs::path p = o.workspace / "preview" / StrCat("recon_l", level, "_i", s.iteration + 1, ".png");
+        EnsureWritableDirectory(p.parent_path());
+        WriteImage(p, ToImage(r), PixelFormat::kUInt8);
+        eval_seconds += Since(t0);
+      }
+      log.Write(line);
+      ReconstructOptions::Event e;
+      e.level = level;
+      e.levels = levels;
+      e.iteration = s.iteration + 1;
+      e.iterations = so.max_iterations;
+      e.cost = s.cost_after;
+      e.train_psnr = s.train_psnr;
+      emit(e);
+      return true;
+    };
+    SolverSummary summary;
+    Solve(so, backend.get(), &x, callback, &summary);
+    if (summary.status == SolverStatus::kFailure) {
+      throw Error(StrCat("level ", level, ": the solver failed: ", summary.message,
+                         "; check the workspace images, or try --damping 0.1"));
+    }
+    lr.iterations = summary.iterations;
+    lr.cost = summary.final_cost;
+    lr.train_psnr = summary.per_iteration.empty() ? 0 : summary.per_iteration.back().train_psnr;
+    lr.status = StatusName(summary.status);
+    if (!test.empty()) lr.test_psnr = held_out();  // the backend still holds x in kSolverX
+    WriteCheckpoint(CheckpointPath(o.workspace, level),
+                    MakeCheckpoint(scene, level, shape, summary.iterations, o.solver.type, x));
+    lr.seconds = Since(t_level) - eval_seconds;
+    elapsed += lr.seconds;
+    log.Write({{"event", "level"},
+               {"level", level},
+               {"n", shape.n},
+               {"iterations", lr.iterations},
+               {"seconds", lr.seconds},
+               {"elapsed", elapsed},
+               {"cost", lr.cost},
+               {"train_psnr", lr.train_psnr},
+               {"test_psnr", lr.test_psnr},
+               {"status", lr.status},
+               {"report", summary.BriefReport()}});
+    say(StrCat("level ", level + 1, "/", levels, " done in ", lr.seconds, " s: ", summary.BriefReport(),
+               test.empty() ? std::string() : StrCat("; held-out PSNR ", lr.test_psnr, " dB")));
+    result.levels.push_back(lr);
+    result.solve_seconds += lr.seconds;
+    result.final_checkpoint = CheckpointPath(o.workspace, level);
+    result.test_psnr = lr.test_psnr;
+    if (level + 1 < levels) x = Resample(shape, x, shape_of(level + 1));
+  }
+
+  json levels_json = json::array();
+  for (const LevelReport& l : result.levels) {
+    levels_json.push_back({{"level", l.level},
+                           {"n", l.shape.n},
+                           {"m", l.shape.m},
+                           {"image_downscale", l.image_downscale},
+                           {"rays", l.rays},
+                           {"iterations", l.iterations},
+                           {"seconds", l.seconds},
+                           {"cost", l.cost},
+                           {"train_psnr", l.train_psnr},
+                           {"test_psnr", l.test_psnr},
+                           {"status", l.status},
+                           {"checkpoint", fs::relative(CheckpointPath(o.workspace, l.level), o.workspace).string()}});
+  }
+  const json summary{{"format", "perf-recon"},
+                     {"version", 1},
+                     {"backend", result.backend},
+                     {"solver", SolverName(o.solver.type)},
+                     {"levels", levels},
+                     {"start_resolution", o.start_resolution},
+                     {"iterations_per_level", o.iterations},
+                     {"final_checkpoint", fs::relative(result.final_checkpoint, o.workspace).string()},
+                     {"test_psnr", result.test_psnr},
+                     {"solve_seconds", result.solve_seconds},
+                     {"levels_run", levels_json}};
+  WriteFileAtomically(o.workspace / "recon" / "recon.json", summary.dump(2) + "\n");
+  return result;
+}
+
+std::string ReconstructSummary(const ReconstructResult& r) {
+  std::ostringstream s;
+  s.precision(4);
+  if (r.already_complete) {
+    s << "reconstruction already complete: " << r.final_checkpoint.string() << "\n";
+    return s.str();
+  }
+  s << "reconstructed on " << r.backend << " in " << r.solve_seconds << " s";
+  if (r.test_psnr > 0) s << ", held-out PSNR " << r.test_psnr << " dB";
+  s << "\n  final checkpoint: " << r.final_checkpoint.string() << "\n";
+  return s.str();
+}
+
+}  // namespace perf::recon

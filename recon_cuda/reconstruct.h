@@ -1,0 +1,84 @@
+// `perf reconstruct`: the hierarchy of DESIGN.md "Hierarchy" over a workspace made by
+// `perf import`. Level 0 starts from random colours and low opacity at start_resolution^3 (and
+// start_resolution^2 texels per face); each level runs the solver for a fixed number of
+// iterations, is checkpointed, and fills the next level (every resolution doubled) by
+// interpolation.
+//
+// Workspace outputs:
+//   recon/level_<k>.perfvol   checkpoint after level k (checkpoint.h)
+//   recon/log.jsonl           one JSON line per solver iteration (and one per level / resume)
+//   recon/recon.json          summary: levels done, final checkpoint, settings, held-out PSNR
+//   preview/recon_l<k>_i<j>.png  with preview_every: a held-out view during the solve
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "recon_cuda/solver.h"
+
+namespace perf::recon {
+
+// Levels used when none are asked for. CPU: 2 (32^3 and 64^3), because a 2-core CPU does a
+// 64^3 Gauss-Newton iteration on 100x100 images in about a second and 128^3 in several: two
+// levels give a recognisable result in about a minute, and --levels 3 is there for more. GPU:
+// the paper's 4 levels (up to 256^3).
+int DefaultLevels(const std::string& backend_name);
+
+struct ReconstructOptions {
+  std::filesystem::path workspace;
+  std::string device = "auto";  // cpu, cuda or auto
+  int threads = 0;              // CPU worker threads, 0: all cores
+  int levels = 0;               // 0: DefaultLevels
+  int start_resolution = 32;
+  int iterations = 30;          // solver iterations per level (paper: 30)
+  SolverOptions solver;         // max_iterations and seed are set per level
+  InitOptions init;
+  ResidualSettings residuals;
+  // Coarse levels fit downscaled photos: the largest power-of-two downscale that keeps a voxel
+  // at least one pixel wide in the median view (fewer rays, same information at that level).
+  bool pyramid = true;
+  bool resume = false;          // continue after the last checkpoint instead of starting over
+  int preview_every = 0;        // write a held-out preview every K iterations (0: never)
+  int eval_every = 0;           // held-out PSNR every K iterations (0: at the end of each level)
+  float min_box_opacity = 0.7f; // the paper's rendering rule, for previews and held-out PSNR
+
+  // Progress: called after each iteration and at level boundaries.
+  struct Event {
+    int level = 0, levels = 0, iteration = 0, iterations = 0;
+    double cost = 0, train_psnr = 0;
+    std::string message;  // non-empty: a line to print
+  };
+  std::function<void(const Event&)> on_event;
+
+  // Throws InputError naming the bad option.
+  void Check() const;
+};
+
+struct LevelReport {
+  int level = 0;
+  VolumeShape shape;
+  int image_downscale = 1;
+  int64_t rays = 0;
+  int iterations = 0;
+  double seconds = 0;  // solver wall time of the level (excludes held-out evaluation)
+  double cost = 0, train_psnr = 0, test_psnr = 0;
+  std::string status;
+};
+
+struct ReconstructResult {
+  std::string backend;
+  std::vector<LevelReport> levels;  // the levels run by this call
+  double solve_seconds = 0;         // sum of the levels' solver time
+  double test_psnr = 0;             // held-out PSNR of the final level (0: no held-out views)
+  std::filesystem::path final_checkpoint;
+  bool already_complete = false;    // --resume found every level done
+};
+
+ReconstructResult Reconstruct(const ReconstructOptions& options);
+
+// A few lines for the terminal.
+std::string ReconstructSummary(const ReconstructResult& r);
+
+}  // namespace perf::recon

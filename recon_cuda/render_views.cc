@@ -1,0 +1,73 @@
+#include "recon_cuda/render_views.h"
+
+#include "common/atomic_file.h"
+#include "common/errors.h"
+#include "recon_cuda/checkpoint.h"
+#include "sfm_import/image_io.h"
+
+namespace perf::recon {
+
+namespace fs = std::filesystem;
+
+RenderViewsResult RenderViews(const RenderViewsOptions& o) {
+  if (o.split != "test" && o.split != "train" && o.split != "all") {
+    throw InputError("command line", "--split", o.split, "unknown split", "use test, train or all");
+  }
+  const fs::path scene_path = o.workspace / "scene.json";
+  if (!fs::exists(scene_path)) throw IoError(scene_path.string(), "not found", "run perf import on this workspace first");
+  const Scene scene = ReadScene(scene_path);
+  RenderViewsResult result;
+  result.checkpoint = o.checkpoint;
+  if (result.checkpoint.empty()) {
+    const int last = LastCheckpointLevel(o.workspace);
+    if (last < 0) {
+      throw IoError((o.workspace / "recon").string(), "no checkpoint found", "run perf reconstruct on this workspace first");
+    }
+    result.checkpoint = CheckpointPath(o.workspace, last);
+  }
+  Checkpoint c = ReadCheckpoint(result.checkpoint);
+
+  std::vector<PosedImage> views;
+  for (Split s : {Split::kTrain, Split::kTest}) {
+    if ((s == Split::kTrain && o.split == "test") || (s == Split::kTest && o.split == "train")) continue;
+    std::vector<PosedImage> part = LoadImages(scene, o.workspace, s);
+    for (PosedImage& v : part) {
+      if (o.names.empty() || std::find(o.names.begin(), o.names.end(), v.name) != o.names.end()) {
+        views.push_back(std::move(v));
+      }
+    }
+  }
+  for (const std::string& name : o.names) {
+    if (std::none_of(views.begin(), views.end(), [&](const PosedImage& v) { return v.name == name; })) {
+      throw InputError("command line", "--view", name, StrCat("no image of that name in the ", o.split, " split"),
+                       "use a name from scene.json's images");
+    }
+  }
+
+  std::unique_ptr<Backend> backend = MakeBackend(o.device, o.threads);
+  RaySet no_rays;
+  backend->SetLevel(LevelProblem{c.shape, GeometryOf(c), &no_rays, {}}, 1);
+  backend->Upload(0, c.params);
+  const fs::path out_dir = o.out_dir.empty() ? o.workspace / "renders" : o.out_dir;
+  EnsureWritableDirectory(out_dir);
+  int done = 0;
+  for (const PosedImage& v : views) {
+    std::vector<RenderOutput> renders;
+    const std::vector<ViewScore> s = ScoreViews(backend.get(), 0, {v}, o.min_box_opacity, &renders);
+    result.scores.push_back(s[0]);
+    const std::string stem = fs::path(v.name).filename().replace_extension().string();
+    const fs::path file = out_dir / (stem + ".png");
+    WriteImage(file, ToImage(renders[0]), PixelFormat::kUInt8);
+    result.files.push_back(file);
+    if (o.write_opacity) {
+      const fs::path op = out_dir / (stem + "_opacity.png");
+      WriteImage(op, OpacityImage(renders[0]), PixelFormat::kUInt16);
+      result.files.push_back(op);
+    }
+    if (o.progress) o.progress(++done, static_cast<int>(views.size()));
+  }
+  result.mean_psnr = MeanPsnr(result.scores);
+  return result;
+}
+
+}  // namespace perf::recon

@@ -1,0 +1,233 @@
+#include "recon_cuda/solver.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+#include "common/errors.h"
+
+namespace perf::recon {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double Since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// Vector ids of the Gauss-Newton solver.
+enum : VecId { kX = kSolverX, kG, kDiag, kStep, kResidual, kZ, kDir, kAp, kTrial, kGnVectors };
+// Adam reuses kX and kG; its moments live in two more.
+enum : VecId { kAdamM = 2, kAdamV = 3, kAdamVectors = 4 };
+
+void Fail(const char* field, const std::string& value, const std::string& problem) {
+  throw InputError("solver options", field, value, problem);
+}
+
+double Psnr(double colour_sse, int64_t rays) {
+  if (rays <= 0) return 0;
+  const double mse = colour_sse / (3.0 * static_cast<double>(rays));
+  return mse > 0 ? -10.0 * std::log10(mse) : 99.0;
+}
+
+}  // namespace
+
+const char* SolverName(SolverType t) { return t == SolverType::kGaussNewton ? "gn" : "adam"; }
+
+const char* StatusName(SolverStatus s) {
+  switch (s) {
+    case SolverStatus::kIterationLimit: return "iteration limit";
+    case SolverStatus::kNoProgress: return "no progress";
+    case SolverStatus::kUserAbort: return "stopped by the caller";
+    case SolverStatus::kFailure: return "failure";
+  }
+  return "?";
+}
+
+int RequiredVectors(SolverType type) {
+  return type == SolverType::kGaussNewton ? static_cast<int>(kGnVectors) : static_cast<int>(kAdamVectors);
+}
+
+void SolverOptions::Check() const {
+  if (max_iterations < 0) Fail("max_iterations", std::to_string(max_iterations), "must be >= 0");
+  if (max_cg_iterations < 1) Fail("max_cg_iterations", std::to_string(max_cg_iterations), "must be >= 1");
+  if (!(cg_exit_ratio > 0 && cg_exit_ratio <= 1)) Fail("cg_exit_ratio", StrCat(cg_exit_ratio), "must be in (0, 1]");
+  if (!(damping >= 0)) Fail("damping", StrCat(damping), "must be >= 0");
+  if (!(initial_step > 0)) Fail("initial_step", StrCat(initial_step), "must be > 0");
+  if (!(step_factor > 0 && step_factor < 1)) Fail("step_factor", StrCat(step_factor), "must be in (0, 1)");
+  if (max_line_search_steps < 1) Fail("max_line_search_steps", std::to_string(max_line_search_steps), "must be >= 1");
+  if (line_search_ray_stride < 1) Fail("line_search_ray_stride", std::to_string(line_search_ray_stride), "must be >= 1");
+  if (psnr_ray_stride < 0) Fail("psnr_ray_stride", std::to_string(psnr_ray_stride), "must be >= 0");
+  if (!(adam.lr_colour > 0 && adam.lr_density > 0 && adam.lr_opacity > 0)) {
+    Fail("adam learning rates", StrCat(adam.lr_colour, ", ", adam.lr_density, ", ", adam.lr_opacity), "must be > 0");
+  }
+}
+
+std::string SolverSummary::BriefReport() const {
+  char buf[512];
+  std::snprintf(buf, sizeof(buf),
+                "%d iterations, cost %.6g -> %.6g, %.2f s (linearize %.2f, cg %.2f, line search %.2f, update %.2f, "
+                "psnr %.2f), %d+%d+%d passes, %s",
+                iterations, initial_cost, final_cost, seconds_total, seconds_linearize, seconds_cg, seconds_line_search,
+                seconds_update, seconds_psnr, linearize_passes, jtj_passes, cost_passes, StatusName(status));
+  return buf;
+}
+
+namespace {
+
+// PCG (paper Algorithm 2) on (J^T J + mu D) d = -g, d = 0 at the start. Returns iterations.
+int SolvePcg(const SolverOptions& o, Backend* b, SolverSummary* summary) {
+  const int64_t params = b->level().shape.ParamCount();
+  (void)params;
+  b->Fill(kStep, 0.f);
+  b->Fill(kResidual, 0.f);
+  b->Axpy(kResidual, -1.0, kG);  // r0 = b - A 0 = -g
+  const double floor = std::max(o.diagonal_floor * b->MaxAbs(kDiag), 1e-30);
+  b->DivideClamped(kZ, kResidual, kDiag, static_cast<float>(floor));
+  b->Copy(kDir, kZ);
+  double rz = b->Dot(kResidual, kZ);
+  double r_prev = b->Dot(kResidual, kResidual);
+  const double r0 = r_prev;
+  int k = 0;
+  while (k < o.max_cg_iterations) {
+    b->MultiplyJtJ(kDir, kAp);
+    ++summary->jtj_passes;
+    if (o.damping > 0) b->AxpyDiag(kAp, o.damping, kDiag, kDir);
+    const double pap = b->Dot(kDir, kAp);
+    if (!(pap > 0)) break;  // no curvature along p (p = 0 or numerically flat)
+    const double alpha = rz / pap;
+    b->Axpy(kStep, alpha, kDir);
+    b->Axpy(kResidual, -alpha, kAp);
+    ++k;
+    const double r = b->Dot(kResidual, kResidual);
+    if (r < o.cg_relative_tolerance * r0 || r / r_prev > o.cg_exit_ratio || k == o.max_cg_iterations) break;
+    r_prev = r;
+    b->DivideClamped(kZ, kResidual, kDiag, static_cast<float>(floor));
+    const double rz_next = b->Dot(kResidual, kZ);
+    b->Xpby(kDir, kZ, rz_next / rz);
+    rz = rz_next;
+  }
+  return k;
+}
+
+// x(gamma) = P(x + gamma d) into kTrial.
+void TrialPoint(Backend* b, double gamma) {
+  b->Copy(kTrial, kX);
+  b->Axpy(kTrial, gamma, kStep);
+  b->Project(kTrial);
+}
+
+}  // namespace
+
+void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const IterationCallback& callback,
+           SolverSummary* summary) {
+  o.Check();
+  *summary = SolverSummary();
+  const auto t_solve = Clock::now();
+  PERF_CHECK(static_cast<int64_t>(x->size()) == b->level().shape.ParamCount());
+  b->Upload(kX, *x);
+  if (o.type == SolverType::kAdam) {
+    b->Fill(kAdamM, 0.f);
+    b->Fill(kAdamV, 0.f);
+  }
+  int rejected_in_a_row = 0;
+  const RaySubset ls_subset{o.line_search_ray_stride, 0};
+  for (int it = 0; it < o.max_iterations; ++it) {
+    IterationSummary s;
+    s.iteration = it;
+    const auto t_it = Clock::now();
+    const uint32_t seed = Hash(o.seed, static_cast<uint32_t>(it), 0u);
+
+    auto t0 = Clock::now();
+    const PassStats lin = b->Linearize(kX, seed, kG, o.type == SolverType::kGaussNewton ? kDiag : kNoVector);
+    ++summary->linearize_passes;
+    s.seconds_linearize = Since(t0);
+    s.cost = lin.cost;
+    s.samples = lin.samples;
+    if (!std::isfinite(lin.cost)) {
+      summary->status = SolverStatus::kFailure;
+      summary->message = StrCat("the cost is not finite at iteration ", it);
+      break;
+    }
+    if (it == 0) summary->initial_cost = lin.cost;
+
+    if (o.type == SolverType::kAdam) {
+      t0 = Clock::now();
+      b->AdamStep(kX, kG, kAdamM, kAdamV, o.adam, it + 1);
+      s.seconds_update = Since(t0);
+      s.step = 1;
+      s.cost_after = lin.cost;  // of the step's own pass: Adam evaluates nothing else
+    } else {
+      t0 = Clock::now();
+      s.cg_iterations = SolvePcg(o, b, summary);
+      s.seconds_cg = Since(t0);
+
+      t0 = Clock::now();
+      double cost0 = lin.cost;
+      if (o.line_search_ray_stride > 1) {
+        cost0 = b->Cost(kX, seed, ls_subset).cost;
+        ++summary->cost_passes;
+      }
+      // Paper Algorithm 3: shrink while the cost keeps falling; take the last gamma before it rose.
+      double gamma = o.initial_step, best_gamma = 0, best = std::numeric_limits<double>::infinity();
+      double prev = std::numeric_limits<double>::infinity();
+      for (int k = 0; k < o.max_line_search_steps; ++k) {
+        TrialPoint(b, gamma);
+        const double mu = b->Cost(kTrial, seed, ls_subset).cost;
+        ++summary->cost_passes;
+        ++s.line_search_steps;
+        if (!(mu <= prev)) break;  // rose (or NaN): the previous gamma was the best
+        prev = best = mu;
+        best_gamma = gamma;
+        gamma *= o.step_factor;
+      }
+      s.seconds_line_search = Since(t0);
+
+      t0 = Clock::now();
+      s.accepted = best < cost0;
+      if (s.accepted) {
+        b->Axpy(kX, best_gamma, kStep);
+        b->Project(kX);
+        s.step = best_gamma;
+        s.cost_after = best;
+        rejected_in_a_row = 0;
+      } else {
+        s.step = 0;
+        s.cost_after = cost0;
+        ++rejected_in_a_row;
+      }
+      s.seconds_update = Since(t0);
+      if (o.line_search_ray_stride > 1) {
+        // Report the cost on all rays' scale.
+        s.cost_after *= cost0 > 0 ? lin.cost / cost0 : 1.0;
+      }
+    }
+
+    if (o.psnr_ray_stride > 0) {
+      t0 = Clock::now();
+      const PassStats p = b->Cost(kX, 0x5eed5eedu, RaySubset{o.psnr_ray_stride, 0});
+      s.train_psnr = Psnr(p.colour_sse, p.rays);
+      s.seconds_psnr = Since(t0);
+    }
+    s.seconds_total = Since(t_it);
+    summary->seconds_linearize += s.seconds_linearize;
+    summary->seconds_cg += s.seconds_cg;
+    summary->seconds_line_search += s.seconds_line_search;
+    summary->seconds_update += s.seconds_update;
+    summary->seconds_psnr += s.seconds_psnr;
+    summary->final_cost = s.cost_after;
+    summary->iterations = it + 1;
+    summary->per_iteration.push_back(s);
+    if (callback && !callback(s)) {
+      summary->status = SolverStatus::kUserAbort;
+      break;
+    }
+    if (rejected_in_a_row >= 3) {
+      summary->status = SolverStatus::kNoProgress;
+      summary->message = "3 Gauss-Newton steps in a row did not lower the cost";
+      break;
+    }
+  }
+  b->Download(kX, *x);
+  summary->seconds_total = Since(t_solve);
+}
+
+}  // namespace perf::recon

@@ -1,0 +1,112 @@
+// The solver of one level (paper "Gauss-Newton solver" .. "Line search"; DESIGN.md
+// "Gauss-Newton step"), in Ceres' shape: Options with documented defaults and Check(), a Summary
+// with a status, costs, per-phase timings and BriefReport(), and Solve(). Host code written once
+// against backend.h, so the CPU and CUDA backends share it.
+//
+// Gauss-Newton iteration:
+//   1. Linearize at x: cost, g = J^T r, D = diag(J^T J), one jitter seed for the whole iteration;
+//   2. PCG (paper Algorithm 2) on (J^T J + mu D) d = -g from d = 0, Jacobi preconditioner D,
+//      leaving when R / R_prev > 0.85 (R = |r|^2) or after max_cg_iterations;
+//   3. backtracking line search (paper Algorithm 3) on x(gamma) = P(x + gamma d), P the
+//      projection to the valid range: gamma = 1, 0.7, 0.49, ... while the cost keeps falling;
+//   4. x = x(gamma) if that lowers the cost, else the step is rejected.
+// Adam (the paper's figure 1 baseline): one Linearize without diagonal per step, fresh jitter.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "recon_cuda/backend.h"
+
+namespace perf::recon {
+
+enum class SolverType { kGaussNewton, kAdam };
+const char* SolverName(SolverType t);
+
+struct SolverOptions {
+  SolverType type = SolverType::kGaussNewton;
+  // Gauss-Newton iterations, or Adam steps, at this level (paper: 30 per level).
+  int max_iterations = 30;
+  // Jitter: iteration k uses Hash(seed, k, 0) for every pass (DESIGN.md "Gauss-Newton step").
+  uint32_t seed = 1;
+
+  // PCG (paper Algorithm 2). The paper leaves after 1-3 iterations through the ratio test.
+  int max_cg_iterations = 3;
+  double cg_exit_ratio = 0.85;     // leave when |r_k+1|^2 / |r_k|^2 > this
+  double cg_relative_tolerance = 1e-10;  // or when |r|^2 < this |r_0|^2
+  // Levenberg-Marquardt style damping: solves (J^T J + damping D) d = -g. 0: plain Gauss-Newton.
+  double damping = 0.0;
+  // Preconditioner floor relative to the largest diagonal entry, for parameters no ray reaches.
+  double diagonal_floor = 1e-9;
+
+  // Line search (paper Algorithm 3).
+  double initial_step = 1.0;
+  double step_factor = 0.7;
+  int max_line_search_steps = 8;
+  // Evaluate the line search's costs on every k-th ray only (1: all rays).
+  int line_search_ray_stride = 1;
+
+  AdamSettings adam;
+
+  // PSNR of the colour residuals on a fixed subset of the training rays (every k-th ray, a
+  // fixed jitter), after each iteration; 0 switches it off.
+  int psnr_ray_stride = 16;
+
+  // Throws InputError (file "options") naming the bad field.
+  void Check() const;
+};
+
+// Why Solve returned.
+enum class SolverStatus {
+  kIterationLimit,  // max_iterations ran (the normal end: the hierarchy uses a fixed budget)
+  kNoProgress,      // 3 consecutive Gauss-Newton steps were rejected by the line search
+  kUserAbort,       // the iteration callback asked to stop
+  kFailure,         // the cost became non-finite (diverged or bad input values)
+};
+const char* StatusName(SolverStatus s);
+
+struct IterationSummary {
+  int iteration = 0;          // 0-based within the level
+  double cost = 0;            // at the start of the iteration (its rays and jitter)
+  double cost_after = 0;      // after the accepted step (line search rays)
+  double train_psnr = 0;      // on the fixed subset after the step; 0 when off
+  int cg_iterations = 0;
+  double step = 0;            // accepted gamma (0: rejected; Adam: 1)
+  int line_search_steps = 0;  // cost evaluations in the line search
+  bool accepted = true;
+  double seconds_linearize = 0, seconds_cg = 0, seconds_line_search = 0, seconds_update = 0,
+         seconds_psnr = 0, seconds_total = 0;
+  int64_t samples = 0;        // march samples of the Linearize pass
+};
+
+struct SolverSummary {
+  SolverStatus status = SolverStatus::kIterationLimit;
+  double initial_cost = 0, final_cost = 0;
+  int iterations = 0;
+  std::vector<IterationSummary> per_iteration;
+  double seconds_linearize = 0, seconds_cg = 0, seconds_line_search = 0, seconds_update = 0, seconds_psnr = 0,
+         seconds_total = 0;
+  int linearize_passes = 0, jtj_passes = 0, cost_passes = 0;
+  std::string message;
+
+  // One line: "GN: 8 iterations, cost 1.2e3 -> 4.5e1, 9.8 s (linearize 3.1, cg 2.5, line search 3.6), iteration limit".
+  std::string BriefReport() const;
+};
+
+// Return false to stop after this iteration (status kUserAbort).
+using IterationCallback = std::function<bool(const IterationSummary&)>;
+
+// Runs the solver from `x` (host copy, ParamCount values, in the valid range) on the backend's
+// current level and writes the result back into `x`. The backend must have had SetLevel called
+// with at least RequiredVectors(type) vectors.
+void Solve(const SolverOptions& options, Backend* backend, std::vector<float>* x, const IterationCallback& callback,
+           SolverSummary* summary);
+
+int RequiredVectors(SolverType type);
+
+// The backend vector that holds x during and after Solve (for renders from a callback).
+inline constexpr VecId kSolverX = 0;
+
+}  // namespace perf::recon

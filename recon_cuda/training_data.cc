@@ -1,0 +1,115 @@
+#include "recon_cuda/training_data.h"
+
+#include <tbb/parallel_for.h>
+
+#include <atomic>
+
+#include "common/errors.h"
+#include "sfm_import/image_io.h"
+
+namespace perf::recon {
+
+PinholeCamera<float> ToPinhole(const SceneCamera& camera, const Eigen::Matrix<double, 3, 4>& world_from_cam) {
+  PinholeCamera<float> c{};
+  c.fx = static_cast<float>(camera.fx);
+  c.fy = static_cast<float>(camera.fy);
+  c.cx = static_cast<float>(camera.cx);
+  c.cy = static_cast<float>(camera.cy);
+  for (int i = 0; i < 12; ++i) c.world_from_cam[i] = static_cast<float>(world_from_cam(i / 4, i % 4));
+  return c;
+}
+
+namespace {
+
+// RGB from grey, RGB or RGBA (associated alpha: the importer already composited over the
+// background, so any alpha left here is dropped).
+Image ToRgb(const Image& in, const std::string& path) {
+  if (in.channels == 3) return in;
+  if (in.channels != 1 && in.channels != 4 && in.channels != 2) {
+    throw InputError(path, "channels", std::to_string(in.channels), "expected a grey, RGB or RGBA image",
+                     "re-run perf import");
+  }
+  Image out(in.width, in.height, 3);
+  for (int y = 0; y < in.height; ++y)
+    for (int x = 0; x < in.width; ++x)
+      for (int c = 0; c < 3; ++c) out.at(x, y, c) = in.at(x, y, in.channels >= 3 ? c : 0);
+  return out;
+}
+
+}  // namespace
+
+std::vector<PosedImage> LoadImages(const Scene& scene, const std::filesystem::path& workspace, Split split,
+                                   const std::function<void(int done, int total)>& progress) {
+  std::vector<const SceneImage*> chosen;
+  for (const SceneImage& im : scene.images) {
+    if (im.split == split) chosen.push_back(&im);
+  }
+  std::vector<PosedImage> out(chosen.size());
+  std::atomic<int> done{0};
+  tbb::parallel_for(size_t{0}, chosen.size(), [&](size_t i) {
+    const SceneImage& im = *chosen[i];
+    const SceneCamera& cam = scene.camera(im.camera_id);
+    const std::filesystem::path path = workspace / im.path;
+    Image img = ToRgb(ReadImage(path), path.string());
+    if (img.width != cam.width || img.height != cam.height) {
+      throw InputError(path.string(), "size", StrCat(img.width, "x", img.height),
+                       StrCat("scene.json says camera ", cam.id, " is ", cam.width, "x", cam.height),
+                       "the workspace images were changed after import; re-run perf import");
+    }
+    out[i] = {im.name, ToPinhole(cam, im.world_from_cam), std::move(img)};
+    const int d = ++done;
+    if (progress) progress(d, static_cast<int>(chosen.size()));
+  });
+  return out;
+}
+
+PosedImage Downscaled(const PosedImage& image, int factor) {
+  if (factor <= 1) return image;
+  PosedImage out = image;
+  const int w = std::max(1, image.image.width / factor), h = std::max(1, image.image.height / factor);
+  out.image = ResizeImage(image.image, w, h);
+  // The resized image covers the same field of view: scale by the exact per-axis ratio.
+  const float sx = static_cast<float>(w) / image.image.width, sy = static_cast<float>(h) / image.image.height;
+  out.camera.fx *= sx;
+  out.camera.cx *= sx;
+  out.camera.fy *= sy;
+  out.camera.cy *= sy;
+  return out;
+}
+
+int64_t RaySet::Bytes() const {
+  return static_cast<int64_t>(cameras.size() * sizeof(PinholeCamera<float>) + pixels.size() * sizeof(RayPixel) +
+                              colours.size() * sizeof(float));
+}
+
+RaySet MakeRaySet(const std::vector<PosedImage>& images) {
+  RaySet rays;
+  int64_t total = 0;
+  for (const PosedImage& im : images) {
+    if (im.image.width > 65535 || im.image.height > 65535) {
+      throw InputError(im.name, "size", StrCat(im.image.width, "x", im.image.height), "images over 65535 pixels a side",
+                       "re-run perf import with --downscale");
+    }
+    total += static_cast<int64_t>(im.image.width) * im.image.height;
+  }
+  rays.pixels.reserve(total);
+  rays.colours.reserve(3 * total);
+  constexpr int kTile = 8;
+  for (size_t c = 0; c < images.size(); ++c) {
+    const Image& img = images[c].image;
+    rays.cameras.push_back(images[c].camera);
+    for (int ty = 0; ty < img.height; ty += kTile) {
+      for (int tx = 0; tx < img.width; tx += kTile) {
+        for (int y = ty; y < std::min(ty + kTile, img.height); ++y) {
+          for (int x = tx; x < std::min(tx + kTile, img.width); ++x) {
+            rays.pixels.push_back({static_cast<uint32_t>(c), static_cast<uint16_t>(x), static_cast<uint16_t>(y)});
+            for (int ch = 0; ch < 3; ++ch) rays.colours.push_back(img.at(x, y, ch));
+          }
+        }
+      }
+    }
+  }
+  return rays;
+}
+
+}  // namespace perf::recon

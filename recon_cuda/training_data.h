@@ -1,0 +1,52 @@
+// The photos the solver fits, as posed pinhole images and as flat ray sets: every pixel of every
+// training image is one ray (DESIGN.md "One ray"). Coarse levels may use a downscaled copy of the
+// images (an image pyramid), which cuts their rays by 4x per halving.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "recon_cuda/ray_math.h"
+#include "sfm_import/image.h"
+#include "sfm_import/scene.h"
+
+namespace perf::recon {
+
+struct PosedImage {
+  std::string name;
+  PinholeCamera<float> camera;
+  Image image;  // RGB float, as stored (sRGB-encoded values)
+};
+
+// Every image of `split` in the workspace, read with OpenImageIO and converted to RGB. Throws
+// InputError / IoError naming the image when one is missing, unreadable or of the wrong size.
+std::vector<PosedImage> LoadImages(const Scene& scene, const std::filesystem::path& workspace, Split split,
+                                   const std::function<void(int done, int total)>& progress = {});
+
+PinholeCamera<float> ToPinhole(const SceneCamera& camera, const Eigen::Matrix<double, 3, 4>& world_from_cam);
+
+// The image downscaled by an integer factor (OpenImageIO filtered resize) with its intrinsics
+// scaled to match: pixel edges map to pixel edges, so f and c both divide by the factor.
+PosedImage Downscaled(const PosedImage& image, int factor);
+
+struct RayPixel {
+  uint32_t camera;
+  uint16_t x, y;
+};
+
+// Rays of one level. Ordered image by image in 8 x 8 pixel tiles, so that consecutive rays (one
+// thread's block) meet the same cells: better cache use than scanlines.
+struct RaySet {
+  std::vector<PinholeCamera<float>> cameras;
+  std::vector<RayPixel> pixels;
+  std::vector<float> colours;  // [size(), 3]
+  int64_t size() const { return static_cast<int64_t>(pixels.size()); }
+  int64_t Bytes() const;
+};
+
+RaySet MakeRaySet(const std::vector<PosedImage>& images);
+
+}  // namespace perf::recon

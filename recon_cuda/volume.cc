@@ -1,0 +1,158 @@
+#include "recon_cuda/volume.h"
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <sstream>
+
+#include "common/errors.h"
+#include "sfm_import/scene.h"
+
+namespace perf::recon {
+
+VolumeGeometry VolumeGeometry::FromScene(const Scene& scene) {
+  VolumeGeometry g;
+  const Eigen::Vector3d c = scene.box.center, s = scene.box.size;
+  const Eigen::Matrix3d& r = scene.box.rotation;
+  g.box.center = {static_cast<float>(c.x()), static_cast<float>(c.y()), static_cast<float>(c.z())};
+  for (int i = 0; i < 9; ++i) g.box.world_from_box.m[i] = static_cast<float>(r(i / 3, i % 3));
+  g.box.size = {static_cast<float>(s.x()), static_cast<float>(s.y()), static_cast<float>(s.z())};
+  if (!(s.minCoeff() > 0) || !s.allFinite()) {
+    throw InputError("scene.json", "box.size", StrCat(s.transpose()), "must be positive",
+                     "re-run perf import, or pass --box-size");
+  }
+  const int k = static_cast<int>(scene.shells.radii.size());
+  if (k < 1 || k > kMaxShells) {
+    throw InputError("scene.json", "shells.radii", StrCat(k, " shells"),
+                     StrCat("the reconstruction needs 1 to ", kMaxShells, " shells (the outermost ends every ray)"),
+                     "re-run perf import with --shells N");
+  }
+  const Eigen::Vector3d local = r.transpose() * (scene.shells.center - c);
+  g.shell_center = {static_cast<float>(local.x()), static_cast<float>(local.y()), static_cast<float>(local.z())};
+  for (double radius : scene.shells.radii) g.shell_radii.push_back(static_cast<float>(radius));
+  return g;
+}
+
+VolumeView<float> MakeView(const VolumeShape& shape, const VolumeGeometry& geometry, const float* params) {
+  PERF_CHECK(shape.num_shells == geometry.num_shells());
+  VolumeView<float> v{};
+  v.params = params;
+  v.n = shape.n;
+  v.size = geometry.box.size;
+  v.num_shells = shape.num_shells;
+  v.m = shape.m;
+  v.shell_center = geometry.shell_center;
+  for (int k = 0; k < kMaxShells; ++k) v.shell_radii[k] = k < shape.num_shells ? geometry.shell_radii[k] : 0.f;
+  return v;
+}
+
+std::vector<float> InitialParams(const VolumeShape& shape, const VolumeGeometry& geometry, const InitOptions& options) {
+  std::vector<float> x(static_cast<size_t>(shape.ParamCount()));
+  std::mt19937 rng(options.seed);
+  std::uniform_real_distribution<float> unit(0.f, 1.f);
+  const double side = std::min({geometry.box.size.x, geometry.box.size.y, geometry.box.size.z});
+  const double sigma_mean = -std::log(1.0 - std::clamp(options.box_opacity, 0.0, 0.99)) / side;
+  for (int64_t i = 0; i < shape.ParamCount(); ++i) {
+    switch (KindOf(shape, i)) {
+      case ParamKind::kGridDensity: x[i] = static_cast<float>(2 * sigma_mean) * unit(rng); break;
+      case ParamKind::kShellOpacity: x[i] = static_cast<float>(2 * options.shell_opacity) * unit(rng); break;
+      default: x[i] = unit(rng); break;
+    }
+  }
+  ProjectToValidRange(shape, x);
+  return x;
+}
+
+namespace {
+
+// One axis of the resampling: new sample i of `to` at old position (i + 0.5) from / to in old
+// cell units; linear between the two nearest old centres, extrapolated beyond the outer ones.
+struct Axis {
+  int lo, hi;
+  double f;  // weight of hi; may be < 0 or > 1 at the border (extrapolation)
+};
+std::vector<Axis> AxisWeights(int from, int to) {
+  std::vector<Axis> a(to);
+  for (int i = 0; i < to; ++i) {
+    if (from == 1) {
+      a[i] = {0, 0, 0.0};
+      continue;
+    }
+    const double c = (i + 0.5) * from / to - 0.5;
+    const int lo = std::clamp(static_cast<int>(std::floor(c)), 0, from - 2);
+    a[i] = {lo, lo + 1, c - lo};
+  }
+  return a;
+}
+
+}  // namespace
+
+std::vector<float> Resample(const VolumeShape& from, std::span<const float> params, const VolumeShape& to) {
+  PERF_CHECK(static_cast<int64_t>(params.size()) == from.ParamCount());
+  PERF_CHECK(from.num_shells == to.num_shells);
+  std::vector<float> out(static_cast<size_t>(to.ParamCount()));
+  const std::vector<Axis> g = AxisWeights(from.n, to.n);
+  for (int k = 0; k < to.n; ++k) {
+    for (int j = 0; j < to.n; ++j) {
+      for (int i = 0; i < to.n; ++i) {
+        double v[4] = {0, 0, 0, 0};
+        for (int c = 0; c < 8; ++c) {
+          const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+          const double w = (dx ? g[i].f : 1 - g[i].f) * (dy ? g[j].f : 1 - g[j].f) * (dz ? g[k].f : 1 - g[k].f);
+          if (w == 0) continue;
+          const int64_t cell = GridCell(from.n, dx ? g[i].hi : g[i].lo, dy ? g[j].hi : g[j].lo, dz ? g[k].hi : g[k].lo);
+          for (int ch = 0; ch < 4; ++ch) v[ch] += w * params[GridParam(cell, ch)];
+        }
+        const int64_t cell = GridCell(to.n, i, j, k);
+        for (int ch = 0; ch < 4; ++ch) out[GridParam(cell, ch)] = static_cast<float>(v[ch]);
+      }
+    }
+  }
+  const std::vector<Axis> t = AxisWeights(from.m, to.m);
+  for (int s = 0; s < to.num_shells; ++s) {
+    for (int face = 0; face < 6; ++face) {
+      for (int v = 0; v < to.m; ++v) {
+        for (int u = 0; u < to.m; ++u) {
+          double acc[4] = {0, 0, 0, 0};
+          for (int c = 0; c < 4; ++c) {
+            const int du = c & 1, dv = c >> 1;
+            const double w = (du ? t[u].f : 1 - t[u].f) * (dv ? t[v].f : 1 - t[v].f);
+            if (w == 0) continue;
+            const int64_t p = ShellParam(from.n, from.m, s, face, du ? t[u].hi : t[u].lo, dv ? t[v].hi : t[v].lo, 0);
+            for (int ch = 0; ch < 4; ++ch) acc[ch] += w * params[p + ch];
+          }
+          const int64_t p = ShellParam(to.n, to.m, s, face, u, v, 0);
+          for (int ch = 0; ch < 4; ++ch) out[p + ch] = static_cast<float>(acc[ch]);
+        }
+      }
+    }
+  }
+  ProjectToValidRange(to, out);
+  return out;
+}
+
+void ProjectToValidRange(const VolumeShape& shape, std::span<float> x) {
+  PERF_CHECK(static_cast<int64_t>(x.size()) == shape.ParamCount());
+  const int64_t grid = shape.GridParamCount();
+  for (int64_t i = 0; i < grid; i += 4) {
+    for (int ch = 0; ch < 3; ++ch) x[i + ch] = std::clamp(x[i + ch], 0.f, 1.f);
+    x[i + 3] = std::max(x[i + 3], 0.f);
+  }
+  for (int64_t i = grid; i < static_cast<int64_t>(x.size()); ++i) x[i] = std::clamp(x[i], 0.f, 1.f);
+}
+
+std::string DescribeShape(const VolumeShape& shape) {
+  std::ostringstream s;
+  s << shape.n << "^3 grid, " << shape.num_shells << " shell" << (shape.num_shells == 1 ? "" : "s") << " of 6 x "
+    << shape.m << "^2 texels (";
+  const double p = static_cast<double>(shape.ParamCount());
+  if (p >= 1e6) {
+    s.precision(3);
+    s << p / 1e6 << " M parameters)";
+  } else {
+    s << shape.ParamCount() << " parameters)";
+  }
+  return s.str();
+}
+
+}  // namespace perf::recon

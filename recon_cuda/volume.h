@@ -1,0 +1,80 @@
+// The reconstructed volume on the host (DESIGN.md "Representation", "Hierarchy"): the dense
+// grid and the environment shells in one flat parameter vector (layout in ray_types.h), the
+// geometry that places them in the world, the random start of the coarsest level and the
+// resampling from one level to the next.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "recon_cuda/ray_math.h"
+
+namespace perf {
+struct Scene;
+}
+
+namespace perf::recon {
+
+// Resolutions of one level.
+struct VolumeShape {
+  int n = 32;          // grid cells per axis
+  int m = 32;          // texels per cube-map face side
+  int num_shells = 0;  // <= kMaxShells
+
+  int64_t ParamCount() const { return recon::ParamCount(n, m, num_shells); }
+  int64_t GridParamCount() const { return recon::GridParamCount(n); }
+  // The next level of the hierarchy: every resolution doubled.
+  VolumeShape Doubled() const { return {2 * n, 2 * m, num_shells}; }
+  bool operator==(const VolumeShape&) const = default;
+};
+
+// Where the box and the shells are in the world (from scene.json); the same for every level.
+struct VolumeGeometry {
+  BoxFrame<float> box;
+  Vec3<float> shell_center;  // box-local: R^T (shells.center - box.center)
+  std::vector<float> shell_radii;
+
+  static VolumeGeometry FromScene(const Scene& scene);  // throws InputError if unusable
+  int num_shells() const { return static_cast<int>(shell_radii.size()); }
+};
+
+// The view the ray math reads: params must outlive it.
+VolumeView<float> MakeView(const VolumeShape& shape, const VolumeGeometry& geometry, const float* params);
+
+struct InitOptions {
+  uint32_t seed = 1;
+  // Opacity of the box along its shortest side at the start (paper: "random colours with low
+  // opacity"): every cell's sigma is uniform in [0, 2 s] with s chosen so that the mean optical
+  // depth across the box gives this opacity.
+  double box_opacity = 0.1;
+  double shell_opacity = 0.1;  // mean opacity of the inner shells' texels, uniform in [0, 2 a]
+};
+
+// Random colours in [0, 1], low densities and shell opacities (the outermost shell's opacity is
+// ignored by the ray math: it is always opaque).
+std::vector<float> InitialParams(const VolumeShape& shape, const VolumeGeometry& geometry, const InitOptions& options);
+
+// Fills the `to` level from the `from` level (paper "Hierarchical formulation"): every new cell
+// centre (texel centre) takes the trilinear (bilinear, per face) interpolation of the old
+// values, linearly extrapolated over the quarter cell between the old outermost centres and the
+// border, so constant and linear fields carry over exactly; then projected to the valid range.
+std::vector<float> Resample(const VolumeShape& from, std::span<const float> params, const VolumeShape& to);
+
+// The valid range (DESIGN.md "Gauss-Newton step"): sigma >= 0, colours and opacities in [0, 1].
+void ProjectToValidRange(const VolumeShape& shape, std::span<float> params);
+
+// Which of the 4 channels of parameter i is what (for per-kind learning rates and bounds).
+enum class ParamKind { kGridColour, kGridDensity, kShellColour, kShellOpacity };
+inline ParamKind KindOf(const VolumeShape& shape, int64_t i) {
+  const bool grid = i < shape.GridParamCount();
+  const bool fourth = i % 4 == 3;
+  return grid ? (fourth ? ParamKind::kGridDensity : ParamKind::kGridColour)
+              : (fourth ? ParamKind::kShellOpacity : ParamKind::kShellColour);
+}
+
+// "128^3 grid, 4 shells of 6 x 128^2 texels (33.8 M parameters)".
+std::string DescribeShape(const VolumeShape& shape);
+
+}  // namespace perf::recon

@@ -1,0 +1,245 @@
+// The CPU backend's passes against a dense Jacobian from the double-precision per-ray math:
+// cost, J^T r, the exact diag(J^T J), J^T J p (cached and recomputed partials), the line-search
+// cost on a subset, thread-count independence, and the render path.
+#include "recon_cuda/cpu_backend.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "common/errors.h"
+
+#include "recon_cuda/volume.h"
+#include "tests/recon/recon_test_util.h"
+
+namespace perf::recon {
+namespace {
+
+using test::DenseJacobian;
+using test::TinyProblem;
+
+double MaxAbs(const std::vector<double>& v) {
+  double m = 0;
+  for (double x : v) m = std::max(m, std::abs(x));
+  return m;
+}
+
+// Float pass vs double reference: each entry within 2e-4 of the largest entry (float sums over
+// a few hundred contributions) plus 1e-4 relative.
+void ExpectClose(const std::vector<float>& got, const std::vector<double>& want, const char* what) {
+  ASSERT_EQ(got.size(), want.size());
+  const double scale = MaxAbs(want);
+  ASSERT_GT(scale, 0) << what;
+  int nonzero = 0;
+  for (size_t i = 0; i < want.size(); ++i) {
+    ASSERT_NEAR(got[i], want[i], 2e-4 * scale + 1e-4 * std::abs(want[i])) << what << " entry " << i;
+    if (std::abs(want[i]) > 1e-3 * scale) ++nonzero;
+  }
+  EXPECT_GT(nonzero, static_cast<int>(want.size() / 10)) << what << ": too few entries exercised";
+}
+
+std::unique_ptr<Backend> Cpu(int threads, bool cache = true) {
+  CpuBackendOptions o;
+  o.threads = threads;
+  o.cache_jacobian = cache;
+  return MakeCpuBackend(o);
+}
+
+enum : VecId { kX, kG, kD, kP, kOut, kVectors };
+
+TEST(CpuBackendTest, LinearizeMatchesTheDenseJacobian) {
+  const TinyProblem p(1);
+  auto b = Cpu(2);
+  b->SetLevel(p.Level(), kVectors);
+  b->Upload(kX, p.x);
+  const uint32_t seed = 77;
+  const PassStats s = b->Linearize(kX, seed, kG, kD);
+  const DenseJacobian j(p, p.x, seed, 0.1);
+  EXPECT_NEAR(s.cost, j.Cost(), 1e-5 * j.Cost());
+  EXPECT_EQ(s.rays, p.rays.size());
+  EXPECT_GT(s.samples, p.rays.size());
+  std::vector<float> g(p.shape.ParamCount()), d(p.shape.ParamCount());
+  b->Download(kG, g);
+  b->Download(kD, d);
+  ExpectClose(g, j.Jtr(), "J^T r");
+  ExpectClose(d, j.Diag(), "diag(J^T J)");
+}
+
+TEST(CpuBackendTest, DiagonalMergesVisitsOfTheSameCell) {
+  // Squaring each visit on its own drops the cross terms between neighbouring samples that share
+  // a cell (of either sign: sigma's partials change sign along a ray) and gives a visibly
+  // different diagonal; the backend's must be the exact one.
+  const TinyProblem p(2);
+  const DenseJacobian j(p, p.x, 5, 0.1);
+  const std::vector<double> exact = j.Diag();
+  std::vector<double> naive(exact.size(), 0.0);
+  for (const auto& [i, v] : j.naive_diag_terms) naive[i] += v;
+  auto b = Cpu(1);
+  b->SetLevel(p.Level(), kVectors);
+  b->Upload(kX, p.x);
+  b->Linearize(kX, 5, kG, kD);
+  std::vector<float> d(p.shape.ParamCount());
+  b->Download(kD, d);
+  double sum_exact = 0, sum_naive = 0, sum_got = 0;
+  for (size_t i = 0; i < exact.size(); ++i) {
+    sum_exact += exact[i];
+    sum_naive += naive[i];
+    sum_got += d[i];
+  }
+  EXPECT_NEAR(sum_got, sum_exact, 1e-4 * sum_exact);
+  EXPECT_GT(std::abs(sum_exact - sum_naive), 0.1 * sum_exact);
+}
+
+TEST(CpuBackendTest, JtJpMatchesTheDenseJacobianCachedAndRecomputed) {
+  const TinyProblem p(3);
+  const uint32_t seed = 11;
+  const DenseJacobian j(p, p.x, seed, 0.1);
+  std::mt19937 rng(4);
+  std::normal_distribution<float> g;
+  std::vector<float> pv(p.shape.ParamCount());
+  for (float& v : pv) v = g(rng);
+  const std::vector<double> want = j.Jtu(j.Jp(std::vector<double>(pv.begin(), pv.end())));
+  for (bool cache : {true, false}) {
+    auto b = Cpu(2, cache);
+    b->SetLevel(p.Level(), kVectors);
+    EXPECT_EQ(b->CachesJacobian(), cache);
+    b->Upload(kX, p.x);
+    b->Upload(kP, pv);
+    b->Linearize(kX, seed, kG, kD);
+    b->MultiplyJtJ(kP, kOut);
+    std::vector<float> out(p.shape.ParamCount());
+    b->Download(kOut, out);
+    ExpectClose(out, want, cache ? "J^T J p (cached)" : "J^T J p (recomputed)");
+  }
+}
+
+TEST(CpuBackendTest, CostPassAgreesWithLinearizeAndSubsets) {
+  const TinyProblem p(4, 4, 2, 4, 7, 6);
+  auto b = Cpu(2);
+  b->SetLevel(p.Level(), kVectors);
+  b->Upload(kX, p.x);
+  const PassStats lin = b->Linearize(kX, 9, kG, kD);
+  const PassStats all = b->Cost(kX, 9);
+  EXPECT_DOUBLE_EQ(all.cost, lin.cost);  // same rays, jitter and block order
+  EXPECT_EQ(all.samples, lin.samples);
+  double parts = 0;
+  int64_t rays = 0;
+  for (int off = 0; off < 3; ++off) {
+    const PassStats s = b->Cost(kX, 9, RaySubset{3, off});
+    parts += s.cost;
+    rays += s.rays;
+  }
+  EXPECT_EQ(rays, p.rays.size());
+  EXPECT_NEAR(parts, all.cost, 1e-9 * all.cost);
+  EXPECT_NE(b->Cost(kX, 10).cost, all.cost);  // another seed, other jitter
+}
+
+TEST(CpuBackendTest, OneAndTwoThreadsAgree) {
+  const TinyProblem p(5, 8, 4, 6, 16, 12);
+  std::vector<float> g1(p.shape.ParamCount()), g2(p.shape.ParamCount());
+  double c1 = 0, c2 = 0;
+  for (int threads : {1, 2}) {
+    auto b = Cpu(threads);
+    b->SetLevel(p.Level(), kVectors);
+    b->Upload(kX, p.x);
+    const double c = b->Linearize(kX, 3, kG, kD).cost;
+    (threads == 1 ? c1 : c2) = c;
+    b->Download(kG, threads == 1 ? g1 : g2);
+  }
+  EXPECT_EQ(c1, c2);  // per-block sums in block order: bit-identical
+  float worst = 0, scale = 0;
+  for (size_t i = 0; i < g1.size(); ++i) {
+    worst = std::max(worst, std::abs(g1[i] - g2[i]));
+    scale = std::max(scale, std::abs(g1[i]));
+  }
+  EXPECT_LE(worst, 1e-5f * scale);
+}
+
+TEST(CpuBackendTest, VectorOperations) {
+  const TinyProblem p(6);
+  auto b = Cpu(2);
+  b->SetLevel(p.Level(), kVectors);
+  const int64_t n = p.shape.ParamCount();
+  std::vector<float> a(n), c(n);
+  for (int64_t i = 0; i < n; ++i) {
+    a[i] = 0.5f + 0.001f * static_cast<float>(i % 97);
+    c[i] = -1.0f + 0.002f * static_cast<float>(i % 13);
+  }
+  b->Upload(kX, a);
+  b->Upload(kG, c);
+  double dot = 0;
+  for (int64_t i = 0; i < n; ++i) dot += static_cast<double>(a[i]) * c[i];
+  EXPECT_NEAR(b->Dot(kX, kG), dot, 1e-9 * std::abs(dot));
+  b->Copy(kP, kX);
+  b->Axpy(kP, 2.0, kG);  // a + 2c
+  b->Xpby(kP, kG, 0.5);  // c + 0.5 (a + 2c) = 2c + 0.5a
+  std::vector<float> out(n);
+  b->Download(kP, out);
+  for (int64_t i = 0; i < n; i += 101) EXPECT_NEAR(out[i], 2 * c[i] + 0.5f * a[i], 1e-5f);
+  b->DivideClamped(kOut, kG, kX, 0.6f);
+  b->Download(kOut, out);
+  for (int64_t i = 0; i < n; i += 101) EXPECT_NEAR(out[i], c[i] / std::max(a[i], 0.6f), 1e-6f);
+  EXPECT_NEAR(b->MaxAbs(kG), 1.0, 1e-6);
+  b->Fill(kP, -2.f);
+  b->Project(kP);
+  b->Download(kP, out);
+  EXPECT_EQ(out[3], 0.f);                         // grid sigma >= 0
+  EXPECT_EQ(out[0], 0.f);                         // colour >= 0
+  EXPECT_EQ(out[p.shape.GridParamCount() + 3], 0.f);  // shell opacity >= 0
+  b->Fill(kP, 7.f);
+  b->Project(kP);
+  b->Download(kP, out);
+  EXPECT_EQ(out[3], 7.f);  // sigma has no upper bound
+  EXPECT_EQ(out[2], 1.f);
+  EXPECT_EQ(out[p.shape.GridParamCount() + 3], 1.f);
+}
+
+TEST(CpuBackendTest, RenderSeesTheShellsThroughAnEmptyBox) {
+  TinyProblem p(7);
+  // Empty box: every pixel is the shells' colour, whatever the opacity rule.
+  for (int64_t i = 3; i < p.shape.GridParamCount(); i += 4) p.x[i] = 0;
+  auto b = Cpu(2);
+  b->SetLevel(p.Level(), 1);
+  b->Upload(0, p.x);
+  const RenderOutput with_rule = b->Render(0, p.rays.cameras[0], 6, 5, 0.7f);
+  const RenderOutput without = b->Render(0, p.rays.cameras[0], 6, 5, 0.f);
+  for (size_t i = 0; i < with_rule.colour.size(); ++i) EXPECT_FLOAT_EQ(with_rule.colour[i], without.colour[i]);
+  for (float o : with_rule.opacity) EXPECT_EQ(o, 0.f);
+  // A dense box is opaque: the rule keeps it.
+  for (int64_t i = 3; i < p.shape.GridParamCount(); i += 4) p.x[i] = 50;
+  b->Upload(0, p.x);
+  const RenderOutput dense = b->Render(0, p.rays.cameras[0], 6, 5, 0.7f);
+  int opaque = 0;
+  for (float o : dense.opacity) opaque += o > 0.99f;
+  EXPECT_GT(opaque, 10);
+  // Faint density: the rule hides it, without the rule it shows.
+  for (int64_t i = 3; i < p.shape.GridParamCount(); i += 4) p.x[i] = 0.1f;
+  b->Upload(0, p.x);
+  const RenderOutput faint_rule = b->Render(0, p.rays.cameras[0], 6, 5, 0.7f);
+  const RenderOutput faint = b->Render(0, p.rays.cameras[0], 6, 5, 0.f);
+  double diff_rule = 0, diff = 0;
+  for (size_t i = 0; i < faint.colour.size(); ++i) {
+    diff_rule += std::abs(faint_rule.colour[i] - without.colour[i]);
+    diff += std::abs(faint.colour[i] - without.colour[i]);
+  }
+  EXPECT_LT(diff_rule, 1e-5);
+  EXPECT_GT(diff, 0.1);
+}
+
+TEST(CpuBackendTest, SetLevelRefusesWhatDoesNotFit) {
+  const TinyProblem p(8);
+  CpuBackendOptions o;
+  o.max_memory = 1000;  // bytes
+  auto b = MakeCpuBackend(o);
+  try {
+    b->SetLevel(p.Level(), kVectors);
+    FAIL() << "expected ResourceError";
+  } catch (const ResourceError& e) {
+    EXPECT_NE(std::string(e.what()).find("MiB"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("--levels"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace perf::recon

@@ -1,0 +1,145 @@
+// A tiny reconstruction problem shared by the recon tests: a rotated, non-cubic box, a small
+// grid, two shells, a few cameras around it and random parameters; plus a dense Jacobian built
+// from the double-precision per-ray math, to check the float backends against.
+#pragma once
+
+#include <cmath>
+#include <random>
+#include <utility>
+#include <vector>
+
+#include "recon_cuda/backend.h"
+#include "recon_cuda/ray_math.h"
+
+namespace perf::recon::test {
+
+inline Vec3<float> Cross(Vec3<float> a, Vec3<float> b) {
+  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+
+// A camera at `pos` looking at `target`, y roughly along -up (image y down).
+inline PinholeCamera<float> LookAt(Vec3<float> pos, Vec3<float> target, float f, float cx, float cy,
+                                   Vec3<float> up = {0, 0, 1}) {
+  const Vec3<float> z = Normalized(target - pos);
+  Vec3<float> x = Cross(z, up);
+  if (Dot(x, x) < 1e-8f) x = Cross(z, Vec3<float>{0, 1, 0});
+  x = Normalized(x);
+  const Vec3<float> y = Cross(z, x);
+  return {f, f, cx, cy, {x.x, y.x, z.x, pos.x, x.y, y.y, z.y, pos.y, x.z, y.z, z.z, pos.z}};
+}
+
+struct TinyProblem {
+  VolumeShape shape;
+  VolumeGeometry geometry;
+  RaySet rays;
+  std::vector<float> x;
+
+  explicit TinyProblem(uint32_t seed, int n = 4, int m = 2, int cameras = 3, int width = 6, int height = 5) {
+    std::mt19937 rng(seed);
+    shape = {n, m, 2};
+    const float c = 0.6f, s = 0.8f;  // rotation about z by ~37 degrees
+    geometry.box = {{0.2f, -0.1f, 0.05f}, {{c, -s, 0, s, c, 0, 0, 0, 1}}, {2.0f, 1.6f, 1.4f}};
+    geometry.shell_center = {0.1f, 0.0f, -0.1f};
+    geometry.shell_radii = {2.5f, 5.0f};
+    std::uniform_real_distribution<float> u(0.f, 1.f), col(0.1f, 0.9f), sig(0.2f, 2.5f), op(0.2f, 0.8f);
+    for (int k = 0; k < cameras; ++k) {
+      const float a = 6.2831853f * k / cameras + 0.3f;
+      const Vec3<float> pos{3.0f * std::cos(a), 3.0f * std::sin(a), 0.8f * (u(rng) - 0.5f)};
+      rays.cameras.push_back(LookAt(pos, geometry.box.center, 1.2f * width, width / 2.0f, height / 2.0f));
+      for (int y = 0; y < height; ++y) {
+        for (int px = 0; px < width; ++px) {
+          rays.pixels.push_back({static_cast<uint32_t>(k), static_cast<uint16_t>(px), static_cast<uint16_t>(y)});
+          for (int ch = 0; ch < 3; ++ch) rays.colours.push_back(u(rng));
+        }
+      }
+    }
+    x.resize(shape.ParamCount());
+    for (int64_t i = 0; i < shape.ParamCount(); ++i) {
+      switch (KindOf(shape, i)) {
+        case ParamKind::kGridDensity: x[i] = sig(rng); break;
+        case ParamKind::kShellOpacity: x[i] = op(rng); break;
+        default: x[i] = col(rng); break;
+      }
+    }
+  }
+
+  LevelProblem Level(float lambda = 0.1f) const { return {shape, geometry, &rays, {lambda, 0.f}}; }
+};
+
+// The dense Jacobian [4 rays, params] and residuals of every ray, in double, from the per-ray
+// math at x (as floats widened to double) with the rays' jitter for `seed`.
+struct DenseJacobian {
+  std::vector<std::vector<double>> rows;  // [4 * rays][params]
+  std::vector<double> residuals;          // [4 * rays]
+  // Every single visit's squared partials: what diag(J^T J) would be without merging visits.
+  std::vector<std::pair<int64_t, double>> naive_diag_terms;
+
+  DenseJacobian(const TinyProblem& p, const std::vector<float>& xf, uint32_t seed, double lambda) {
+    const std::vector<double> x(xf.begin(), xf.end());
+    VolumeView<double> vol{};
+    vol.params = x.data();
+    vol.n = p.shape.n;
+    vol.m = p.shape.m;
+    vol.num_shells = p.shape.num_shells;
+    vol.size = {p.geometry.box.size.x, p.geometry.box.size.y, p.geometry.box.size.z};
+    vol.shell_center = {p.geometry.shell_center.x, p.geometry.shell_center.y, p.geometry.shell_center.z};
+    for (int k = 0; k < p.shape.num_shells; ++k) vol.shell_radii[k] = p.geometry.shell_radii[k];
+    BoxFrame<double> box;
+    box.center = {p.geometry.box.center.x, p.geometry.box.center.y, p.geometry.box.center.z};
+    box.size = vol.size;
+    for (int i = 0; i < 9; ++i) box.world_from_box.m[i] = p.geometry.box.world_from_box.m[i];
+    for (int64_t i = 0; i < p.rays.size(); ++i) {
+      const RayPixel& px = p.rays.pixels[i];
+      const PinholeCamera<float>& cf = p.rays.cameras[px.camera];
+      PinholeCamera<double> cam{cf.fx, cf.fy, cf.cx, cf.cy, {}};
+      for (int k = 0; k < 12; ++k) cam.world_from_cam[k] = cf.world_from_cam[k];
+      const Jitter jit{seed, static_cast<uint32_t>(i), true};
+      const BoxRay<double> ray = PixelBoxRay(cam, box, vol.n, px.x, px.y, jit);
+      const double target[3] = {p.rays.colours[3 * i], p.rays.colours[3 * i + 1], p.rays.colours[3 * i + 2]};
+      const RayOutput<double> out = Forward(vol, ray, jit, target, lambda);
+      std::vector<std::vector<double>> j(4, std::vector<double>(x.size(), 0.0));
+      auto f = [&](int64_t idx, double a, double b, double c, double d) {
+        j[0][idx] += a;
+        j[1][idx] += b;
+        j[2][idx] += c;
+        j[3][idx] += d;
+      };
+      auto g = [&](int64_t idx, double a, double b, double c, double d) {
+        f(idx, a, b, c, d);
+        naive_diag_terms.push_back({idx, a * a + b * b + c * c + d * d});
+      };
+      BackwardPerParam(vol, ray, jit, lambda, out, g);
+      for (int r = 0; r < 4; ++r) {
+        rows.push_back(std::move(j[r]));
+        residuals.push_back(out.residual[r]);
+      }
+    }
+  }
+
+  std::vector<double> Jtr() const { return Jtu(residuals); }
+  std::vector<double> Jtu(const std::vector<double>& u) const {
+    std::vector<double> g(rows[0].size(), 0.0);
+    for (size_t r = 0; r < rows.size(); ++r)
+      for (size_t i = 0; i < g.size(); ++i) g[i] += rows[r][i] * u[r];
+    return g;
+  }
+  std::vector<double> Jp(const std::vector<double>& p) const {
+    std::vector<double> u(rows.size(), 0.0);
+    for (size_t r = 0; r < rows.size(); ++r)
+      for (size_t i = 0; i < p.size(); ++i) u[r] += rows[r][i] * p[i];
+    return u;
+  }
+  std::vector<double> Diag() const {
+    std::vector<double> d(rows[0].size(), 0.0);
+    for (const auto& row : rows)
+      for (size_t i = 0; i < d.size(); ++i) d[i] += row[i] * row[i];
+    return d;
+  }
+  double Cost() const {
+    double c = 0;
+    for (double r : residuals) c += 0.5 * r * r;
+    return c;
+  }
+};
+
+}  // namespace perf::recon::test
