@@ -71,24 +71,42 @@ struct Scratch {
   uint64_t pass = 0;                        // the pass acc was zeroed for
 };
 
-// Collects a ray's partials: the gradient and diagonal scatter and, optionally, the record.
+// Collects a ray's partials: the gradient (and diagonal) scatter, merged cell by cell along the
+// ray (jacobian.h), and optionally the record that MultiplyJtJ reuses.
+// With the diagonal, J^T r goes through the same merge as the diagonal's row entries (needed for
+// exactness there, and it halves the scatters); without (Adam), a direct scatter measured faster.
+template <bool kDiag>
 struct LinearizeVisitor {
+  static constexpr int K = 9;  // J^T r values, then the 5 row values of diag
   float r[4];
-  AddSink g;
-  AddSink* diag;       // nullptr: no diagonal
-  DiagMerger<float> merger;
+  AddSink g, d;
+  CellMerger<float, K> merger;
   BlockJ* out;         // nullptr: nothing recorded
   ShellJ* out_shells;  // [num_shells] of this ray
 
   void Shell(int k, const CubeCoord<float>& c, const TexelSample<float>& ts, const ShellPartials<float>& sp) {
     ScatterJtuShell(ts, sp, r, g);
-    if (diag) DiagMerger<float>::Shell(ts, sp, *diag);
+    if constexpr (kDiag) AddDiagShell(ts, sp, d);
     if (out_shells) out_shells[k] = {c, sp};
   }
   void Sample(int, const MarchStep<float>& st, const GridSample<float>& gs, const SamplePartials<float>& sp) {
-    ScatterJtuSample(gs, sp, r, g);
-    if (diag) merger.Sample(gs, sp, *diag);
+    if constexpr (kDiag) {
+      float v[K];
+      JtuValues(sp, r, v);
+      RowValues(sp, v + 4);
+      merger.Sample(gs, v, *this);
+    } else {
+      ScatterJtuSample(gs, sp, r, g);
+    }
     if (out) out->samples.push_back({st.t, sp});
+  }
+  // A cell's merged sums are complete.
+  void operator()(int64_t cell, const float* acc) {
+    g.Add4(GridParam(cell, 0), acc[0], acc[1], acc[2], acc[3]);
+    AddDiagFromRow(cell, acc + 4, d);
+  }
+  void Finish() {
+    if constexpr (kDiag) merger.Finish(*this);
   }
 };
 
@@ -249,28 +267,10 @@ class CpuBackend final : public Backend {
     const int sums = want_diag ? 2 : 1;
     const uint64_t pass = BeginPass();
     PassStats stats = ForBlocks(sums, pass, [&](int64_t block, int64_t begin, int64_t end, Scratch& s) {
-      BlockStats bs;
       BlockJ* out = record ? &blocks_[block] : nullptr;
       if (out) ClearBlock(out, end - begin);
-      for (int64_t i = begin; i < end; ++i) {
-        const BoxRay<float> ray = RayOf(i, seed);
-        const Jitter jit{seed, static_cast<uint32_t>(i), true};
-        const float* target = &level_.rays->colours[3 * i];
-        const RayOutput<float> fwd = Forward(vol, ray, jit, target, level_.residuals.lambda,
-                                             level_.residuals.stop_transmittance, s.record.data());
-        AddSink gsink{s.acc[0].data()}, dsink{want_diag ? s.acc[1].data() : nullptr};
-        LinearizeVisitor v{{fwd.residual[0], fwd.residual[1], fwd.residual[2], fwd.residual[3]},
-                           gsink,
-                           want_diag ? &dsink : nullptr,
-                           {},
-                           out,
-                           out ? &out->shells[(i - begin) * level_.shape.num_shells] : nullptr};
-        Backward(vol, ray, jit, level_.residuals.lambda, fwd, v, s.record.data());
-        if (want_diag) v.merger.Finish(dsink);
-        if (out) out->end[i - begin] = static_cast<uint32_t>(out->samples.size());
-        bs.Add(fwd);
-      }
-      return bs;
+      return want_diag ? LinearizeBlock<true>(vol, seed, begin, end, s, out)
+                       : LinearizeBlock<false>(vol, seed, begin, end, s, out);
     });
     ReduceInto(pass, 0, g);
     if (want_diag) ReduceInto(pass, 1, diag);
@@ -324,6 +324,7 @@ class CpuBackend final : public Backend {
           if (shells[k].coord.face < 0) continue;
           ScatterJtuShell(BilinearWeights(vol.n, vol.m, k, shells[k].coord), shells[k].sp, u, sink);
         }
+        // Direct scatter: measured faster here than merging cells (CellMerger) first.
         for (int j = 0; j < count; ++j) ScatterJtuSample(w[j], samples[j].sp, u, sink);
         bs.rays += 1;
         bs.samples += count;
@@ -401,6 +402,30 @@ class CpuBackend final : public Backend {
   const std::vector<float>& vec(VecId v) const {
     PERF_CHECK(v >= 0 && v < static_cast<int>(vectors_.size()));
     return vectors_[v];
+  }
+
+  template <bool kDiag>
+  BlockStats LinearizeBlock(const VolumeView<float>& vol, uint32_t seed, int64_t begin, int64_t end, Scratch& s,
+                            BlockJ* out) const {
+    BlockStats bs;
+    const float lambda = level_.residuals.lambda;
+    for (int64_t i = begin; i < end; ++i) {
+      const BoxRay<float> ray = RayOf(i, seed);
+      const Jitter jit{seed, static_cast<uint32_t>(i), true};
+      const RayOutput<float> fwd = Forward(vol, ray, jit, &level_.rays->colours[3 * i], lambda,
+                                           level_.residuals.stop_transmittance, s.record.data());
+      LinearizeVisitor<kDiag> v{{fwd.residual[0], fwd.residual[1], fwd.residual[2], fwd.residual[3]},
+                                AddSink{s.acc[0].data()},
+                                AddSink{kDiag ? s.acc[1].data() : nullptr},
+                                {},
+                                out,
+                                out ? &out->shells[(i - begin) * level_.shape.num_shells] : nullptr};
+      Backward(vol, ray, jit, lambda, fwd, v, s.record.data());
+      v.Finish();
+      if (out) out->end[i - begin] = static_cast<uint32_t>(out->samples.size());
+      bs.Add(fwd);
+    }
+    return bs;
   }
 
   BoxRay<float> RayOf(int64_t i, uint32_t seed) const {

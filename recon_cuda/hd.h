@@ -8,4 +8,12 @@
 #define PERF_HD
 #endif
 
-#define PERF_HD_INLINE PERF_HD inline
+// Small per-sample functions are forced inline: they run tens of times per ray, and GCC's
+// heuristics otherwise leave some (TrilinearWeights) as calls in the hot loops.
+#if defined(__CUDACC__)
+#define PERF_HD_INLINE __host__ __device__ __forceinline__
+#elif defined(__GNUC__)
+#define PERF_HD_INLINE inline __attribute__((always_inline))
+#else
+#define PERF_HD_INLINE inline
+#endif

@@ -55,89 +55,117 @@ PERF_HD_INLINE void ScatterJtuShell(const TexelSample<T>& ts, const ShellPartial
   }
 }
 
-// The ray's exact share of diag(J^T J): for every parameter, sum over the 4 residuals of the
-// square of the SUMMED row entry. Squaring each (sample, cell) contribution on its own would
-// drop the cross terms between neighbouring samples that share a cell (typically 3-5 samples
-// do), understating the diagonal by up to that factor.
+// Merging the per-sample contributions of one ray cell by cell before they reach memory.
 //
-// Merging is cheap because the samples that reach one cell are consecutive: a cell's trilinear
-// support is a box (clamping at the border keeps it one), a ray meets a box in one interval, and
-// the samples are ordered along the ray. So only the previous sample's cells can still be
-// reached; a cell of the previous sample that the current one does not reach is complete and is
-// flushed. Texels of a shell are reached by one lookup per ray, so they only merge repeats at
-// the face border.
-template <class T>
-class DiagMerger {
+// The samples that reach one cell are consecutive: a cell's trilinear support is a box (clamping
+// at the border keeps it one), a ray meets a box in one interval, and the samples are ordered
+// along the ray. So only the previous sample's cells can still be reached; a cell of the
+// previous sample that the current one does not reach is complete and is flushed once.
+//
+// Two uses. (1) diag(J^T J) must square the SUMMED row entry of each parameter; squaring each
+// (sample, cell) contribution on its own would drop the cross terms between the 3-5 samples that
+// share a cell. (2) Scatters (J^T r, J^T u) write each cell once per ray instead of once per
+// sample: fewer dependent read-modify-writes on the CPU, fewer atomics on the GPU.
+//
+// CellMerger<T, K> accumulates, per cell, K sums of w * v[k] (w: the sample's trilinear weight of
+// that cell, v: the sample's K values) and calls flush(cell, const T acc[K]) when a cell is done.
+template <class T, int K>
+class CellMerger {
  public:
-  template <class Sink>
-  PERF_HD_INLINE void Sample(const GridSample<T>& gs, const SamplePartials<T>& sp, Sink& sink) {
+  template <class Flush>
+  PERF_HD_INLINE void Sample(const GridSample<T>& gs, const T (&v)[K], Flush& flush) {
+    // Fast path: the same 8 cells as the previous sample (GridCell is injective, so equal first
+    // and last corners mean equal (lo, hi) on every axis, hence the same cells in the same order).
+    if (same_order_ && gs.cell[0] == cell_[0] && gs.cell[7] == cell_[7]) {
+      for (int q = 0; q < 8; ++q) {
+        for (int k = 0; k < K; ++k) acc_[q][k] += gs.w[q] * v[k];
+      }
+      return;
+    }
     int64_t cell[8];
-    T col[8], sig[8][4];
+    T acc[8][K];
     int count = 0;
     for (int q = 0; q < 8; ++q) {
       int j = 0;
       while (j < count && cell[j] != gs.cell[q]) ++j;
       if (j == count) {
         cell[j] = gs.cell[q];
-        col[j] = 0;
-        for (int r = 0; r < 4; ++r) sig[j][r] = 0;
+        for (int k = 0; k < K; ++k) acc[j][k] = 0;
         ++count;
       }
-      const T w = gs.w[q];
-      col[j] += w * sp.dc;
-      for (int r = 0; r < 3; ++r) sig[j][r] += w * sp.ds[r];
-      sig[j][3] += w * sp.dl;
+      for (int k = 0; k < K; ++k) acc[j][k] += gs.w[q] * v[k];
     }
     for (int i = 0; i < count_; ++i) {
       int j = 0;
       while (j < count && cell[j] != cell_[i]) ++j;
       if (j == count) {
-        Flush(i, sink);
+        flush(cell_[i], acc_[i]);
         continue;
       }
-      col[j] += col_[i];
-      for (int r = 0; r < 4; ++r) sig[j][r] += sig_[i][r];
+      for (int k = 0; k < K; ++k) acc[j][k] += acc_[i][k];
     }
     for (int j = 0; j < count; ++j) {
       cell_[j] = cell[j];
-      col_[j] = col[j];
-      for (int r = 0; r < 4; ++r) sig_[j][r] = sig[j][r];
+      for (int k = 0; k < K; ++k) acc_[j][k] = acc[j][k];
     }
     count_ = count;
+    // Corners were merged in order, so with 8 distinct cells entry q is corner q.
+    same_order_ = count == 8;
   }
 
-  // Call once per ray after the last sample.
-  template <class Sink>
-  PERF_HD_INLINE void Finish(Sink& sink) {
-    for (int i = 0; i < count_; ++i) Flush(i, sink);
+  // Call once per ray after its last sample.
+  template <class Flush>
+  PERF_HD_INLINE void Finish(Flush& flush) {
+    for (int i = 0; i < count_; ++i) flush(cell_[i], acc_[i]);
     count_ = 0;
-  }
-
-  template <class Sink>
-  PERF_HD_INLINE static void Shell(const TexelSample<T>& ts, const ShellPartials<T>& sp, Sink& sink) {
-    for (int q = 0; q < 4; ++q) {
-      bool seen = false;
-      for (int j = 0; j < q; ++j) seen = seen || ts.param[j] == ts.param[q];
-      if (seen) continue;
-      T w = 0;
-      for (int j = q; j < 4; ++j) w += ts.param[j] == ts.param[q] ? ts.w[j] : T(0);
-      const T c = w * sp.de;
-      const T a = sp.opaque ? T(0) : w * w * (sp.da[0] * sp.da[0] + sp.da[1] * sp.da[1] + sp.da[2] * sp.da[2]);
-      sink.Add4(ts.param[q], c * c, c * c, c * c, a);
-    }
+    same_order_ = false;
   }
 
  private:
-  template <class Sink>
-  PERF_HD_INLINE void Flush(int i, Sink& sink) {
-    const T c = col_[i] * col_[i];
-    const T s = sig_[i][0] * sig_[i][0] + sig_[i][1] * sig_[i][1] + sig_[i][2] * sig_[i][2] + sig_[i][3] * sig_[i][3];
-    sink.Add4(GridParam(cell_[i], 0), c, c, c, s);
-  }
-
   int64_t cell_[8];
-  T col_[8], sig_[8][4];
+  T acc_[8][K];
   int count_ = 0;
+  bool same_order_ = false;
 };
+
+// The per-sample values whose merged sums give a cell's J^T u (4 values, ScatterJtuSample's) and,
+// with diag, the summed row entries whose squares give its diag(J^T J) share: the colour entry
+// dc (the same for the three colour residuals) and sigma's entries for the 4 residuals.
+template <class T>
+PERF_HD_INLINE void JtuValues(const SamplePartials<T>& sp, const T u[4], T* v) {
+  v[0] = sp.dc * u[0];
+  v[1] = sp.dc * u[1];
+  v[2] = sp.dc * u[2];
+  v[3] = sp.ds[0] * u[0] + sp.ds[1] * u[1] + sp.ds[2] * u[2] + sp.dl * u[3];
+}
+template <class T>
+PERF_HD_INLINE void RowValues(const SamplePartials<T>& sp, T* v) {
+  v[0] = sp.dc;
+  v[1] = sp.ds[0];
+  v[2] = sp.ds[1];
+  v[3] = sp.ds[2];
+  v[4] = sp.dl;
+}
+// diag entries of a cell from its merged row values (RowValues order).
+template <class T, class Sink>
+PERF_HD_INLINE void AddDiagFromRow(int64_t cell, const T* row, Sink& sink) {
+  const T c = row[0] * row[0];
+  sink.Add4(GridParam(cell, 0), c, c, c, row[1] * row[1] + row[2] * row[2] + row[3] * row[3] + row[4] * row[4]);
+}
+
+// A shell's texels are reached by one lookup per ray: only repeats at the face border merge.
+template <class T, class Sink>
+PERF_HD_INLINE void AddDiagShell(const TexelSample<T>& ts, const ShellPartials<T>& sp, Sink& sink) {
+  for (int q = 0; q < 4; ++q) {
+    bool seen = false;
+    for (int j = 0; j < q; ++j) seen = seen || ts.param[j] == ts.param[q];
+    if (seen) continue;
+    T w = 0;
+    for (int j = q; j < 4; ++j) w += ts.param[j] == ts.param[q] ? ts.w[j] : T(0);
+    const T c = w * sp.de;
+    const T a = sp.opaque ? T(0) : w * w * (sp.da[0] * sp.da[0] + sp.da[1] * sp.da[1] + sp.da[2] * sp.da[2]);
+    sink.Add4(ts.param[q], c * c, c * c, c * c, a);
+  }
+}
 
 }  // namespace perf::recon

@@ -201,6 +201,7 @@ PERF_HD_INLINE BoxRay<T> PixelBoxRay(const PinholeCamera<T>& cam, const BoxFrame
 // need not gather the grid or call exp again (the CPU backend records; the GPU recomputes).
 template <class T>
 struct SampleRecord {
+  GridSample<T> gs;  // the sample's cells and trilinear weights
   T t, delta;
   T v[4];   // (r, g, b, sigma) interpolated at t
   T trans;  // T_i, the transmittance in front of the sample
@@ -234,12 +235,13 @@ PERF_HD RayOutput<T> Forward(const VolumeView<T>& vol, const BoxRay<T>& ray, con
   while (k < march.count) {
     const MarchStep<T> st = StepAt(march, k, jit);
     T v[4];
-    GatherGrid(vol.params, TrilinearWeights(vol.n, ray.GridPoint(st.t)), v);
+    const GridSample<T> gs = TrilinearWeights(vol.n, ray.GridPoint(st.t));
+    GatherGrid(vol.params, gs, v);
     const T od = v[3] * st.delta;
     const T keep = Exp(-od);
     const T weight = trans * (1 - keep);
     for (int c = 0; c < 3; ++c) out.h[c] += weight * v[c];
-    if (record) record[k] = {st.t, st.delta, {v[0], v[1], v[2], v[3]}, trans, keep};
+    if (record) record[k] = {gs, st.t, st.delta, {v[0], v[1], v[2], v[3]}, trans, keep};
     depth += od;
     trans *= keep;
     ++k;
@@ -337,7 +339,7 @@ PERF_HD void Backward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitt
       const SampleRecord<T>& r = record[k];
       st = {r.t, r.delta};
       for (int ch = 0; ch < 4; ++ch) v[ch] = r.v[ch];
-      gs = TrilinearWeights(vol.n, ray.GridPoint(st.t));
+      gs = r.gs;
       ti = r.trans;
       keep = r.keep;
     } else {

@@ -71,7 +71,9 @@ PERF_HD_INLINE Vec3<T> MulMatTransposed(const Mat3<T>& r, Vec3<T> v) {
 template <class T>
 PERF_HD_INLINE void LinearCoord(T s, int n, int* lo, int* hi, T* f) {
   const T c = Clamp(s - T(0.5), T(0), T(n - 1));
-  int i = static_cast<int>(Floor(c));
+  // c >= 0, so truncation is floor (and needs no libm call where floorf has no instruction).
+  // A NaN s gives c = NaN whose cast is unspecified: the index is clamped regardless.
+  int i = static_cast<int>(c);
   i = i < 0 ? 0 : (i > n - 1 ? n - 1 : i);
   *lo = i;
   *hi = i + 1 < n ? i + 1 : n - 1;

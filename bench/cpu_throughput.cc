@@ -1,0 +1,77 @@
+// Throughput of the solver's passes on the CPU backend: rays/s and samples/s of Linearize (cost,
+// J^T r, diag, recorded Jacobian), MultiplyJtJ, the cost-only pass, and Linearize as Adam runs
+// it (no diagonal, nothing recorded).
+//
+//   perf_bench_cpu --workspace WS [--checkpoint FILE] [--n 64] [--threads 2] [--repeat 3]
+//
+// WS is a workspace made by perf import (e.g. lego --downscale 16); the volume is the checkpoint
+// (resampled to --n) when given, else the random start. Prints one line per pass and, with
+// --json FILE, writes the figures as JSON.
+#include <CLI/CLI.hpp>
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "common/errors.h"
+#include "recon_cuda/checkpoint.h"
+#include "recon_cuda/cpu_backend.h"
+#include "recon_cuda/solver.h"
+
+using namespace perf;
+using namespace perf::recon;
+
+int main(int argc, char** argv) {
+  CLI::App app{"PERF CPU pass throughput"};
+  std::string workspace, checkpoint, json_path;
+  int n = 64, threads = 0, repeat = 3;
+  app.add_option("--workspace", workspace, "Workspace made by perf import")->required();
+  app.add_option("--checkpoint", checkpoint, "Volume to evaluate (default: the random start)");
+  app.add_option("--n", n, "Grid resolution (the checkpoint is resampled to it)")->capture_default_str();
+  app.add_option("--threads", threads, "Worker threads (0: all cores)")->capture_default_str();
+  app.add_option("--repeat", repeat, "Runs per pass (the best is reported)")->capture_default_str();
+  app.add_option("--json", json_path, "Also write the figures here");
+  CLI11_PARSE(app, argc, argv);
+  try {
+    const Scene scene = ReadScene(std::filesystem::path(workspace) / "scene.json");
+    const VolumeGeometry geometry = VolumeGeometry::FromScene(scene);
+    const RaySet rays = MakeRaySet(LoadImages(scene, workspace, Split::kTrain));
+    VolumeShape shape{n, n, geometry.num_shells()};
+    std::vector<float> x;
+    if (!checkpoint.empty()) {
+      const Checkpoint c = ReadCheckpoint(checkpoint);
+      x = c.shape == shape ? c.params : Resample(c.shape, c.params, shape);
+    } else {
+      x = InitialParams(shape, geometry, InitOptions{});
+    }
+    CpuBackendOptions o;
+    o.threads = threads;
+    auto backend = MakeCpuBackend(o);
+    backend->SetLevel(LevelProblem{shape, geometry, &rays, {}}, 4);
+    backend->Upload(0, x);
+    std::printf("%s, %s, %lld rays, Jacobian cache %s\n", backend->Describe().c_str(), DescribeShape(shape).c_str(),
+                static_cast<long long>(rays.size()), backend->CachesJacobian() ? "on" : "off");
+    nlohmann::json out{{"backend", backend->Describe()}, {"n", n}, {"rays", rays.size()}};
+    auto measure = [&](const char* name, auto&& pass) {
+      PassStats best;
+      best.seconds = 1e30;
+      for (int r = 0; r < repeat; ++r) {
+        const PassStats s = pass();
+        if (s.seconds < best.seconds) best = s;
+      }
+      const double rps = best.rays / best.seconds, sps = best.samples / best.seconds;
+      std::printf("  %-22s %8.3f s  %7.2f M rays/s  %7.1f M samples/s  (%.1f samples/ray)\n", name, best.seconds,
+                  rps / 1e6, sps / 1e6, static_cast<double>(best.samples) / std::max<int64_t>(1, best.rays));
+      out["passes"][name] = {{"seconds", best.seconds}, {"rays_per_s", rps}, {"samples_per_s", sps}};
+    };
+    measure("linearize (GN)", [&] { return backend->Linearize(0, 7, 1, 2); });
+    measure("J^T J p", [&] { return backend->MultiplyJtJ(1, 3); });
+    measure("cost", [&] { return backend->Cost(0, 7); });
+    measure("linearize (Adam)", [&] { return backend->Linearize(0, 7, 1, kNoVector); });
+    if (!json_path.empty()) std::ofstream(json_path) << out.dump(2) << "\n";
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
