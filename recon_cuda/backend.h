@@ -27,6 +27,10 @@ struct ResidualSettings {
   // Early ray termination: the march stops once the transmittance drops below this. What is
   // behind then contributes less than this fraction to the pixel (and to every partial).
   float stop_transmittance = 1e-4f;
+  // Jitter every ray inside its pixel and every sample along it (DESIGN.md "One ray"); off, rays
+  // go through pixel centres with samples mid-segment and every pass sees the same rays (tests,
+  // reference solves).
+  bool jitter = true;
 };
 
 // Everything a backend needs for one level of the hierarchy.

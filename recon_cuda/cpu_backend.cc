@@ -345,7 +345,7 @@ class CpuBackend final : public Backend {
       int64_t i = begin + ((subset.offset - begin % subset.stride) + subset.stride) % subset.stride;
       for (; i < end; i += subset.stride) {
         const RayOutput<float> fwd =
-            Forward(vol, RayOf(i, seed), Jitter{seed, static_cast<uint32_t>(i), true}, &level_.rays->colours[3 * i],
+            Forward(vol, RayOf(i, seed), Jitter{seed, static_cast<uint32_t>(i), level_.residuals.jitter}, &level_.rays->colours[3 * i],
                     level_.residuals.lambda, level_.residuals.stop_transmittance);
         bs.Add(fwd);
       }
@@ -411,7 +411,7 @@ class CpuBackend final : public Backend {
     const float lambda = level_.residuals.lambda;
     for (int64_t i = begin; i < end; ++i) {
       const BoxRay<float> ray = RayOf(i, seed);
-      const Jitter jit{seed, static_cast<uint32_t>(i), true};
+      const Jitter jit{seed, static_cast<uint32_t>(i), level_.residuals.jitter};
       const RayOutput<float> fwd = Forward(vol, ray, jit, &level_.rays->colours[3 * i], lambda,
                                            level_.residuals.stop_transmittance, s.record.data());
       LinearizeVisitor<kDiag> v{{fwd.residual[0], fwd.residual[1], fwd.residual[2], fwd.residual[3]},
@@ -431,7 +431,7 @@ class CpuBackend final : public Backend {
   BoxRay<float> RayOf(int64_t i, uint32_t seed) const {
     const RayPixel& px = level_.rays->pixels[i];
     return PixelBoxRay(level_.rays->cameras[px.camera], level_.geometry.box, level_.shape.n, px.x, px.y,
-                       Jitter{seed, static_cast<uint32_t>(i), true});
+                       Jitter{seed, static_cast<uint32_t>(i), level_.residuals.jitter});
   }
 
   void ClearBlock(BlockJ* b, int64_t rays) const {
@@ -442,7 +442,7 @@ class CpuBackend final : public Backend {
 
   // The partials of ray i at the linearisation point, into s.row (no recorded Jacobian).
   void RecomputeRow(const VolumeView<float>& vol, const BoxRay<float>& ray, int64_t i, Scratch& s) const {
-    const Jitter jit{lin_seed_, static_cast<uint32_t>(i), true};
+    const Jitter jit{lin_seed_, static_cast<uint32_t>(i), level_.residuals.jitter};
     ClearBlock(&s.row, 1);
     const RayOutput<float> fwd = Forward(vol, ray, jit, &level_.rays->colours[3 * i], level_.residuals.lambda,
                                          level_.residuals.stop_transmittance, s.record.data());

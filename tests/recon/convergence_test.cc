@@ -1,10 +1,10 @@
 // Convergence of the whole solver on a known scene (synthetic_scene.h): from a random start,
-// through the hierarchy, to a high held-out PSNR, with the Gauss-Newton cost falling every
-// iteration.
+// through two levels of the hierarchy, to a high held-out PSNR, with the Gauss-Newton cost
+// falling at every iteration of the coarse level. Plus the solver's contract: options checks,
+// callbacks, statuses, and the Adam baseline on the same passes.
 #include <gtest/gtest.h>
 
-#include <cstdio>
-
+#include "common/errors.h"
 #include "recon_cuda/cpu_backend.h"
 #include "recon_cuda/evaluation.h"
 #include "recon_cuda/solver.h"
@@ -14,36 +14,118 @@
 namespace perf::recon {
 namespace {
 
+const test::SyntheticScene& Scene() {
+  // 36 views of 48 x 48 on a sphere, every 6th held out; the truth is a 32^3 grid.
+  static const test::SyntheticScene scene(32, 16, 36, 48, 6);
+  return scene;
+}
+
 TEST(ConvergenceTest, GaussNewtonRecoversAKnownScene) {
-  const test::SyntheticScene scene(32, 16, 36, 48, 6);
+  const test::SyntheticScene& scene = Scene();
   auto backend = MakeCpuBackend({});
   const RaySet rays = MakeRaySet(scene.train);
-  std::vector<float> x;
   VolumeShape shape{16, 8, 2};
-  InitOptions init;
-  init.box_opacity = getenv("PERF_INIT") ? atof(getenv("PERF_INIT")) : 0.1;
-  x = InitialParams(shape, scene.geometry, init);
+  std::vector<float> x = InitialParams(shape, scene.geometry, InitOptions{});
+  const double start_psnr = [&] {
+    backend->SetLevel(LevelProblem{shape, scene.geometry, &rays, {}}, 1);
+    backend->Upload(0, x);
+    return MeanPsnr(ScoreViews(backend.get(), 0, scene.test, 0.f));
+  }();
   SolverOptions so;
-  so.max_iterations = getenv("PERF_ITERS") ? atoi(getenv("PERF_ITERS")) : 15;
-  if (getenv("PERF_CG")) so.max_cg_iterations = atoi(getenv("PERF_CG"));
-  if (getenv("PERF_DAMP")) so.damping = atof(getenv("PERF_DAMP"));
+  so.max_iterations = 15;
   for (int level = 0; level < 2; ++level) {
     backend->SetLevel(LevelProblem{shape, scene.geometry, &rays, {}}, RequiredVectors(so.type));
-    SolverSummary summary;
     so.seed = 100 + level;
-    Solve(so, backend.get(), &x, [&](const IterationSummary& s) {
-      std::printf("level %d it %d cost %.2f -> %.2f cg %d step %.3f train %.2f\n", level, s.iteration, s.cost,
-                  s.cost_after, s.cg_iterations, s.step, s.train_psnr);
-      return true;
-    }, &summary);
-    const double psnr = MeanPsnr(ScoreViews(backend.get(), kSolverX, scene.test, 0.f));
-    std::printf("level %d: %s, held-out %.2f dB\n", level, summary.BriefReport().c_str(), psnr);
+    SolverSummary summary;
+    Solve(so, backend.get(), &x, {}, &summary);
+    ASSERT_EQ(summary.iterations, 15);
+    EXPECT_EQ(summary.status, SolverStatus::kIterationLimit);
     if (level == 0) {
-      const VolumeShape next = shape.Doubled();
-      x = Resample(shape, x, next);
-      shape = next;
+      // Far from the solution, every Gauss-Newton step lowers the cost by much more than the
+      // change of jitter between iterations moves it: the cost falls strictly.
+      for (size_t i = 0; i < summary.per_iteration.size(); ++i) {
+        const IterationSummary& s = summary.per_iteration[i];
+        EXPECT_TRUE(s.accepted) << "iteration " << i;
+        EXPECT_LT(s.cost_after, s.cost) << "iteration " << i;
+        if (i > 0) EXPECT_LT(s.cost, summary.per_iteration[i - 1].cost) << "iteration " << i;
+      }
+      EXPECT_LT(summary.final_cost, 0.05 * summary.initial_cost);
+      x = Resample(shape, x, shape.Doubled());
+      shape = shape.Doubled();
     }
   }
+  const double psnr = MeanPsnr(ScoreViews(backend.get(), kSolverX, scene.test, 0.f));
+  std::printf("held-out PSNR: %.2f dB from a random start at %.2f dB\n", psnr, start_psnr);
+  // The truth is exactly representable at the final level (32^3), so the bar is the issue's
+  // 30 dB (RMS error ~3 %), leaving ~6 dB for the 15 + 15 iterations and the jitter.
+  EXPECT_GT(psnr, 30.0);
+  EXPECT_LT(start_psnr, 15.0);
+}
+
+TEST(ConvergenceTest, AdamRunsOnTheSamePasses) {
+  const test::SyntheticScene& scene = Scene();
+  auto backend = MakeCpuBackend({});
+  const RaySet rays = MakeRaySet(scene.train);
+  const VolumeShape shape{16, 8, 2};
+  std::vector<float> x = InitialParams(shape, scene.geometry, InitOptions{});
+  SolverOptions so;
+  so.type = SolverType::kAdam;
+  so.max_iterations = 40;
+  so.adam.lr_density = 0.3f;
+  backend->SetLevel(LevelProblem{shape, scene.geometry, &rays, {}}, RequiredVectors(so.type));
+  SolverSummary summary;
+  Solve(so, backend.get(), &x, {}, &summary);
+  EXPECT_EQ(summary.linearize_passes, 40);
+  EXPECT_EQ(summary.jtj_passes, 0);
+  EXPECT_LT(summary.final_cost, 0.2 * summary.initial_cost);
+  for (float v : x) ASSERT_GE(v, 0.f);  // projected after every step
+}
+
+TEST(SolverTest, OptionsAreChecked) {
+  SolverOptions o;
+  EXPECT_NO_THROW(o.Check());
+  o.step_factor = 1.0;
+  try {
+    o.Check();
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.field(), "step_factor");
+  }
+  o = SolverOptions();
+  o.max_cg_iterations = 0;
+  EXPECT_THROW(o.Check(), InputError);
+  o = SolverOptions();
+  o.damping = -1;
+  EXPECT_THROW(o.Check(), InputError);
+}
+
+TEST(SolverTest, CallbackStopsAndSummaryReports) {
+  const test::SyntheticScene& scene = Scene();
+  auto backend = MakeCpuBackend({});
+  const RaySet rays = MakeRaySet(scene.train);
+  const VolumeShape shape{8, 4, 2};
+  std::vector<float> x = InitialParams(shape, scene.geometry, InitOptions{});
+  backend->SetLevel(LevelProblem{shape, scene.geometry, &rays, {}}, RequiredVectors(SolverType::kGaussNewton));
+  SolverOptions so;
+  so.max_iterations = 10;
+  so.line_search_ray_stride = 4;
+  int calls = 0;
+  SolverSummary summary;
+  Solve(so, backend.get(), &x, [&](const IterationSummary& s) {
+    EXPECT_EQ(s.iteration, calls);
+    EXPECT_GT(s.train_psnr, 0);
+    EXPECT_GE(s.cg_iterations, 1);
+    EXPECT_GT(s.seconds_total, 0);
+    return ++calls < 3;
+  }, &summary);
+  EXPECT_EQ(calls, 3);
+  EXPECT_EQ(summary.status, SolverStatus::kUserAbort);
+  EXPECT_EQ(summary.iterations, 3);
+  EXPECT_EQ(summary.linearize_passes, 3);
+  EXPECT_GE(summary.cost_passes, 3 * 3);  // subset cost at x, then >= 2 trial points
+  const std::string report = summary.BriefReport();
+  EXPECT_NE(report.find("3 iterations"), std::string::npos) << report;
+  EXPECT_NE(report.find("stopped by the caller"), std::string::npos) << report;
 }
 
 }  // namespace

@@ -74,8 +74,9 @@ struct DenseJacobian {
   // Every single visit's squared partials: what diag(J^T J) would be without merging visits.
   std::vector<std::pair<int64_t, double>> naive_diag_terms;
 
-  DenseJacobian(const TinyProblem& p, const std::vector<float>& xf, uint32_t seed, double lambda) {
-    const std::vector<double> x(xf.begin(), xf.end());
+  template <class S>
+  DenseJacobian(const TinyProblem& p, const std::vector<S>& xs, uint32_t seed, double lambda, bool jitter = true) {
+    const std::vector<double> x(xs.begin(), xs.end());
     VolumeView<double> vol{};
     vol.params = x.data();
     vol.n = p.shape.n;
@@ -93,7 +94,7 @@ struct DenseJacobian {
       const PinholeCamera<float>& cf = p.rays.cameras[px.camera];
       PinholeCamera<double> cam{cf.fx, cf.fy, cf.cx, cf.cy, {}};
       for (int k = 0; k < 12; ++k) cam.world_from_cam[k] = cf.world_from_cam[k];
-      const Jitter jit{seed, static_cast<uint32_t>(i), true};
+      const Jitter jit{seed, static_cast<uint32_t>(i), jitter};
       const BoxRay<double> ray = PixelBoxRay(cam, box, vol.n, px.x, px.y, jit);
       const double target[3] = {p.rays.colours[3 * i], p.rays.colours[3 * i + 1], p.rays.colours[3 * i + 2]};
       const RayOutput<double> out = Forward(vol, ray, jit, target, lambda);

@@ -1,0 +1,138 @@
+// The host-side volume: level-to-level resampling (exact for constant and linear fields),
+// the random start, the valid-range projection, and placement from scene.json.
+#include "recon_cuda/volume.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "common/errors.h"
+#include "sfm_import/scene.h"
+
+namespace perf::recon {
+namespace {
+
+// Per-channel linear functions of the cell (texel) centre in box (face) units [0, 1], in the
+// middle of the valid range so the projection after resampling does not touch them.
+double GridField(double x, double y, double z, int ch) { return 0.4 + 0.1 * x - 0.05 * y + 0.08 * z + 0.02 * ch; }
+double FaceField(double u, double v, int shell, int face, int ch) {
+  return 0.3 + 0.2 * u - 0.1 * v + 0.05 * shell + 0.01 * face + 0.02 * ch;
+}
+
+std::vector<float> LinearVolume(const VolumeShape& s) {
+  std::vector<float> x(s.ParamCount());
+  for (int k = 0; k < s.n; ++k)
+    for (int j = 0; j < s.n; ++j)
+      for (int i = 0; i < s.n; ++i)
+        for (int ch = 0; ch < 4; ++ch)
+          x[GridParam(GridCell(s.n, i, j, k), ch)] =
+              static_cast<float>(GridField((i + 0.5) / s.n, (j + 0.5) / s.n, (k + 0.5) / s.n, ch));
+  for (int sh = 0; sh < s.num_shells; ++sh)
+    for (int f = 0; f < 6; ++f)
+      for (int v = 0; v < s.m; ++v)
+        for (int u = 0; u < s.m; ++u)
+          for (int ch = 0; ch < 4; ++ch)
+            x[ShellParam(s.n, s.m, sh, f, u, v, ch)] =
+                static_cast<float>(FaceField((u + 0.5) / s.m, (v + 0.5) / s.m, sh, f, ch));
+  return x;
+}
+
+TEST(VolumeTest, ResamplingKeepsALinearFieldExactly) {
+  const VolumeShape from{4, 3, 2};
+  const VolumeShape to = from.Doubled();
+  EXPECT_EQ(to, (VolumeShape{8, 6, 2}));
+  const std::vector<float> out = Resample(from, LinearVolume(from), to);
+  const std::vector<float> want = LinearVolume(to);
+  ASSERT_EQ(out.size(), want.size());
+  for (size_t i = 0; i < out.size(); ++i) ASSERT_NEAR(out[i], want[i], 1e-6) << i;  // border cells included
+}
+
+TEST(VolumeTest, ResamplingKeepsAConstantFieldExactly) {
+  const VolumeShape from{3, 2, 1};
+  std::vector<float> x(from.ParamCount());
+  for (size_t i = 0; i < x.size(); ++i) x[i] = i % 4 == 3 ? 0.75f : 0.25f;
+  for (const VolumeShape& to : {from.Doubled(), VolumeShape{5, 7, 1}, VolumeShape{1, 1, 1}}) {
+    const std::vector<float> out = Resample(from, x, to);
+    for (size_t i = 0; i < out.size(); ++i) ASSERT_EQ(out[i], i % 4 == 3 ? 0.75f : 0.25f) << i;
+  }
+}
+
+TEST(VolumeTest, ResamplingProjectsExtrapolatedValues) {
+  // A steep ramp extrapolates below 0 and above 1 at the borders; the result stays valid.
+  const VolumeShape from{2, 2, 1};
+  std::vector<float> x(from.ParamCount(), 0.5f);
+  for (int k = 0; k < 2; ++k)
+    for (int j = 0; j < 2; ++j) {
+      x[GridParam(GridCell(2, 0, j, k), 0)] = 0.f;
+      x[GridParam(GridCell(2, 1, j, k), 0)] = 1.f;
+      x[GridParam(GridCell(2, 0, j, k), 3)] = 0.f;
+      x[GridParam(GridCell(2, 1, j, k), 3)] = 4.f;
+    }
+  const VolumeShape to = from.Doubled();
+  const std::vector<float> out = Resample(from, x, to);
+  EXPECT_EQ(out[GridParam(GridCell(4, 0, 0, 0), 0)], 0.f);  // would be -0.25
+  EXPECT_EQ(out[GridParam(GridCell(4, 3, 0, 0), 0)], 1.f);  // would be 1.25
+  EXPECT_EQ(out[GridParam(GridCell(4, 0, 0, 0), 3)], 0.f);  // sigma >= 0
+  EXPECT_FLOAT_EQ(out[GridParam(GridCell(4, 3, 0, 0), 3)], 5.f);  // no upper bound on sigma
+  EXPECT_FLOAT_EQ(out[GridParam(GridCell(4, 1, 0, 0), 0)], 0.25f);
+}
+
+TEST(VolumeTest, InitialParamsAreRandomValidAndFaint) {
+  VolumeGeometry g;
+  g.box = {{0, 0, 0}, {{1, 0, 0, 0, 1, 0, 0, 0, 1}}, {2, 3, 4}};
+  g.shell_radii = {3, 9};
+  const VolumeShape s{16, 8, 2};
+  InitOptions o;
+  o.box_opacity = 0.2;
+  const std::vector<float> x = InitialParams(s, g, o);
+  double sigma = 0, colour = 0, opacity = 0;
+  int64_t nsig = 0, ncol = 0, nop = 0;
+  for (int64_t i = 0; i < s.ParamCount(); ++i) {
+    ASSERT_GE(x[i], 0.f);
+    switch (KindOf(s, i)) {
+      case ParamKind::kGridDensity: sigma += x[i]; ++nsig; break;
+      case ParamKind::kShellOpacity: opacity += x[i]; ++nop; break;
+      default: ASSERT_LE(x[i], 1.f); colour += x[i]; ++ncol; break;
+    }
+  }
+  // Mean optical depth across the shortest side (2) gives the asked opacity.
+  EXPECT_NEAR(1 - std::exp(-sigma / nsig * 2), 0.2, 0.01);
+  EXPECT_NEAR(colour / ncol, 0.5, 0.01);
+  EXPECT_NEAR(opacity / nop, 0.1, 0.01);
+  EXPECT_EQ(InitialParams(s, g, o), x);  // seeded
+  o.seed = 2;
+  EXPECT_NE(InitialParams(s, g, o), x);
+}
+
+TEST(VolumeTest, GeometryFromSceneAndItsErrors) {
+  Scene scene;
+  scene.box.center = {1, 2, 3};
+  scene.box.size = {2, 2, 4};
+  scene.box.rotation << 0, -1, 0, 1, 0, 0, 0, 0, 1;
+  scene.shells.center = {1, 3, 3};
+  scene.shells.radii = {3, 6, 12};
+  const VolumeGeometry g = VolumeGeometry::FromScene(scene);
+  EXPECT_EQ(g.num_shells(), 3);
+  // Box-local shell centre: R^T (0, 1, 0) = (1, 0, 0).
+  EXPECT_NEAR(g.shell_center.x, 1, 1e-6);
+  EXPECT_NEAR(g.shell_center.y, 0, 1e-6);
+  EXPECT_EQ(g.box.world_from_box.m[1], -1.f);
+  scene.shells.radii.assign(kMaxShells + 1, 1.0);
+  EXPECT_THROW(VolumeGeometry::FromScene(scene), InputError);
+  scene.shells.radii = {3};
+  scene.box.size = {2, 0, 4};
+  try {
+    VolumeGeometry::FromScene(scene);
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.field(), "box.size");
+  }
+}
+
+TEST(VolumeTest, DescribeShape) {
+  EXPECT_EQ(DescribeShape({32, 32, 4}), "32^3 grid, 4 shells of 6 x 32^2 texels (229376 parameters)");
+  EXPECT_EQ(DescribeShape({128, 128, 1}), "128^3 grid, 1 shell of 6 x 128^2 texels (8.78 M parameters)");
+}
+
+}  // namespace
+}  // namespace perf::recon
