@@ -197,12 +197,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     start = last + 1;
     x = Resample(c.shape, c.params, shape_of(start));
     say(StrCat("resuming after level ", last, " (", path.string(), ")"));
-  } else {
-    // A fresh start: checkpoints of an earlier run would be mistaken for this one's.
-    for (int l = 0; l <= std::max(last, 16); ++l) fs::remove(CheckpointPath(o.workspace, l));
   }
-  JsonLog log(o.workspace / "recon" / "log.jsonl", o.resume && start > 0);
-  if (start > 0) log.Write({{"event", "resume"}, {"level", start}});
 
   say("loading images");
   const std::vector<PosedImage> train = LoadImages(scene, o.workspace, Split::kTrain);
@@ -211,6 +206,12 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     throw InputError(scene_path.string(), "images", "0 train images", "nothing to reconstruct from",
                      "re-run perf import with --holdout 0 or more images");
   }
+  if (start == 0) {
+    // A fresh start: checkpoints of an earlier run would be mistaken for this one's.
+    for (int l = 0; l <= std::max(last, 16); ++l) fs::remove(CheckpointPath(o.workspace, l));
+  }
+  JsonLog log(o.workspace / "recon" / "log.jsonl", start > 0);
+  if (start > 0) log.Write({{"event", "resume"}, {"level", start}});
   const std::vector<PosedImage>& preview_views = test.empty() ? train : test;
   say(StrCat("backend: ", result.backend, "; ", train.size(), " training and ", test.size(), " held-out views; ",
              levels, " levels from ", o.start_resolution, "^3"));

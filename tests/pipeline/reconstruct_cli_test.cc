@@ -1,0 +1,174 @@
+// `perf reconstruct` and `perf render` as a user runs them, on a small synthetic capture written
+// as a NeRF-style transforms.json: outputs, log, checkpoints, resume, previews, renders, and the
+// bad inputs (no import yet, unknown options, a damaged checkpoint).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "sfm_import/image_io.h"
+#include "tests/recon/synthetic_scene.h"
+#include "tests/test_util.h"
+
+namespace perf {
+namespace {
+
+namespace fs = std::filesystem;
+using test::RunCommand;
+
+// Writes the synthetic scene's views as PNGs plus transforms.json (Blender camera axes:
+// x right, y up, z backwards), then imports it into `ws`.
+void MakeWorkspace(const fs::path& dir, const fs::path& ws) {
+  const recon::test::SyntheticScene scene(16, 8, 18, 32, 6);
+  nlohmann::json frames = nlohmann::json::array();
+  std::vector<const recon::PosedImage*> all;
+  // Interleave so the importer's every-6th hold-out picks the scene's test views again.
+  size_t t = 0, r = 0;
+  for (int v = 0; v < 18; ++v) all.push_back(v % 6 == 0 ? &scene.test[t++] : &scene.train[r++]);
+  fs::create_directories(dir / "images");
+  for (size_t i = 0; i < all.size(); ++i) {
+    const recon::PosedImage& im = *all[i];
+    WriteImage(dir / "images" / (im.name + ".png"), im.image, PixelFormat::kUInt8);
+    const float* m = im.camera.world_from_cam;
+    nlohmann::json rows = nlohmann::json::array();
+    for (int row = 0; row < 3; ++row) rows.push_back({m[4 * row], -m[4 * row + 1], -m[4 * row + 2], m[4 * row + 3]});
+    rows.push_back({0, 0, 0, 1});
+    frames.push_back({{"file_path", "./images/" + im.name}, {"transform_matrix", rows}});
+  }
+  const double angle = 2 * std::atan(0.5 * 32 / all[0]->camera.fx);
+  std::ofstream(dir / "transforms.json") << nlohmann::json{{"camera_angle_x", angle}, {"frames", frames}}.dump();
+  const auto r2 = RunCommand(test::PerfBinary() + " import -q --nerf " + (dir / "transforms.json").string() +
+                             " --holdout 6 --workspace " + ws.string());
+  ASSERT_EQ(r2.exit_code, 0) << r2.output;
+}
+
+std::vector<nlohmann::json> ReadLog(const fs::path& path) {
+  std::vector<nlohmann::json> lines;
+  std::ifstream in(path);
+  std::string line;
+  while (std::getline(in, line)) lines.push_back(nlohmann::json::parse(line));
+  return lines;
+}
+
+class ReconstructCli : public ::testing::Test {
+ protected:
+  void SetUp() override { MakeWorkspace(dir_.path(), ws_); }
+  std::string Perf(const std::string& args) { return test::PerfBinary() + " " + args; }
+  test::TempDir dir_;
+  fs::path ws_ = dir_ / "ws";
+};
+
+TEST_F(ReconstructCli, ReconstructsLogsCheckpointsResumesAndRenders) {
+  auto r = RunCommand(Perf("reconstruct " + ws_.string() +
+                           " --levels 2 --start-resolution 8 --iterations 4 --preview-every 2 --eval-every 2"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("backend: cpu"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("level 2/2"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("held-out PSNR"), std::string::npos) << r.output;
+  EXPECT_TRUE(fs::exists(ws_ / "recon" / "level_0.perfvol"));
+  EXPECT_TRUE(fs::exists(ws_ / "recon" / "level_1.perfvol"));
+  EXPECT_TRUE(fs::exists(ws_ / "preview" / "recon_l1_i4.png"));
+
+  const std::vector<nlohmann::json> log = ReadLog(ws_ / "recon" / "log.jsonl");
+  int iterations = 0, levels = 0, with_test = 0;
+  double first_cost = 0, last_cost = 0;
+  for (const auto& j : log) {
+    if (j["event"] == "iteration") {
+      ++iterations;
+      for (const char* k : {"level", "cost", "train_psnr", "cg_iterations", "step", "seconds", "elapsed"}) {
+        EXPECT_TRUE(j.contains(k)) << k << " in " << j.dump();
+      }
+      EXPECT_TRUE(j["seconds"].contains("linearize"));
+      if (j.contains("test_psnr")) ++with_test;
+      if (iterations == 1) first_cost = j["cost"];
+      last_cost = j["cost_after"];
+    }
+    levels += j["event"] == "level";
+  }
+  EXPECT_EQ(iterations, 8);
+  EXPECT_EQ(levels, 2);
+  EXPECT_EQ(with_test, 4);
+  EXPECT_LT(last_cost, 0.5 * first_cost);
+
+  const nlohmann::json summary = nlohmann::json::parse(std::ifstream(ws_ / "recon" / "recon.json"));
+  EXPECT_EQ(summary["final_checkpoint"], "recon/level_1.perfvol");
+  EXPECT_GT(summary["test_psnr"].get<double>(), 15.0);
+
+  // Everything done: --resume says so and changes nothing.
+  const auto before = fs::last_write_time(ws_ / "recon" / "level_1.perfvol");
+  r = RunCommand(Perf("reconstruct " + ws_.string() + " --levels 2 --start-resolution 8 --resume"));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("already complete"), std::string::npos) << r.output;
+  EXPECT_EQ(fs::last_write_time(ws_ / "recon" / "level_1.perfvol"), before);
+
+  r = RunCommand(Perf("render " + ws_.string() + " --opacity"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("mean PSNR"), std::string::npos) << r.output;
+  EXPECT_TRUE(fs::exists(ws_ / "renders" / "view0.png"));
+  EXPECT_TRUE(fs::exists(ws_ / "renders" / "view0_opacity.png"));
+  const ImageInfo info = ReadImageInfo(ws_ / "renders" / "view6.png");
+  EXPECT_EQ(info.width, 32);
+}
+
+TEST_F(ReconstructCli, ResumeContinuesAfterTheLastLevel) {
+  auto r = RunCommand(Perf("reconstruct -q " + ws_.string() + " --levels 1 --start-resolution 8 --iterations 2"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_FALSE(fs::exists(ws_ / "recon" / "level_1.perfvol"));
+  r = RunCommand(Perf("reconstruct " + ws_.string() + " --levels 2 --start-resolution 8 --iterations 2 --resume"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("resuming after level 0"), std::string::npos) << r.output;
+  EXPECT_TRUE(fs::exists(ws_ / "recon" / "level_1.perfvol"));
+  const std::vector<nlohmann::json> log = ReadLog(ws_ / "recon" / "log.jsonl");
+  int resumes = 0, iterations = 0;
+  for (const auto& j : log) {
+    resumes += j["event"] == "resume";
+    iterations += j["event"] == "iteration";
+  }
+  EXPECT_EQ(resumes, 1);
+  EXPECT_EQ(iterations, 4);  // the first run's 2 kept, then level 1's 2
+  // Resuming with another start resolution would mix two hierarchies: refused.
+  fs::remove(ws_ / "recon" / "level_1.perfvol");
+  r = RunCommand(Perf("reconstruct " + ws_.string() + " --levels 2 --start-resolution 16 --resume"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("level_0.perfvol"), std::string::npos) << r.output;
+}
+
+TEST_F(ReconstructCli, BadInputsAreNamed) {
+  // A damaged checkpoint is refused on resume, naming the file; nothing else is written.
+  auto r = RunCommand(Perf("reconstruct -q " + ws_.string() + " --levels 1 --start-resolution 8 --iterations 1"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const fs::path ck = ws_ / "recon" / "level_0.perfvol";
+  fs::resize_file(ck, fs::file_size(ck) - 10);
+  r = RunCommand(Perf("reconstruct " + ws_.string() + " --levels 2 --start-resolution 8 --resume"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("level_0.perfvol"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("truncated"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(ws_ / "recon" / "level_1.perfvol"));
+  r = RunCommand(Perf("render " + ws_.string()));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+
+  r = RunCommand(Perf("reconstruct " + ws_.string() + " --solver sgd"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("--solver"), std::string::npos) << r.output;
+  r = RunCommand(Perf("reconstruct " + ws_.string() + " --device tpu"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  r = RunCommand(Perf("reconstruct " + ws_.string() + " --levels 9"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("--levels"), std::string::npos) << r.output;
+  r = RunCommand(Perf("render " + ws_.string() + " --view nosuch.png"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+}
+
+TEST(ReconstructCliPlain, NoWorkspaceYet) {
+  test::TempDir dir;
+  auto r = RunCommand(test::PerfBinary() + " reconstruct " + dir.path().string());
+  EXPECT_EQ(r.exit_code, 3) << r.output;
+  EXPECT_NE(r.output.find("scene.json"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("perf import"), std::string::npos) << r.output;
+  r = RunCommand(test::PerfBinary() + " render " + dir.path().string());
+  EXPECT_EQ(r.exit_code, 3) << r.output;
+}
+
+}  // namespace
+}  // namespace perf
