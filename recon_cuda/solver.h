@@ -45,8 +45,10 @@ struct SolverOptions {
   double initial_step = 1.0;
   double step_factor = 0.7;
   int max_line_search_steps = 8;
-  // Evaluate the line search's costs on every k-th ray only (1: all rays).
-  int line_search_ray_stride = 1;
+  // Evaluate the line search's costs on every k-th ray only (1: all rays). 4 measured the same
+  // held-out PSNR as 1 on lego (50x50, 8 + 8 iterations: 22.43 dB both) at half the line
+  // search's time (3DGS-LM uses 30 % of the images likewise).
+  int line_search_ray_stride = 4;
 
   AdamSettings adam;
 
