@@ -9,8 +9,10 @@ namespace perf::recon {
 
 template <class T>
 struct GridSample {
-  int64_t cell[8];  // cell indices (may repeat at the border)
+  int64_t cell[8];  // cell indices, corner c = (c & 1, c >> 1 & 1, c >> 2) offsets from lo
   T w[8];           // weights, sum to 1
+  int lo[3];        // the lower cell index per axis
+  bool distinct;    // no axis is clamped to a single cell (only then are the 8 cells distinct)
 };
 
 // g: position in grid units, the box being [0, n]^3.
@@ -20,11 +22,17 @@ PERF_HD_INLINE GridSample<T> TrilinearWeights(int n, Vec3<T> g) {
   T f[3];
   for (int a = 0; a < 3; ++a) LinearCoord(g[a], n, &lo[a], &hi[a], &f[a]);
   GridSample<T> s;
+  const int64_t base = GridCell(n, lo[0], lo[1], lo[2]);
+  const int64_t ox = hi[0] - lo[0], oy = static_cast<int64_t>(hi[1] - lo[1]) * n,
+                oz = static_cast<int64_t>(hi[2] - lo[2]) * n * n;
+  const T wx[2] = {1 - f[0], f[0]}, wy[2] = {1 - f[1], f[1]}, wz[2] = {1 - f[2], f[2]};
   for (int c = 0; c < 8; ++c) {
     const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
-    s.cell[c] = GridCell(n, dx ? hi[0] : lo[0], dy ? hi[1] : lo[1], dz ? hi[2] : lo[2]);
-    s.w[c] = (dx ? f[0] : 1 - f[0]) * (dy ? f[1] : 1 - f[1]) * (dz ? f[2] : 1 - f[2]);
+    s.cell[c] = base + (dx ? ox : 0) + (dy ? oy : 0) + (dz ? oz : 0);
+    s.w[c] = wx[dx] * wy[dy] * wz[dz];
   }
+  for (int a = 0; a < 3; ++a) s.lo[a] = lo[a];
+  s.distinct = ox != 0 && oy != 0 && oz != 0;
   return s;
 }
 

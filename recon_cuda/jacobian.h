@@ -74,14 +74,31 @@ class CellMerger {
  public:
   template <class Flush>
   PERF_HD_INLINE void Sample(const GridSample<T>& gs, const T (&v)[K], Flush& flush) {
-    // Fast path: the same 8 cells as the previous sample (GridCell is injective, so equal first
-    // and last corners mean equal (lo, hi) on every axis, hence the same cells in the same order).
-    if (same_order_ && gs.cell[0] == cell_[0] && gs.cell[7] == cell_[7]) {
-      for (int q = 0; q < 8; ++q) {
-        for (int k = 0; k < K; ++k) acc_[q][k] += gs.w[q] * v[k];
+    if (gs.distinct && distinct_) {
+      // Both samples have 8 distinct cells at lo + {0,1}^3: corner q of this sample is corner
+      // q + (lo - lo_prev) of the previous one when that lies in {0,1}^3.
+      const int d0 = gs.lo[0] - lo_[0], d1 = gs.lo[1] - lo_[1], d2 = gs.lo[2] - lo_[2];
+      if (d0 == 0 && d1 == 0 && d2 == 0) {  // the same cells: accumulate in place
+        for (int q = 0; q < 8; ++q)
+          for (int k = 0; k < K; ++k) acc_[q][k] += gs.w[q] * v[k];
+        return;
       }
+      T next[8][K];
+      bool used[8] = {false, false, false, false, false, false, false, false};
+      for (int q = 0; q < 8; ++q) {
+        const int px = (q & 1) + d0, py = ((q >> 1) & 1) + d1, pz = (q >> 2) + d2;
+        const bool shared = (px == 0 || px == 1) && (py == 0 || py == 1) && (pz == 0 || pz == 1);
+        const int p = px + 2 * py + 4 * pz;
+        for (int k = 0; k < K; ++k) next[q][k] = gs.w[q] * v[k] + (shared ? acc_[p][k] : T(0));
+        if (shared) used[p] = true;
+      }
+      for (int p = 0; p < 8; ++p) {
+        if (!used[p]) flush(cell_[p], acc_[p]);
+      }
+      Store(gs, next, 8);
       return;
     }
+    // General case (a border sample, or the ray's first): merge by cell index.
     int64_t cell[8];
     T acc[8][K];
     int count = 0;
@@ -104,13 +121,8 @@ class CellMerger {
       }
       for (int k = 0; k < K; ++k) acc[j][k] += acc_[i][k];
     }
-    for (int j = 0; j < count; ++j) {
-      cell_[j] = cell[j];
-      for (int k = 0; k < K; ++k) acc_[j][k] = acc[j][k];
-    }
-    count_ = count;
-    // Corners were merged in order, so with 8 distinct cells entry q is corner q.
-    same_order_ = count == 8;
+    for (int j = 0; j < count; ++j) cell_[j] = cell[j];
+    Store(gs, acc, count);
   }
 
   // Call once per ray after its last sample.
@@ -118,14 +130,27 @@ class CellMerger {
   PERF_HD_INLINE void Finish(Flush& flush) {
     for (int i = 0; i < count_; ++i) flush(cell_[i], acc_[i]);
     count_ = 0;
-    same_order_ = false;
+    distinct_ = false;
   }
 
  private:
+  // Keeps `count` entries; with 8 distinct cells they are in corner order (entry q = corner q).
+  PERF_HD_INLINE void Store(const GridSample<T>& gs, const T (&acc)[8][K], int count) {
+    for (int j = 0; j < count; ++j)
+      for (int k = 0; k < K; ++k) acc_[j][k] = acc[j][k];
+    count_ = count;
+    distinct_ = gs.distinct && count == 8;
+    if (distinct_) {
+      for (int q = 0; q < 8; ++q) cell_[q] = gs.cell[q];
+      for (int a = 0; a < 3; ++a) lo_[a] = gs.lo[a];
+    }
+  }
+
   int64_t cell_[8];
   T acc_[8][K];
+  int lo_[3] = {0, 0, 0};
   int count_ = 0;
-  bool same_order_ = false;
+  bool distinct_ = false;
 };
 
 // The per-sample values whose merged sums give a cell's J^T u (4 values, ScatterJtuSample's) and,

@@ -47,7 +47,9 @@ TEST(ConvergenceTest, GaussNewtonRecoversAKnownScene) {
         const IterationSummary& s = summary.per_iteration[i];
         EXPECT_TRUE(s.accepted) << "iteration " << i;
         EXPECT_LT(s.cost_after, s.cost) << "iteration " << i;
-        if (i > 0) EXPECT_LT(s.cost, summary.per_iteration[i - 1].cost) << "iteration " << i;
+        if (i > 0) {
+          EXPECT_LT(s.cost, summary.per_iteration[i - 1].cost) << "iteration " << i;
+        }
       }
       EXPECT_LT(summary.final_cost, 0.05 * summary.initial_cost);
       x = Resample(shape, x, shape.Doubled());
