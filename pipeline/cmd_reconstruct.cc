@@ -56,6 +56,8 @@ void AddReconstructCommand(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--initial-step", o.solver.initial_step, "First step length tried by the line search (paper: 1)")
       ->capture_default_str();
+  cmd->add_option("--diagonal-floor", o.solver.diagonal_floor,
+                  "Preconditioner floor relative to the largest diag(J^T J) entry")->capture_default_str();
   cmd->add_option("--line-search-stride", o.solver.line_search_ray_stride,
                   "Evaluate the line search on every k-th ray")->capture_default_str();
   cmd->add_option("--lr-colour", o.solver.adam.lr_colour, "Adam learning rate of colours and shell opacities")

@@ -38,8 +38,11 @@ struct SolverOptions {
   double cg_relative_tolerance = 1e-10;  // or when |r|^2 < this |r_0|^2
   // Levenberg-Marquardt style damping: solves (J^T J + damping D) d = -g. 0: plain Gauss-Newton.
   double damping = 0.0;
-  // Preconditioner floor relative to the largest diagonal entry, for parameters no ray reaches.
-  double diagonal_floor = 1e-9;
+  // Preconditioner floor relative to the largest diagonal entry. Besides guarding parameters no
+  // ray reaches, it holds back the steps of those the rays barely constrain (the colour of a
+  // nearly clear cell), which otherwise overshoot and are clamped. Measured on lego 50x50
+  // (8 + 8 GN): 1e-9 22.43 dB, 1e-5 22.63, 1e-4 22.73, 1e-3 21.75, 1e-2 21.0.
+  double diagonal_floor = 1e-4;
 
   // Line search (paper Algorithm 3).
   double initial_step = 1.0;

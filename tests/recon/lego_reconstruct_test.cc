@@ -29,9 +29,9 @@ TEST(LegoReconstructTest, HeldOutPsnrAt50Pixels) {
   ASSERT_EQ(r.levels.size(), 2u);
   std::printf("lego 50x50, 8 + 8 GN iterations: held-out PSNR %.2f dB in %.1f s (%s)\n", r.test_psnr,
               r.solve_seconds, r.backend.c_str());
-  // Measured 22.4 dB (closing note of issue 3); the bar leaves 1.4 dB for float summation order
+  // Measured 22.7 dB (closing note of issue 3); the bar leaves 1.2 dB for float summation order
   // across thread counts and machines. Level 1 must improve on level 0.
-  EXPECT_GT(r.test_psnr, 21.0);
+  EXPECT_GT(r.test_psnr, 21.5);
   EXPECT_GT(r.levels[1].test_psnr, r.levels[0].test_psnr + 0.5);
   EXPECT_GT(r.levels[1].train_psnr, 20.0);
 }
