@@ -62,17 +62,18 @@ class Reader {
 
 void WriteCheckpoint(std::ostream& out, const Checkpoint& c) {
   PERF_CHECK(static_cast<int64_t>(c.params.size()) == c.shape.ParamCount());
-  PERF_CHECK(static_cast<int>(c.shell_radii.size()) == c.shape.num_shells && c.shape.num_shells <= kMaxShells);
+  PERF_CHECK(static_cast<int>(c.placement.shell_radii.size()) == c.shape.num_shells && c.shape.num_shells <= kMaxShells);
   std::string h;
   h.append(kMagic, 8);
   Put(&h, kCheckpointVersion);
   Put(&h, kHeaderBytes);
   for (int32_t v : {c.level, c.shape.n, c.shape.m, c.shape.num_shells, c.iterations, c.solver}) Put(&h, v);
-  for (double v : c.box_center) Put(&h, v);
-  for (double v : c.box_rotation) Put(&h, v);
-  for (double v : c.box_size) Put(&h, v);
-  for (double v : c.shell_center) Put(&h, v);
-  for (int k = 0; k < kMaxShells; ++k) Put(&h, k < c.shape.num_shells ? c.shell_radii[k] : 0.0);
+  const VolumePlacement& p = c.placement;
+  for (double v : p.box_center) Put(&h, v);
+  for (double v : p.box_rotation) Put(&h, v);
+  for (double v : p.box_size) Put(&h, v);
+  for (double v : p.shell_center) Put(&h, v);
+  for (int k = 0; k < kMaxShells; ++k) Put(&h, k < c.shape.num_shells ? p.shell_radii[k] : 0.0);
   Put(&h, static_cast<uint64_t>(c.params.size()));
   Put(&h, Fnv1a(c.params.data(), c.params.size() * sizeof(float)));
   PERF_CHECK(h.size() == kHeaderBytes);
@@ -112,20 +113,21 @@ Checkpoint ReadCheckpoint(std::istream& in, const std::string& name) {
     if (!std::isfinite(v)) r.Bad(field, StrCat(v), "not finite");
     return v;
   };
-  for (double& v : c.box_center) v = get_finite("box.center");
-  for (double& v : c.box_rotation) v = get_finite("box.rotation");
-  for (double& v : c.box_size) {
+  VolumePlacement& p = c.placement;
+  for (double& v : p.box_center) v = get_finite("box.center");
+  for (double& v : p.box_rotation) v = get_finite("box.rotation");
+  for (double& v : p.box_size) {
     v = get_finite("box.size");
     if (!(v > 0)) r.Bad("box.size", StrCat(v), "must be positive");
   }
-  for (double& v : c.shell_center) v = get_finite("shells.center");
+  for (double& v : p.shell_center) v = get_finite("shells.center");
   for (int k = 0; k < kMaxShells; ++k) {
     const double radius = get_finite("shells.radii");
     if (k < c.shape.num_shells) {
-      if (!(radius > 0) || (k > 0 && !(radius > c.shell_radii.back()))) {
+      if (!(radius > 0) || (k > 0 && !(radius > p.shell_radii.back()))) {
         r.Bad("shells.radii", StrCat(radius), "radii must be positive and increasing");
       }
-      c.shell_radii.push_back(radius);
+      p.shell_radii.push_back(radius);
     }
   }
   const uint64_t count = r.Get<uint64_t>("parameter count");
@@ -158,21 +160,6 @@ Checkpoint ReadCheckpoint(const std::filesystem::path& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw IoError(path.string(), "cannot open the checkpoint", "run perf reconstruct on the workspace first");
   return ReadCheckpoint(in, path.string());
-}
-
-VolumeGeometry GeometryOf(const Checkpoint& c) {
-  VolumeGeometry g;
-  g.box.center = {static_cast<float>(c.box_center[0]), static_cast<float>(c.box_center[1]),
-                  static_cast<float>(c.box_center[2])};
-  for (int i = 0; i < 9; ++i) g.box.world_from_box.m[i] = static_cast<float>(c.box_rotation[i]);
-  g.box.size = {static_cast<float>(c.box_size[0]), static_cast<float>(c.box_size[1]), static_cast<float>(c.box_size[2])};
-  // Box-local shell centre: R^T (shell centre - box centre).
-  double d[3], local[3];
-  for (int a = 0; a < 3; ++a) d[a] = c.shell_center[a] - c.box_center[a];
-  for (int a = 0; a < 3; ++a) local[a] = c.box_rotation[a] * d[0] + c.box_rotation[3 + a] * d[1] + c.box_rotation[6 + a] * d[2];
-  g.shell_center = {static_cast<float>(local[0]), static_cast<float>(local[1]), static_cast<float>(local[2])};
-  for (double r : c.shell_radii) g.shell_radii.push_back(static_cast<float>(r));
-  return g;
 }
 
 std::filesystem::path CheckpointPath(const std::filesystem::path& workspace, int level) {

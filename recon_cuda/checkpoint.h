@@ -32,12 +32,7 @@ struct Checkpoint {
   int iterations = 0;
   int solver = 0;  // 0 Gauss-Newton, 1 Adam
   VolumeShape shape;
-  // World placement, double precision as in scene.json.
-  double box_center[3] = {0, 0, 0};
-  double box_rotation[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-  double box_size[3] = {1, 1, 1};
-  double shell_center[3] = {0, 0, 0};
-  std::vector<double> shell_radii;
+  VolumePlacement placement;  // as in scene.json when the checkpoint was written
   std::vector<float> params;
 };
 
@@ -49,7 +44,7 @@ void WriteCheckpoint(const std::filesystem::path& path, const Checkpoint& c);
 Checkpoint ReadCheckpoint(const std::filesystem::path& path);
 
 // The geometry the checkpoint records (for MakeView).
-VolumeGeometry GeometryOf(const Checkpoint& c);
+inline VolumeGeometry GeometryOf(const Checkpoint& c) { return VolumeGeometry::From(c.placement, "checkpoint"); }
 
 // recon/level_<k>.perfvol in a workspace.
 std::filesystem::path CheckpointPath(const std::filesystem::path& workspace, int level);

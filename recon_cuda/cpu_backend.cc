@@ -227,12 +227,9 @@ class CpuBackend final : public Backend {
   }
   void Project(VecId x) override {
     float* p = vec(x).data();
-    const int64_t grid = level_.shape.GridParamCount();
+    const VolumeShape shape = level_.shape;
     ForChunks([&](int64_t b, int64_t e) {
-      for (int64_t i = b; i < e; ++i) {
-        // Grid sigma (every 4th value of the grid) is only bounded below.
-        p[i] = i < grid && i % 4 == 3 ? std::max(p[i], 0.f) : std::clamp(p[i], 0.f, 1.f);
-      }
+      for (int64_t i = b; i < e; ++i) p[i] = ProjectToValid(KindOf(shape, i), p[i]);
     });
   }
   void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) override {

@@ -13,9 +13,10 @@ double Psnr(const RenderOutput& render, const Image& truth) {
     const double d = static_cast<double>(std::clamp(render.colour[i], 0.f, 1.f)) - truth.pixels[i];
     sse += d * d;
   }
-  const double mse = sse / static_cast<double>(render.colour.size());
-  return mse > 0 ? -10.0 * std::log10(mse) : 99.0;
+  return PsnrFromMse(sse / static_cast<double>(render.colour.size()));
 }
+
+double PsnrFromMse(double mse) { return mse > 0 ? -10.0 * std::log10(mse) : 99.0; }
 
 Image ToImage(const RenderOutput& render) {
   Image im(render.width, render.height, 3);

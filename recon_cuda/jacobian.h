@@ -13,35 +13,40 @@ namespace perf::recon {
 
 // u[4] += J_sample p: p is a parameter-sized vector; the sample's cells are interpolated exactly
 // as the volume is (p enters J p linearly through the same weights).
-template <class T, class P>
-PERF_HD_INLINE void AddJpSample(const P* p, const GridSample<T>& gs, const SamplePartials<T>& sp, T u[4]) {
-  T pb[4] = {0, 0, 0, 0};
-  for (int q = 0; q < 8; ++q) {
-    const P* c = p + GridParam(gs.cell[q], 0);
-    for (int ch = 0; ch < 4; ++ch) pb[ch] += gs.w[q] * static_cast<T>(c[ch]);
-  }
+template <class T>
+PERF_HD_INLINE void AddJpSample(const T* p, const GridSample<T>& gs, const SamplePartials<T>& sp, T u[4]) {
+  T pb[4];
+  GatherGrid(p, gs, pb);
   for (int c = 0; c < 3; ++c) u[c] += sp.dc * pb[c] + sp.ds[c] * pb[3];
   u[3] += sp.dl * pb[3];
 }
 
-template <class T, class P>
-PERF_HD_INLINE void AddJpShell(const P* p, const TexelSample<T>& ts, const ShellPartials<T>& sp, T u[4]) {
-  T pb[4] = {0, 0, 0, 0};
-  for (int q = 0; q < 4; ++q) {
-    for (int ch = 0; ch < 4; ++ch) pb[ch] += ts.w[q] * static_cast<T>(p[ts.param[q] + ch]);
-  }
+template <class T>
+PERF_HD_INLINE void AddJpShell(const T* p, const TexelSample<T>& ts, const ShellPartials<T>& sp, T u[4]) {
+  T pb[4];
+  GatherTexels(p, ts, pb);
   for (int c = 0; c < 3; ++c) u[c] += sp.de * pb[c] + (sp.opaque ? T(0) : sp.da[c] * pb[3]);
 }
 
-// J_sample^T u into the sink: cell channel c gets w dc u_c, sigma gets w (sum_c ds_c u_c + dl u_L).
-// With u = the ray's residuals this is the ray's share of the gradient J^T r.
+// The 4 values a sample contributes, times its trilinear weight, to each of its cells in
+// J^T u: colour channel c gets dc u_c, sigma gets sum_c ds_c u_c + dl u_L.
+template <class T>
+PERF_HD_INLINE void JtuValues(const SamplePartials<T>& sp, const T u[4], T* v) {
+  v[0] = sp.dc * u[0];
+  v[1] = sp.dc * u[1];
+  v[2] = sp.dc * u[2];
+  v[3] = sp.ds[0] * u[0] + sp.ds[1] * u[1] + sp.ds[2] * u[2] + sp.dl * u[3];
+}
+
+// J_sample^T u into the sink (JtuValues times each cell's weight). With u = the ray's residuals
+// this is the ray's share of the gradient J^T r.
 template <class T, class Sink>
 PERF_HD_INLINE void ScatterJtuSample(const GridSample<T>& gs, const SamplePartials<T>& sp, const T u[4], Sink& sink) {
-  const T c0 = sp.dc * u[0], c1 = sp.dc * u[1], c2 = sp.dc * u[2];
-  const T s = sp.ds[0] * u[0] + sp.ds[1] * u[1] + sp.ds[2] * u[2] + sp.dl * u[3];
+  T v[4];
+  JtuValues(sp, u, v);
   for (int q = 0; q < 8; ++q) {
     const T w = gs.w[q];
-    sink.Add4(GridParam(gs.cell[q], 0), w * c0, w * c1, w * c2, w * s);
+    sink.Add4(GridParam(gs.cell[q], 0), w * v[0], w * v[1], w * v[2], w * v[3]);
   }
 }
 
@@ -153,16 +158,8 @@ class CellMerger {
   bool distinct_ = false;
 };
 
-// The per-sample values whose merged sums give a cell's J^T u (4 values, ScatterJtuSample's) and,
-// with diag, the summed row entries whose squares give its diag(J^T J) share: the colour entry
+// The row values whose merged sums give, squared, a cell's diag(J^T J) share: the colour entry
 // dc (the same for the three colour residuals) and sigma's entries for the 4 residuals.
-template <class T>
-PERF_HD_INLINE void JtuValues(const SamplePartials<T>& sp, const T u[4], T* v) {
-  v[0] = sp.dc * u[0];
-  v[1] = sp.dc * u[1];
-  v[2] = sp.dc * u[2];
-  v[3] = sp.ds[0] * u[0] + sp.ds[1] * u[1] + sp.ds[2] * u[2] + sp.dl * u[3];
-}
 template <class T>
 PERF_HD_INLINE void RowValues(const SamplePartials<T>& sp, T* v) {
   v[0] = sp.dc;

@@ -102,25 +102,19 @@ Checkpoint MakeCheckpoint(const Scene& scene, int level, const VolumeShape& shap
   c.shape = shape;
   c.iterations = iterations;
   c.solver = type == SolverType::kAdam ? 1 : 0;
-  for (int a = 0; a < 3; ++a) {
-    c.box_center[a] = scene.box.center[a];
-    c.box_size[a] = scene.box.size[a];
-    c.shell_center[a] = scene.shells.center[a];
-  }
-  for (int i = 0; i < 9; ++i) c.box_rotation[i] = scene.box.rotation(i / 3, i % 3);
-  c.shell_radii = scene.shells.radii;
+  c.placement = VolumePlacement::FromScene(scene);
   c.params = std::move(params);
   return c;
 }
 
 // A checkpoint made from another scene (re-imported workspace) must not be resumed.
 void CheckMatchesScene(const Checkpoint& c, const Scene& scene, const fs::path& path) {
+  const VolumePlacement& p = c.placement;
   double worst = 0;
   for (int a = 0; a < 3; ++a) {
-    worst = std::max({worst, std::abs(c.box_center[a] - scene.box.center[a]), std::abs(c.box_size[a] - scene.box.size[a])});
+    worst = std::max({worst, std::abs(p.box_center[a] - scene.box.center[a]), std::abs(p.box_size[a] - scene.box.size[a])});
   }
-  if (worst > 1e-9 * std::max(1.0, scene.box.size.norm()) ||
-      c.shell_radii.size() != scene.shells.radii.size()) {
+  if (worst > 1e-9 * std::max(1.0, scene.box.size.norm()) || p.shell_radii.size() != scene.shells.radii.size()) {
     throw InputError(path.string(), "box", "", "the checkpoint was made for a different box or shells than scene.json",
                      "the workspace was re-imported; run perf reconstruct without --resume");
   }

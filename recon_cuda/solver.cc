@@ -6,6 +6,7 @@
 #include <limits>
 
 #include "common/errors.h"
+#include "recon_cuda/evaluation.h"
 
 namespace perf::recon {
 namespace {
@@ -23,9 +24,7 @@ void Fail(const char* field, const std::string& value, const std::string& proble
 }
 
 double Psnr(double colour_sse, int64_t rays) {
-  if (rays <= 0) return 0;
-  const double mse = colour_sse / (3.0 * static_cast<double>(rays));
-  return mse > 0 ? -10.0 * std::log10(mse) : 99.0;
+  return rays > 0 ? PsnrFromMse(colour_sse / (3.0 * static_cast<double>(rays))) : 0.0;
 }
 
 }  // namespace

@@ -10,27 +10,47 @@
 
 namespace perf::recon {
 
-VolumeGeometry VolumeGeometry::FromScene(const Scene& scene) {
-  VolumeGeometry g;
-  const Eigen::Vector3d c = scene.box.center, s = scene.box.size;
-  const Eigen::Matrix3d& r = scene.box.rotation;
-  g.box.center = {static_cast<float>(c.x()), static_cast<float>(c.y()), static_cast<float>(c.z())};
-  for (int i = 0; i < 9; ++i) g.box.world_from_box.m[i] = static_cast<float>(r(i / 3, i % 3));
-  g.box.size = {static_cast<float>(s.x()), static_cast<float>(s.y()), static_cast<float>(s.z())};
-  if (!(s.minCoeff() > 0) || !s.allFinite()) {
-    throw InputError("scene.json", "box.size", StrCat(s.transpose()), "must be positive",
+VolumePlacement VolumePlacement::FromScene(const Scene& scene) {
+  VolumePlacement p;
+  for (int a = 0; a < 3; ++a) {
+    p.box_center[a] = scene.box.center[a];
+    p.box_size[a] = scene.box.size[a];
+    p.shell_center[a] = scene.shells.center[a];
+  }
+  for (int i = 0; i < 9; ++i) p.box_rotation[i] = scene.box.rotation(i / 3, i % 3);
+  p.shell_radii = scene.shells.radii;
+  return p;
+}
+
+VolumeGeometry VolumeGeometry::From(const VolumePlacement& p, const std::string& source) {
+  const double* s = p.box_size;
+  if (!(std::min({s[0], s[1], s[2]}) > 0) || !std::isfinite(s[0] + s[1] + s[2])) {
+    throw InputError(source, "box.size", StrCat(s[0], " ", s[1], " ", s[2]), "must be positive",
                      "re-run perf import, or pass --box-size");
   }
-  const int k = static_cast<int>(scene.shells.radii.size());
+  const int k = static_cast<int>(p.shell_radii.size());
   if (k < 1 || k > kMaxShells) {
-    throw InputError("scene.json", "shells.radii", StrCat(k, " shells"),
+    throw InputError(source, "shells.radii", StrCat(k, " shells"),
                      StrCat("the reconstruction needs 1 to ", kMaxShells, " shells (the outermost ends every ray)"),
                      "re-run perf import with --shells N");
   }
-  const Eigen::Vector3d local = r.transpose() * (scene.shells.center - c);
-  g.shell_center = {static_cast<float>(local.x()), static_cast<float>(local.y()), static_cast<float>(local.z())};
-  for (double radius : scene.shells.radii) g.shell_radii.push_back(static_cast<float>(radius));
+  VolumeGeometry g;
+  const double* r = p.box_rotation;
+  g.box.center = {static_cast<float>(p.box_center[0]), static_cast<float>(p.box_center[1]),
+                  static_cast<float>(p.box_center[2])};
+  for (int i = 0; i < 9; ++i) g.box.world_from_box.m[i] = static_cast<float>(r[i]);
+  g.box.size = {static_cast<float>(s[0]), static_cast<float>(s[1]), static_cast<float>(s[2])};
+  // Box-local shell centre: R^T (shell centre - box centre), R row-major.
+  double d[3], local[3];
+  for (int a = 0; a < 3; ++a) d[a] = p.shell_center[a] - p.box_center[a];
+  for (int a = 0; a < 3; ++a) local[a] = r[a] * d[0] + r[3 + a] * d[1] + r[6 + a] * d[2];
+  g.shell_center = {static_cast<float>(local[0]), static_cast<float>(local[1]), static_cast<float>(local[2])};
+  for (double radius : p.shell_radii) g.shell_radii.push_back(static_cast<float>(radius));
   return g;
+}
+
+VolumeGeometry VolumeGeometry::FromScene(const Scene& scene) {
+  return From(VolumePlacement::FromScene(scene), "scene.json");
 }
 
 VolumeView<float> MakeView(const VolumeShape& shape, const VolumeGeometry& geometry, const float* params) {
@@ -133,12 +153,7 @@ std::vector<float> Resample(const VolumeShape& from, std::span<const float> para
 
 void ProjectToValidRange(const VolumeShape& shape, std::span<float> x) {
   PERF_CHECK(static_cast<int64_t>(x.size()) == shape.ParamCount());
-  const int64_t grid = shape.GridParamCount();
-  for (int64_t i = 0; i < grid; i += 4) {
-    for (int ch = 0; ch < 3; ++ch) x[i + ch] = std::clamp(x[i + ch], 0.f, 1.f);
-    x[i + 3] = std::max(x[i + 3], 0.f);
-  }
-  for (int64_t i = grid; i < static_cast<int64_t>(x.size()); ++i) x[i] = std::clamp(x[i], 0.f, 1.f);
+  for (int64_t i = 0; i < static_cast<int64_t>(x.size()); ++i) x[i] = ProjectToValid(KindOf(shape, i), x[i]);
 }
 
 std::string DescribeShape(const VolumeShape& shape) {

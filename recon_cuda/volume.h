@@ -4,6 +4,7 @@
 // resampling from one level to the next.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <span>
 #include <string>
@@ -30,13 +31,27 @@ struct VolumeShape {
   bool operator==(const VolumeShape&) const = default;
 };
 
-// Where the box and the shells are in the world (from scene.json); the same for every level.
+// Where the box and the shells are in the world, in double precision and the world frame, as
+// scene.json and the checkpoints store it.
+struct VolumePlacement {
+  double box_center[3] = {0, 0, 0};
+  double box_rotation[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};  // world_from_box, row-major
+  double box_size[3] = {1, 1, 1};
+  double shell_center[3] = {0, 0, 0};
+  std::vector<double> shell_radii;
+
+  static VolumePlacement FromScene(const Scene& scene);
+};
+
+// The placement as the ray math reads it (box frame, float); the same for every level.
 struct VolumeGeometry {
   BoxFrame<float> box;
   Vec3<float> shell_center;  // box-local: R^T (shells.center - box.center)
   std::vector<float> shell_radii;
 
-  static VolumeGeometry FromScene(const Scene& scene);  // throws InputError if unusable
+  // Throws InputError naming `source` and the field if the placement is unusable.
+  static VolumeGeometry From(const VolumePlacement& placement, const std::string& source);
+  static VolumeGeometry FromScene(const Scene& scene);
   int num_shells() const { return static_cast<int>(shell_radii.size()); }
 };
 
@@ -75,6 +90,11 @@ inline ParamKind KindOf(const VolumeShape& shape, int64_t i) {
   const bool fourth = i % 4 == 3;
   return grid ? (fourth ? ParamKind::kGridDensity : ParamKind::kGridColour)
               : (fourth ? ParamKind::kShellOpacity : ParamKind::kShellColour);
+}
+
+// The valid range of one parameter (ProjectToValidRange, element by element).
+inline float ProjectToValid(ParamKind kind, float v) {
+  return kind == ParamKind::kGridDensity ? std::max(v, 0.f) : std::clamp(v, 0.f, 1.f);
 }
 
 // "128^3 grid, 4 shells of 6 x 128^2 texels (33.8 M parameters)".

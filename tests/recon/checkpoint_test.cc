@@ -18,14 +18,14 @@ Checkpoint Sample() {
   c.iterations = 12;
   c.solver = 1;
   c.shape = {4, 2, 2};
-  c.box_center[0] = 0.5;
-  c.box_size[2] = 3.25;
-  c.box_rotation[0] = 0;
-  c.box_rotation[1] = -1;
-  c.box_rotation[3] = 1;
-  c.box_rotation[4] = 0;
-  c.shell_center[1] = -0.75;
-  c.shell_radii = {2.0, 8.0};
+  c.placement.box_center[0] = 0.5;
+  c.placement.box_size[2] = 3.25;
+  c.placement.box_rotation[0] = 0;
+  c.placement.box_rotation[1] = -1;
+  c.placement.box_rotation[3] = 1;
+  c.placement.box_rotation[4] = 0;
+  c.placement.shell_center[1] = -0.75;
+  c.placement.shell_radii = {2.0, 8.0};
   c.params.resize(c.shape.ParamCount());
   for (size_t i = 0; i < c.params.size(); ++i) c.params[i] = 0.001f * static_cast<float>(i);
   return c;
@@ -37,12 +37,12 @@ void ExpectEqual(const Checkpoint& a, const Checkpoint& b) {
   EXPECT_EQ(a.solver, b.solver);
   EXPECT_EQ(a.shape, b.shape);
   for (int i = 0; i < 3; ++i) {
-    EXPECT_EQ(a.box_center[i], b.box_center[i]);
-    EXPECT_EQ(a.box_size[i], b.box_size[i]);
-    EXPECT_EQ(a.shell_center[i], b.shell_center[i]);
+    EXPECT_EQ(a.placement.box_center[i], b.placement.box_center[i]);
+    EXPECT_EQ(a.placement.box_size[i], b.placement.box_size[i]);
+    EXPECT_EQ(a.placement.shell_center[i], b.placement.shell_center[i]);
   }
-  for (int i = 0; i < 9; ++i) EXPECT_EQ(a.box_rotation[i], b.box_rotation[i]);
-  EXPECT_EQ(a.shell_radii, b.shell_radii);
+  for (int i = 0; i < 9; ++i) EXPECT_EQ(a.placement.box_rotation[i], b.placement.box_rotation[i]);
+  EXPECT_EQ(a.placement.shell_radii, b.placement.shell_radii);
   EXPECT_EQ(a.params, b.params);
 }
 
