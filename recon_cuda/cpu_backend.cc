@@ -5,13 +5,13 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <sstream>
 #include <thread>
 
 #include "common/errors.h"
+#include "common/stopwatch.h"
 #include "recon_cuda/jacobian.h"
 
 namespace perf::recon {
@@ -28,8 +28,6 @@ int64_t AvailableMemory() {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double Since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 constexpr int64_t kBlockRays = 1024;      // rays per task; fixes the cost's summation order
 constexpr int64_t kVectorChunk = 1 << 15;  // elements per task in vector operations
@@ -257,7 +255,7 @@ class CpuBackend final : public Backend {
   }
 
   PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag) override {
-    const auto t0 = Clock::now();
+    const auto t0 = WallClock::now();
     const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, vec(x).data());
     const bool want_diag = diag != kNoVector;
     const bool record = cache_ && want_diag;  // Adam (no diagonal) never multiplies by J^T J
@@ -275,13 +273,13 @@ class CpuBackend final : public Backend {
     lin_seed_ = seed;
     linearized_ = true;
     recorded_ = record;
-    stats.seconds = Since(t0);
+    stats.seconds = SecondsSince(t0);
     return stats;
   }
 
   PassStats MultiplyJtJ(VecId p, VecId out) override {
     PERF_CHECK_MSG(linearized_, "MultiplyJtJ before Linearize");
-    const auto t0 = Clock::now();
+    const auto t0 = WallClock::now();
     const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, vec(lin_x_).data());
     const float* pp = vec(p).data();
     const int k_shells = level_.shape.num_shells;
@@ -329,12 +327,12 @@ class CpuBackend final : public Backend {
       return bs;
     });
     ReduceInto(pass, 0, out);
-    stats.seconds = Since(t0);
+    stats.seconds = SecondsSince(t0);
     return stats;
   }
 
   PassStats Cost(VecId x, uint32_t seed, RaySubset subset) override {
-    const auto t0 = Clock::now();
+    const auto t0 = WallClock::now();
     const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, vec(x).data());
     PERF_CHECK(subset.stride >= 1 && subset.offset >= 0 && subset.offset < subset.stride);
     PassStats stats = ForBlocks(0, 0, [&](int64_t, int64_t begin, int64_t end, Scratch&) {
@@ -348,7 +346,7 @@ class CpuBackend final : public Backend {
       }
       return bs;
     });
-    stats.seconds = Since(t0);
+    stats.seconds = SecondsSince(t0);
     return stats;
   }
 

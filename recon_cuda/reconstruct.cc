@@ -1,7 +1,6 @@
 #include "recon_cuda/reconstruct.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -9,6 +8,7 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
+#include "common/stopwatch.h"
 #include "recon_cuda/checkpoint.h"
 #include "recon_cuda/evaluation.h"
 #include "sfm_import/image_io.h"
@@ -18,8 +18,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
-using Clock = std::chrono::steady_clock;
-double Since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 void Fail(const char* option, const std::string& value, const std::string& problem, const std::string& hint = {}) {
   throw InputError("command line", option, value, problem, hint);
@@ -155,9 +153,6 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   };
 
   const fs::path scene_path = o.workspace / "scene.json";
-  if (!fs::exists(scene_path)) {
-    throw IoError(scene_path.string(), "not found", "run perf import on this workspace first");
-  }
   const Scene scene = ReadScene(scene_path);
   const VolumeGeometry geometry = VolumeGeometry::FromScene(scene);
   std::unique_ptr<Backend> backend = MakeBackend(o.device, o.threads);
@@ -212,7 +207,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
 
   double elapsed = 0;  // solver time so far (excludes held-out evaluation and previews)
   for (int level = start; level < levels; ++level) {
-    const auto t_level = Clock::now();
+    const auto t_level = WallClock::now();
     double eval_seconds = 0;
     const VolumeShape shape = shape_of(level);
     if (level == 0 || x.empty()) {
@@ -248,12 +243,12 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     so.seed = Hash(o.init.seed, static_cast<uint32_t>(level), 0x1e7e1u);
     const VecId x_id = kSolverX;
     auto held_out = [&]() {
-      const auto t0 = Clock::now();
+      const auto t0 = WallClock::now();
       const double psnr = MeanPsnr(ScoreViews(backend.get(), x_id, test, o.min_box_opacity));
-      eval_seconds += Since(t0);
+      eval_seconds += SecondsSince(t0);
       return psnr;
     };
-    double solve_elapsed_at_level_start = elapsed + Since(t_level);
+    double solve_elapsed_at_level_start = elapsed + SecondsSince(t_level);
     double iter_time = 0;
     auto callback = [&](const IterationSummary& s) {
       iter_time += s.seconds_total;
@@ -263,13 +258,13 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
         line["test_psnr"] = held_out();
       }
       if (o.preview_every > 0 && ((s.iteration + 1) % o.preview_every == 0 || last_it)) {
-        const auto t0 = Clock::now();
+        const auto t0 = WallClock::now();
         const PosedImage& v = preview_views.front();
         const RenderOutput r = backend->Render(x_id, v.camera, v.image.width, v.image.height, o.min_box_opacity);
         const fs::path p = o.workspace / "preview" / StrCat("recon_l", level, "_i", s.iteration + 1, ".png");
         EnsureWritableDirectory(p.parent_path());
         WriteImage(p, ToImage(r), PixelFormat::kUInt8);
-        eval_seconds += Since(t0);
+        eval_seconds += SecondsSince(t0);
       }
       log.Write(line);
       ReconstructOptions::Event e;
@@ -295,7 +290,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     if (!test.empty()) lr.test_psnr = held_out();  // the backend still holds x in kSolverX
     WriteCheckpoint(CheckpointPath(o.workspace, level),
                     MakeCheckpoint(scene, level, shape, summary.iterations, o.solver.type, x));
-    lr.seconds = Since(t_level) - eval_seconds;
+    lr.seconds = SecondsSince(t_level) - eval_seconds;
     elapsed += lr.seconds;
     log.Write({{"event", "level"},
                {"level", level},

@@ -13,9 +13,7 @@ RenderViewsResult RenderViews(const RenderViewsOptions& o) {
   if (o.split != "test" && o.split != "train" && o.split != "all") {
     throw InputError("command line", "--split", o.split, "unknown split", "use test, train or all");
   }
-  const fs::path scene_path = o.workspace / "scene.json";
-  if (!fs::exists(scene_path)) throw IoError(scene_path.string(), "not found", "run perf import on this workspace first");
-  const Scene scene = ReadScene(scene_path);
+  const Scene scene = ReadScene(o.workspace / "scene.json");
   RenderViewsResult result;
   result.checkpoint = o.checkpoint;
   if (result.checkpoint.empty()) {

@@ -1,18 +1,16 @@
 #include "recon_cuda/solver.h"
 
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 
 #include "common/errors.h"
+#include "common/stopwatch.h"
 #include "recon_cuda/evaluation.h"
 
 namespace perf::recon {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double Since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 // Vector ids of the Gauss-Newton solver.
 enum : VecId { kX = kSolverX, kG, kDiag, kStep, kResidual, kZ, kDir, kAp, kTrial, kGnVectors };
@@ -120,7 +118,7 @@ void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const Iter
            SolverSummary* summary) {
   o.Check();
   *summary = SolverSummary();
-  const auto t_solve = Clock::now();
+  const auto t_solve = WallClock::now();
   PERF_CHECK(static_cast<int64_t>(x->size()) == b->level().shape.ParamCount());
   b->Upload(kX, *x);
   if (o.type == SolverType::kAdam) {
@@ -132,13 +130,13 @@ void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const Iter
   for (int it = 0; it < o.max_iterations; ++it) {
     IterationSummary s;
     s.iteration = it;
-    const auto t_it = Clock::now();
+    const auto t_it = WallClock::now();
     const uint32_t seed = Hash(o.seed, static_cast<uint32_t>(it), 0u);
 
-    auto t0 = Clock::now();
+    auto t0 = WallClock::now();
     const PassStats lin = b->Linearize(kX, seed, kG, o.type == SolverType::kGaussNewton ? kDiag : kNoVector);
     ++summary->linearize_passes;
-    s.seconds_linearize = Since(t0);
+    s.seconds_linearize = SecondsSince(t0);
     s.cost = lin.cost;
     s.samples = lin.samples;
     if (!std::isfinite(lin.cost)) {
@@ -149,17 +147,17 @@ void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const Iter
     if (it == 0) summary->initial_cost = lin.cost;
 
     if (o.type == SolverType::kAdam) {
-      t0 = Clock::now();
+      t0 = WallClock::now();
       b->AdamStep(kX, kG, kAdamM, kAdamV, o.adam, it + 1);
-      s.seconds_update = Since(t0);
+      s.seconds_update = SecondsSince(t0);
       s.step = 1;
       s.cost_after = lin.cost;  // of the step's own pass: Adam evaluates nothing else
     } else {
-      t0 = Clock::now();
+      t0 = WallClock::now();
       s.cg_iterations = SolvePcg(o, b, summary);
-      s.seconds_cg = Since(t0);
+      s.seconds_cg = SecondsSince(t0);
 
-      t0 = Clock::now();
+      t0 = WallClock::now();
       double cost0 = lin.cost;
       if (o.line_search_ray_stride > 1) {
         cost0 = b->Cost(kX, seed, ls_subset).cost;
@@ -178,9 +176,9 @@ void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const Iter
         best_gamma = gamma;
         gamma *= o.step_factor;
       }
-      s.seconds_line_search = Since(t0);
+      s.seconds_line_search = SecondsSince(t0);
 
-      t0 = Clock::now();
+      t0 = WallClock::now();
       s.accepted = best < cost0;
       if (s.accepted) {
         b->Axpy(kX, best_gamma, kStep);
@@ -193,7 +191,7 @@ void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const Iter
         s.cost_after = cost0;
         ++rejected_in_a_row;
       }
-      s.seconds_update = Since(t0);
+      s.seconds_update = SecondsSince(t0);
       if (o.line_search_ray_stride > 1) {
         // Report the cost on all rays' scale.
         s.cost_after *= cost0 > 0 ? lin.cost / cost0 : 1.0;
@@ -201,12 +199,12 @@ void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const Iter
     }
 
     if (o.psnr_ray_stride > 0) {
-      t0 = Clock::now();
+      t0 = WallClock::now();
       const PassStats p = b->Cost(kX, 0x5eed5eedu, RaySubset{o.psnr_ray_stride, 0});
       s.train_psnr = Psnr(p.colour_sse, p.rays);
-      s.seconds_psnr = Since(t0);
+      s.seconds_psnr = SecondsSince(t0);
     }
-    s.seconds_total = Since(t_it);
+    s.seconds_total = SecondsSince(t_it);
     summary->seconds_linearize += s.seconds_linearize;
     summary->seconds_cg += s.seconds_cg;
     summary->seconds_line_search += s.seconds_line_search;
@@ -226,7 +224,7 @@ void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const Iter
     }
   }
   b->Download(kX, *x);
-  summary->seconds_total = Since(t_solve);
+  summary->seconds_total = SecondsSince(t_solve);
 }
 
 }  // namespace perf::recon

@@ -19,25 +19,6 @@ PinholeCamera<float> ToPinhole(const SceneCamera& camera, const Eigen::Matrix<do
   return c;
 }
 
-namespace {
-
-// RGB from grey, RGB or RGBA (associated alpha: the importer already composited over the
-// background, so any alpha left here is dropped).
-Image ToRgb(const Image& in, const std::string& path) {
-  if (in.channels == 3) return in;
-  if (in.channels != 1 && in.channels != 4 && in.channels != 2) {
-    throw InputError(path, "channels", std::to_string(in.channels), "expected a grey, RGB or RGBA image",
-                     "re-run perf import");
-  }
-  Image out(in.width, in.height, 3);
-  for (int y = 0; y < in.height; ++y)
-    for (int x = 0; x < in.width; ++x)
-      for (int c = 0; c < 3; ++c) out.at(x, y, c) = in.at(x, y, in.channels >= 3 ? c : 0);
-  return out;
-}
-
-}  // namespace
-
 std::vector<PosedImage> LoadImages(const Scene& scene, const std::filesystem::path& workspace, Split split,
                                    const std::function<void(int done, int total)>& progress) {
   std::vector<const SceneImage*> chosen;
@@ -50,7 +31,8 @@ std::vector<PosedImage> LoadImages(const Scene& scene, const std::filesystem::pa
     const SceneImage& im = *chosen[i];
     const SceneCamera& cam = scene.camera(im.camera_id);
     const std::filesystem::path path = workspace / im.path;
-    Image img = ToRgb(ReadImage(path), path.string());
+    // The importer writes RGB; an RGBA image put there since is composited like on import.
+    Image img = ToRgb(ReadImage(path), {scene.background.x(), scene.background.y(), scene.background.z()});
     if (img.width != cam.width || img.height != cam.height) {
       throw InputError(path.string(), "size", StrCat(img.width, "x", img.height),
                        StrCat("scene.json says camera ", cam.id, " is ", cam.width, "x", cam.height),

@@ -116,6 +116,24 @@ Image ResizeImage(const Image& image, int width, int height) {
   return out;
 }
 
+Image ToRgb(const Image& in, const std::array<double, 3>& background, Image* alpha) {
+  const bool has_alpha = in.channels == 2 || in.channels == 4;
+  const int colour = has_alpha ? in.channels - 1 : in.channels;
+  Image rgb(in.width, in.height, 3);
+  if (has_alpha && alpha) *alpha = Image(in.width, in.height, 1);
+  for (int y = 0; y < in.height; ++y) {
+    for (int x = 0; x < in.width; ++x) {
+      const float a = has_alpha ? in.at(x, y, in.channels - 1) : 1.f;
+      for (int c = 0; c < 3; ++c) {
+        const float v = in.at(x, y, colour == 1 ? 0 : c);
+        rgb.at(x, y, c) = has_alpha ? v + (1.f - a) * static_cast<float>(background[c]) : v;
+      }
+      if (has_alpha && alpha) alpha->at(x, y, 0) = a;
+    }
+  }
+  return rgb;
+}
+
 bool HasImageExtension(const fs::path& path) {
   static const std::array<std::string_view, 10> kExt = {".jpg", ".jpeg", ".png", ".tif", ".tiff",
                                                         ".exr", ".bmp", ".webp", ".hdr", ".dpx"};

@@ -3,6 +3,7 @@
 // is the orientation COLMAP used when it detected features.
 #pragma once
 
+#include <array>
 #include <filesystem>
 
 #include "sfm_import/image.h"
@@ -28,6 +29,11 @@ void WriteImage(const std::filesystem::path& path, const Image& image, PixelForm
 // Filtered resize (OIIO's ImageBufAlgo::resize, default filter: blackman-harris for
 // downscaling) to exactly `width` x `height`.
 Image ResizeImage(const Image& image, int width, int height);
+
+// RGB from grey, grey + alpha, RGB or RGBA: alpha is split off into `alpha` (optional) and the
+// colour composited over `background`. OpenImageIO returns associated (premultiplied) alpha by
+// default, so the composite is C + (1 - a) bg.
+Image ToRgb(const Image& in, const std::array<double, 3>& background, Image* alpha = nullptr);
 
 // File extensions (lower case, with dot) recognised as images when scanning folders.
 bool HasImageExtension(const std::filesystem::path& path);

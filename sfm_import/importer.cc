@@ -64,33 +64,14 @@ std::string ReplaceExtension(const std::string& name, const std::string& ext) {
   return fs::path(name).replace_extension(ext).generic_string();
 }
 
-// Splits alpha off and composites colour over `bg`. OpenImageIO returns associated
-// (premultiplied) alpha by default, so the composite is C + (1 - a) bg. Grey becomes RGB.
-Image ToRgb(const Image& in, const Eigen::Vector3d& bg, Image* alpha) {
-  const bool has_alpha = in.channels == 2 || in.channels == 4;
-  const int colour = has_alpha ? in.channels - 1 : in.channels;
-  Image rgb(in.width, in.height, 3);
-  if (has_alpha && alpha) *alpha = Image(in.width, in.height, 1);
-  for (int y = 0; y < in.height; ++y) {
-    for (int x = 0; x < in.width; ++x) {
-      const float a = has_alpha ? in.at(x, y, in.channels - 1) : 1.f;
-      for (int c = 0; c < 3; ++c) {
-        const float v = in.at(x, y, colour == 1 ? 0 : c);
-        rgb.at(x, y, c) = has_alpha ? v + (1.f - a) * static_cast<float>(bg[c]) : v;
-      }
-      if (has_alpha && alpha) alpha->at(x, y, 0) = a;
-    }
-  }
-  return rgb;
-}
-
 void ProcessImage(const ImageJob& job, const ImportOptions& o, const fs::path& ws) {
   ImageInfo info;
   Image img = ReadImage(job.source, &info);
   if (job.undistorter && !job.undistorter->is_identity()) img = job.undistorter->Apply(img);
   img = ResizeImage(img, job.out_width, job.out_height);
   Image alpha;
-  Image rgb = ToRgb(img, o.background, job.alpha_rel.empty() ? nullptr : &alpha);
+  Image rgb = ToRgb(img, {o.background.x(), o.background.y(), o.background.z()},
+                    job.alpha_rel.empty() ? nullptr : &alpha);
   const PixelFormat out = OutputFormat(info.format);
   fs::create_directories((ws / job.out_rel).parent_path());
   WriteImage(ws / job.out_rel, rgb, out);
