@@ -89,8 +89,8 @@ class Backend {
   virtual MemoryEstimate EstimateMemory(const LevelProblem& problem, int num_vectors) const = 0;
   // Drops the previous level's vectors and caches and allocates `num_vectors` parameter vectors
   // (ids 0 .. num_vectors - 1, zero-filled). Throws ResourceError, naming the level, what it
-  // needs and what is available, when it does not fit.
-  virtual void SetLevel(const LevelProblem& problem, int num_vectors) = 0;
+  // needs and what is available, when it does not fit; returns the estimate it went by.
+  virtual MemoryEstimate SetLevel(const LevelProblem& problem, int num_vectors) = 0;
   virtual const LevelProblem& level() const = 0;
   // Whether MultiplyJtJ reuses the partials of Linearize (false: it recomputes them).
   virtual bool CachesJacobian() const = 0;

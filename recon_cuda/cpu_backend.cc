@@ -7,7 +7,6 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
-#include <sstream>
 #include <thread>
 
 #include "common/errors.h"
@@ -128,14 +127,14 @@ class CpuBackend final : public Backend {
     return e;
   }
 
-  void SetLevel(const LevelProblem& p, int num_vectors) override {
+  MemoryEstimate SetLevel(const LevelProblem& p, int num_vectors) override {
     PERF_CHECK(p.rays != nullptr);
     PERF_CHECK(p.shape.num_shells == p.geometry.num_shells() && p.shape.num_shells <= kMaxShells);
     vectors_.clear();
     blocks_.clear();
     scratch_.clear();
     level_ = p;
-    MemoryEstimate e = EstimateMemory(p, num_vectors);
+    const MemoryEstimate e = EstimateMemory(p, num_vectors);
     const int64_t needed = e.vectors + e.scratch + e.rays;
     if (e.available > 0 && needed > e.available) {
       throw ResourceError(StrCat("level ", DescribeShape(p.shape), " needs ", needed >> 20, " MiB for the solver's ",
@@ -151,6 +150,7 @@ class CpuBackend final : public Backend {
     // The march of any ray: its chord is at most the box diagonal.
     max_samples_ = static_cast<int>(std::ceil(std::sqrt(3.0) * longest / shortest * p.shape.n)) + 2;
     linearized_ = false;
+    return e;
   }
 
   const LevelProblem& level() const override { return level_; }
@@ -306,9 +306,11 @@ class CpuBackend final : public Backend {
           shells = s.row.shells.data();
         }
         float u[4] = {0, 0, 0, 0};
+        TexelSample<float> ts[kMaxShells];
         for (int k = 0; k < k_shells; ++k) {
           if (shells[k].coord.face < 0) continue;
-          AddJpShell(pp, BilinearWeights(vol.n, vol.m, k, shells[k].coord), shells[k].sp, u);
+          ts[k] = BilinearWeights(vol.n, vol.m, k, shells[k].coord);
+          AddJpShell(pp, ts[k], shells[k].sp, u);
         }
         GridSample<float>* w = s.weights.data();
         for (int j = 0; j < count; ++j) {
@@ -317,7 +319,7 @@ class CpuBackend final : public Backend {
         }
         for (int k = 0; k < k_shells; ++k) {
           if (shells[k].coord.face < 0) continue;
-          ScatterJtuShell(BilinearWeights(vol.n, vol.m, k, shells[k].coord), shells[k].sp, u, sink);
+          ScatterJtuShell(ts[k], shells[k].sp, u, sink);
         }
         // Direct scatter: measured faster here than merging cells (CellMerger) first.
         for (int j = 0; j < count; ++j) ScatterJtuSample(w[j], samples[j].sp, u, sink);
@@ -340,7 +342,7 @@ class CpuBackend final : public Backend {
       int64_t i = begin + ((subset.offset - begin % subset.stride) + subset.stride) % subset.stride;
       for (; i < end; i += subset.stride) {
         const RayOutput<float> fwd =
-            Forward(vol, RayOf(i, seed), Jitter{seed, static_cast<uint32_t>(i), level_.residuals.jitter}, &level_.rays->colours[3 * i],
+            Forward(vol, RayOf(i, seed), JitterOf(i, seed), &level_.rays->colours[3 * i],
                     level_.residuals.lambda, level_.residuals.stop_transmittance);
         bs.Add(fwd);
       }
@@ -406,7 +408,7 @@ class CpuBackend final : public Backend {
     const float lambda = level_.residuals.lambda;
     for (int64_t i = begin; i < end; ++i) {
       const BoxRay<float> ray = RayOf(i, seed);
-      const Jitter jit{seed, static_cast<uint32_t>(i), level_.residuals.jitter};
+      const Jitter jit = JitterOf(i, seed);
       const RayOutput<float> fwd = Forward(vol, ray, jit, &level_.rays->colours[3 * i], lambda,
                                            level_.residuals.stop_transmittance, s.record.data());
       LinearizeVisitor<kDiag> v{{fwd.residual[0], fwd.residual[1], fwd.residual[2], fwd.residual[3]},
@@ -423,10 +425,15 @@ class CpuBackend final : public Backend {
     return bs;
   }
 
+  // Ray i's jitter in the iteration of `seed` (every pass of the iteration sees the same).
+  Jitter JitterOf(int64_t i, uint32_t seed) const {
+    return {seed, static_cast<uint32_t>(i), level_.residuals.jitter};
+  }
+
   BoxRay<float> RayOf(int64_t i, uint32_t seed) const {
     const RayPixel& px = level_.rays->pixels[i];
     return PixelBoxRay(level_.rays->cameras[px.camera], level_.geometry.box, level_.shape.n, px.x, px.y,
-                       Jitter{seed, static_cast<uint32_t>(i), level_.residuals.jitter});
+                       JitterOf(i, seed));
   }
 
   void ClearBlock(BlockJ* b, int64_t rays) const {
@@ -437,7 +444,7 @@ class CpuBackend final : public Backend {
 
   // The partials of ray i at the linearisation point, into s.row (no recorded Jacobian).
   void RecomputeRow(const VolumeView<float>& vol, const BoxRay<float>& ray, int64_t i, Scratch& s) const {
-    const Jitter jit{lin_seed_, static_cast<uint32_t>(i), level_.residuals.jitter};
+    const Jitter jit = JitterOf(i, lin_seed_);
     ClearBlock(&s.row, 1);
     const RayOutput<float> fwd = Forward(vol, ray, jit, &level_.rays->colours[3 * i], level_.residuals.lambda,
                                          level_.residuals.stop_transmittance, s.record.data());
@@ -458,7 +465,6 @@ class CpuBackend final : public Backend {
   // Bytes of the recorded Jacobian: every ray's march length (no jitter needed for the count;
   // early termination only shortens it) times the per-sample record, plus the shell records.
   int64_t CacheBytes(const LevelProblem& p) const {
-    const std::vector<float> none;
     const VolumeView<float> vol = MakeView(p.shape, p.geometry, nullptr);
     const int64_t n = p.rays->size();
     std::vector<int64_t> per_block((n + kBlockRays - 1) / kBlockRays, 0);

@@ -31,12 +31,11 @@ Image OpacityImage(const RenderOutput& render) {
 }
 
 std::vector<ViewScore> ScoreViews(Backend* backend, VecId x, const std::vector<PosedImage>& views,
-                                  float min_box_opacity, std::vector<RenderOutput>* renders) {
+                                  float min_box_opacity) {
   std::vector<ViewScore> scores;
   for (const PosedImage& v : views) {
-    RenderOutput r = backend->Render(x, v.camera, v.image.width, v.image.height, min_box_opacity);
+    const RenderOutput r = backend->Render(x, v.camera, v.image.width, v.image.height, min_box_opacity);
     scores.push_back({v.name, Psnr(r, v.image)});
-    if (renders) renders->push_back(std::move(r));
   }
   return scores;
 }

@@ -21,9 +21,8 @@ Image ToImage(const RenderOutput& render);          // RGB
 Image OpacityImage(const RenderOutput& render);     // one channel: 1 - T_box
 
 // Renders every view at its own size (no jitter, paper's min box opacity rule) and scores it.
-// renders: optional, receives the renders in order.
 std::vector<ViewScore> ScoreViews(Backend* backend, VecId x, const std::vector<PosedImage>& views,
-                                  float min_box_opacity, std::vector<RenderOutput>* renders = nullptr);
+                                  float min_box_opacity);
 
 // The mean of the per-view PSNRs (the NeRF convention); 0 for no views.
 double MeanPsnr(const std::vector<ViewScore>& scores);

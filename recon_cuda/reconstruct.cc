@@ -210,10 +210,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     const auto t_level = WallClock::now();
     double eval_seconds = 0;
     const VolumeShape shape = shape_of(level);
-    if (level == 0 || x.empty()) {
-      InitOptions init = o.init;
-      x = InitialParams(shape, geometry, init);
-    }
+    if (x.empty()) x = InitialParams(shape, geometry, o.init);  // level 0 of a fresh start
     LevelReport lr;
     lr.level = level;
     lr.shape = shape;
@@ -228,9 +225,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     }
     lr.rays = rays.size();
     LevelProblem problem{shape, geometry, &rays, o.residuals};
-    const int vectors = RequiredVectors(o.solver.type);
-    const MemoryEstimate mem = backend->EstimateMemory(problem, vectors);
-    backend->SetLevel(problem, vectors);
+    const MemoryEstimate mem = backend->SetLevel(problem, RequiredVectors(o.solver.type));
     say(StrCat("level ", level + 1, "/", levels, ": ", DescribeShape(shape), ", ", lr.rays, " rays",
                lr.image_downscale > 1 ? StrCat(" (images / ", lr.image_downscale, ")") : std::string(),
                "; memory: vectors ", FormatBytes(mem.vectors), ", per-thread sums ", FormatBytes(mem.scratch),
@@ -241,10 +236,11 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     SolverOptions so = o.solver;
     so.max_iterations = o.iterations;
     so.seed = Hash(o.init.seed, static_cast<uint32_t>(level), 0x1e7e1u);
-    const VecId x_id = kSolverX;
+    int held_out_iteration = -1;  // the iteration whose held-out PSNR was logged last
+    double held_out_psnr = 0;
     auto held_out = [&]() {
       const auto t0 = WallClock::now();
-      const double psnr = MeanPsnr(ScoreViews(backend.get(), x_id, test, o.min_box_opacity));
+      const double psnr = MeanPsnr(ScoreViews(backend.get(), kSolverX, test, o.min_box_opacity));
       eval_seconds += SecondsSince(t0);
       return psnr;
     };
@@ -255,12 +251,14 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
       json line = IterationJson(lr, so, s, solve_elapsed_at_level_start + iter_time);
       const bool last_it = s.iteration + 1 == so.max_iterations;
       if (!test.empty() && o.eval_every > 0 && ((s.iteration + 1) % o.eval_every == 0 || last_it)) {
-        line["test_psnr"] = held_out();
+        held_out_psnr = held_out();
+        held_out_iteration = s.iteration;
+        line["test_psnr"] = held_out_psnr;
       }
       if (o.preview_every > 0 && ((s.iteration + 1) % o.preview_every == 0 || last_it)) {
         const auto t0 = WallClock::now();
         const PosedImage& v = preview_views.front();
-        const RenderOutput r = backend->Render(x_id, v.camera, v.image.width, v.image.height, o.min_box_opacity);
+        const RenderOutput r = backend->Render(kSolverX, v.camera, v.image.width, v.image.height, o.min_box_opacity);
         const fs::path p = o.workspace / "preview" / StrCat("recon_l", level, "_i", s.iteration + 1, ".png");
         EnsureWritableDirectory(p.parent_path());
         WriteImage(p, ToImage(r), PixelFormat::kUInt8);
@@ -287,7 +285,10 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     lr.cost = summary.final_cost;
     lr.train_psnr = summary.per_iteration.empty() ? 0 : summary.per_iteration.back().train_psnr;
     lr.status = StatusName(summary.status);
-    if (!test.empty()) lr.test_psnr = held_out();  // the backend still holds x in kSolverX
+    if (!test.empty()) {
+      // The last iteration's, when the log has it; else now (the backend still holds x).
+      lr.test_psnr = held_out_iteration == summary.iterations - 1 ? held_out_psnr : held_out();
+    }
     WriteCheckpoint(CheckpointPath(o.workspace, level),
                     MakeCheckpoint(scene, level, shape, summary.iterations, o.solver.type, x));
     lr.seconds = SecondsSince(t_level) - eval_seconds;

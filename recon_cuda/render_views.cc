@@ -50,16 +50,15 @@ RenderViewsResult RenderViews(const RenderViewsOptions& o) {
   EnsureWritableDirectory(out_dir);
   int done = 0;
   for (const PosedImage& v : views) {
-    std::vector<RenderOutput> renders;
-    const std::vector<ViewScore> s = ScoreViews(backend.get(), 0, {v}, o.min_box_opacity, &renders);
-    result.scores.push_back(s[0]);
+    const RenderOutput render = backend->Render(0, v.camera, v.image.width, v.image.height, o.min_box_opacity);
+    result.scores.push_back({v.name, Psnr(render, v.image)});
     const std::string stem = fs::path(v.name).filename().replace_extension().string();
     const fs::path file = out_dir / (stem + ".png");
-    WriteImage(file, ToImage(renders[0]), PixelFormat::kUInt8);
+    WriteImage(file, ToImage(render), PixelFormat::kUInt8);
     result.files.push_back(file);
     if (o.write_opacity) {
       const fs::path op = out_dir / (stem + "_opacity.png");
-      WriteImage(op, OpacityImage(renders[0]), PixelFormat::kUInt16);
+      WriteImage(op, OpacityImage(render), PixelFormat::kUInt16);
       result.files.push_back(op);
     }
     if (o.progress) o.progress(++done, static_cast<int>(views.size()));

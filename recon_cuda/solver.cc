@@ -72,8 +72,6 @@ namespace {
 
 // PCG (paper Algorithm 2) on (J^T J + mu D) d = -g, d = 0 at the start. Returns iterations.
 int SolvePcg(const SolverOptions& o, Backend* b, SolverSummary* summary) {
-  const int64_t params = b->level().shape.ParamCount();
-  (void)params;
   b->Fill(kStep, 0.f);
   b->Fill(kResidual, 0.f);
   b->Axpy(kResidual, -1.0, kG);  // r0 = b - A 0 = -g
