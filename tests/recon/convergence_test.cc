@@ -20,21 +20,35 @@ const test::SyntheticScene& Scene() {
   return scene;
 }
 
-TEST(ConvergenceTest, GaussNewtonRecoversAKnownScene) {
+// The scene's training rays on a CPU backend.
+class ConvergenceTest : public ::testing::Test {
+ protected:
+  // Makes `shape` the backend's level with `vectors` vectors.
+  void SetLevel(const VolumeShape& shape, int vectors) {
+    backend->SetLevel(LevelProblem{shape, scene.geometry, &rays, {}}, vectors);
+  }
+  std::vector<float> RandomStart(const VolumeShape& shape) const {
+    return InitialParams(shape, scene.geometry, InitOptions{});
+  }
+
   const test::SyntheticScene& scene = Scene();
-  auto backend = MakeCpuBackend({});
+  std::unique_ptr<Backend> backend = MakeCpuBackend({});
   const RaySet rays = MakeRaySet(scene.train);
+};
+using SolverTest = ConvergenceTest;
+
+TEST_F(ConvergenceTest, GaussNewtonRecoversAKnownScene) {
   VolumeShape shape{16, 8, 2};
-  std::vector<float> x = InitialParams(shape, scene.geometry, InitOptions{});
+  std::vector<float> x = RandomStart(shape);
   const double start_psnr = [&] {
-    backend->SetLevel(LevelProblem{shape, scene.geometry, &rays, {}}, 1);
+    SetLevel(shape, 1);
     backend->Upload(0, x);
     return MeanPsnr(ScoreViews(backend.get(), 0, scene.test, 0.f));
   }();
   SolverOptions so;
   so.max_iterations = 15;
   for (int level = 0; level < 2; ++level) {
-    backend->SetLevel(LevelProblem{shape, scene.geometry, &rays, {}}, RequiredVectors(so.type));
+    SetLevel(shape, RequiredVectors(so.type));
     so.seed = 100 + level;
     SolverSummary summary;
     Solve(so, backend.get(), &x, {}, &summary);
@@ -64,17 +78,14 @@ TEST(ConvergenceTest, GaussNewtonRecoversAKnownScene) {
   EXPECT_LT(start_psnr, 15.0);
 }
 
-TEST(ConvergenceTest, AdamRunsOnTheSamePasses) {
-  const test::SyntheticScene& scene = Scene();
-  auto backend = MakeCpuBackend({});
-  const RaySet rays = MakeRaySet(scene.train);
+TEST_F(ConvergenceTest, AdamRunsOnTheSamePasses) {
   const VolumeShape shape{16, 8, 2};
-  std::vector<float> x = InitialParams(shape, scene.geometry, InitOptions{});
+  std::vector<float> x = RandomStart(shape);
   SolverOptions so;
   so.type = SolverType::kAdam;
   so.max_iterations = 40;
   so.adam.lr_density = 0.3f;
-  backend->SetLevel(LevelProblem{shape, scene.geometry, &rays, {}}, RequiredVectors(so.type));
+  SetLevel(shape, RequiredVectors(so.type));
   SolverSummary summary;
   Solve(so, backend.get(), &x, {}, &summary);
   EXPECT_EQ(summary.linearize_passes, 40);
@@ -83,7 +94,7 @@ TEST(ConvergenceTest, AdamRunsOnTheSamePasses) {
   for (float v : x) ASSERT_GE(v, 0.f);  // projected after every step
 }
 
-TEST(SolverTest, OptionsAreChecked) {
+TEST_F(SolverTest, OptionsAreChecked) {
   SolverOptions o;
   EXPECT_NO_THROW(o.Check());
   o.step_factor = 1.0;
@@ -101,13 +112,10 @@ TEST(SolverTest, OptionsAreChecked) {
   EXPECT_THROW(o.Check(), InputError);
 }
 
-TEST(SolverTest, CallbackStopsAndSummaryReports) {
-  const test::SyntheticScene& scene = Scene();
-  auto backend = MakeCpuBackend({});
-  const RaySet rays = MakeRaySet(scene.train);
+TEST_F(SolverTest, CallbackStopsAndSummaryReports) {
   const VolumeShape shape{8, 4, 2};
-  std::vector<float> x = InitialParams(shape, scene.geometry, InitOptions{});
-  backend->SetLevel(LevelProblem{shape, scene.geometry, &rays, {}}, RequiredVectors(SolverType::kGaussNewton));
+  std::vector<float> x = RandomStart(shape);
+  SetLevel(shape, RequiredVectors(SolverType::kGaussNewton));
   SolverOptions so;
   so.max_iterations = 10;
   so.line_search_ray_stride = 4;
