@@ -15,6 +15,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -399,6 +400,65 @@ void Undistorter::MapToDistorted(double x, double y, double* xd, double* yd) con
   // COLMAP's forward model rather than the float tables: exact, and defined between pixels.
   const Model m{maps_->model, maps_->params, pinhole_.width, pinhole_.height};
   DistortedPixel(m, pinhole_, x, y, xd, yd);
+}
+
+void Undistorter::MapFromDistorted(std::vector<float>* x, std::vector<float>* y) const {
+  PERF_CHECK_MSG(maps_ != nullptr, "MapFromDistorted on a moved-from Undistorter");
+  const int width = pinhole_.width, height = pinhole_.height;
+  const size_t count = static_cast<size_t>(width) * height;
+  x->resize(count);
+  y->resize(count);
+  if (identity_) {
+    for (int j = 0; j < height; ++j) {
+      for (int i = 0; i < width; ++i) {
+        (*x)[static_cast<size_t>(j) * width + i] = static_cast<float>(i + 0.5);
+        (*y)[static_cast<size_t>(j) * width + i] = static_cast<float>(j + 0.5);
+      }
+    }
+    return;
+  }
+  // OpenCV's iterative undistortion gives the start; Newton steps on COLMAP's exact forward
+  // model (as MapToDistorted) polish it, and points that do not come back to their pixel
+  // (beyond a fold of the model) are NaN.
+  const colmap::FocalAndCentre fc = colmap::GetFocalAndCentre(maps_->model, maps_->params.data());
+  const cv::Matx33d K = ToOpenCvK(fc.fx, fc.fy, fc.cx, fc.cy);
+  const cv::Matx33d k_new = ToOpenCvK(pinhole_.fx, pinhole_.fy, pinhole_.cx, pinhole_.cy);
+  const std::vector<double> D = OpenCvDistortion(maps_->model, maps_->params);
+  const Model m{maps_->model, maps_->params, width, height};
+  cv::parallel_for_(cv::Range(0, height), [&](const cv::Range& rows) {
+    std::vector<cv::Point2d> in(width), out;
+    for (int j = rows.start; j < rows.end; ++j) {
+      for (int i = 0; i < width; ++i) in[i] = {static_cast<double>(i), static_cast<double>(j)};
+      const cv::TermCriteria criteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 50, 1e-10);
+      if (IsFisheye(m.id)) {
+        cv::fisheye::undistortPoints(in, out, K, D, cv::noArray(), k_new, criteria);
+      } else {
+        cv::undistortPoints(in, out, K, D, cv::noArray(), k_new, criteria);
+      }
+      for (int i = 0; i < width; ++i) {
+        const double xd_target = i + 0.5, yd_target = j + 0.5;
+        double px = out[i].x + 0.5, py = out[i].y + 0.5;
+        double err = 0;
+        for (int it = 0; it < 5; ++it) {
+          constexpr double h = 1e-3;
+          double xd, yd, x1, y1, x2, y2;
+          DistortedPixel(m, pinhole_, px, py, &xd, &yd);
+          DistortedPixel(m, pinhole_, px + h, py, &x1, &y1);
+          DistortedPixel(m, pinhole_, px, py + h, &x2, &y2);
+          const double a = (x1 - xd) / h, b = (x2 - xd) / h, c = (y1 - yd) / h, d = (y2 - yd) / h;
+          const double ex = xd - xd_target, ey = yd - yd_target, det = a * d - b * c;
+          err = std::max(std::abs(ex), std::abs(ey));
+          if (err < 1e-6 || !(det > 0)) break;
+          px -= (d * ex - b * ey) / det;
+          py -= (-c * ex + a * ey) / det;
+        }
+        const bool ok = std::isfinite(px) && std::isfinite(py) && err < 1e-2;
+        const size_t k = static_cast<size_t>(j) * width + i;
+        (*x)[k] = ok ? static_cast<float>(px) : std::numeric_limits<float>::quiet_NaN();
+        (*y)[k] = ok ? static_cast<float>(py) : std::numeric_limits<float>::quiet_NaN();
+      }
+    }
+  });
 }
 
 }  // namespace perf

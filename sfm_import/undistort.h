@@ -5,6 +5,7 @@
 #pragma once
 
 #include <memory>
+#include <vector>
 
 #include "sfm_import/colmap_model.h"
 #include "sfm_import/image.h"
@@ -41,6 +42,12 @@ class Undistorter {
   // Where the centre of output pixel (x, y) (PERF convention) lands in the distorted input,
   // in PERF pixel coordinates. For tests and for mapping masks back.
   void MapToDistorted(double x, double y, double* xd, double* yd) const;
+
+  // The inverse, for every pixel centre of the distorted input (width x height, row-major):
+  // where it lands in the output pinhole, PERF pixel coordinates (possibly outside the output,
+  // which keeps only valid pixels). NaN where the model has no inverse (beyond a fold). Used
+  // to map results (masks) back into the original photos.
+  void MapFromDistorted(std::vector<float>* x, std::vector<float>* y) const;
 
  private:
   Undistorter() = default;

@@ -118,6 +118,47 @@ TEST_P(UndistortDistorted, MapToDistortedFollowsColmapProjection) {
   }
 }
 
+// The inverse map sends each distorted pixel centre to the pinhole pixel that MapToDistorted
+// sends back to it (where the model is invertible), and the known projection of a 3D point
+// lands where the point projects in the pinhole.
+TEST_P(UndistortDistorted, MapFromDistortedInvertsMapToDistorted) {
+  const colmap::Camera& camera = GetParam().camera;
+  const Undistorter u = Undistorter::Create(camera, "test camera");
+  std::vector<float> mx, my;
+  u.MapFromDistorted(&mx, &my);
+  const int w = static_cast<int>(camera.width), h = static_cast<int>(camera.height);
+  ASSERT_EQ(mx.size(), static_cast<size_t>(w) * h);
+  int valid = 0, checked = 0;
+  for (int j = 0; j < h; j += 7) {
+    for (int i = 0; i < w; i += 7) {
+      const size_t k = static_cast<size_t>(j) * w + i;
+      if (std::isnan(mx[k])) continue;
+      ++valid;
+      double xd, yd;
+      u.MapToDistorted(mx[k], my[k], &xd, &yd);
+      EXPECT_NEAR(xd, i + 0.5, 2e-3) << "pixel " << i << ", " << j;
+      EXPECT_NEAR(yd, j + 0.5, 2e-3) << "pixel " << i << ", " << j;
+      ++checked;
+    }
+  }
+  // The centre of the photo always has an inverse; the folding camera loses its corners only.
+  EXPECT_GT(valid, checked / 2);
+  EXPECT_FALSE(std::isnan(mx[static_cast<size_t>(h / 2) * w + w / 2]));
+  for (const auto& X : PointsInView(u.pinhole())) {
+    double xd, yd, xu, yu;
+    ProjectDistorted(camera, X.data(), &xd, &yd);
+    ProjectPinhole(u.pinhole(), X.data(), &xu, &yu);
+    // The pixel whose centre is nearest to the distorted projection maps near the pinhole one
+    // (within the pinhole's scale of half a distorted pixel).
+    const int i = static_cast<int>(xd), j = static_cast<int>(yd);
+    if (i < 0 || j < 0 || i >= w || j >= h) continue;
+    const size_t k = static_cast<size_t>(j) * w + i;
+    ASSERT_FALSE(std::isnan(mx[k]));
+    EXPECT_NEAR(mx[k], xu, 2.0) << "point " << X[0] << ", " << X[1] << ", " << X[2];
+    EXPECT_NEAR(my[k], yu, 2.0) << "point " << X[0] << ", " << X[1] << ", " << X[2];
+  }
+}
+
 // Every output pixel centre samples the input between its outermost pixel centres (so also
 // inside [0, W] x [0, H]), and the fit is tight: some border pixel lands on the edge.
 TEST_P(UndistortDistorted, KeepsOnlyValidPixelsAndAllOfThem) {
