@@ -2,22 +2,41 @@
 
 #include "common/errors.h"
 #include "recon_cuda/cpu_backend.h"
+#ifdef PERF_WITH_CUDA
+#include "recon_cuda/cuda_backend.h"
+#endif
 
 namespace perf::recon {
 
+bool CudaDeviceAvailable(std::string* name, std::string* reason) {
+#ifdef PERF_WITH_CUDA
+  return ProbeCudaDevice(name, reason);
+#else
+  (void)name;
+  if (reason) *reason = "this build of perf has no CUDA backend (nvcc was not found when it was configured)";
+  return false;
+#endif
+}
+
 std::unique_ptr<Backend> MakeBackend(const std::string& device, int threads) {
-  if (device == "cpu" || device == "auto") {
-    // "auto" is the CPU until the CUDA backend lands (issue 4): there are no CUDA passes yet.
-    CpuBackendOptions o;
-    o.threads = threads;
-    return MakeCpuBackend(o);
+  if (device != "cpu" && device != "cuda" && device != "auto") {
+    throw InputError("command line", "--device", device, "unknown device", "use cpu, cuda or auto");
   }
-  if (device == "cuda") {
-    throw InputError("command line", "--device", device,
-                     "the CUDA backend of the solver is not implemented yet in this build",
-                     "use --device cpu (or auto)");
+  if (device != "cpu") {
+    std::string reason;
+    if (CudaDeviceAvailable(nullptr, &reason)) {
+#ifdef PERF_WITH_CUDA
+      return MakeCudaBackend(CudaBackendOptions{});
+#endif
+    }
+    if (device == "cuda") {
+      throw ResourceError(StrCat("--device cuda: no CUDA device: ", reason,
+                                 "; use --device cpu (or --device auto, which falls back to the CPU)"));
+    }
   }
-  throw InputError("command line", "--device", device, "unknown device", "use cpu, cuda or auto");
+  CpuBackendOptions o;
+  o.threads = threads;
+  return MakeCpuBackend(o);
 }
 
 }  // namespace perf::recon

@@ -10,6 +10,7 @@
 //   Render      one camera without jitter.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -58,6 +59,9 @@ struct PassStats {
   double seconds = 0;
 };
 
+// -10 log10(mse), 99 dB for a perfect match.
+inline double PsnrFromMse(double mse) { return mse > 0 ? -10.0 * std::log10(mse) : 99.0; }
+
 struct MemoryEstimate {
   int64_t vectors = 0;        // the solver's parameter vectors
   int64_t scratch = 0;        // per-thread sums and other working memory
@@ -71,6 +75,18 @@ struct AdamSettings {
   float lr_colour = 0.02f, lr_density = 1.0f, lr_opacity = 0.02f;
   float beta1 = 0.9f, beta2 = 0.999f, epsilon = 1e-8f;
 };
+
+// The scalars of Adam step t (from 1) that every element's update shares (param_ops.h).
+inline AdamCoefficients AdamCoefficientsAt(const AdamSettings& s, int t) {
+  return {s.lr_colour,
+          s.lr_density,
+          s.lr_opacity,
+          s.beta1,
+          s.beta2,
+          s.epsilon,
+          1.f / (1.f - std::pow(s.beta1, static_cast<float>(t))),
+          1.f / (1.f - std::pow(s.beta2, static_cast<float>(t)))};
+}
 
 struct RenderOutput {
   int width = 0, height = 0;
@@ -127,6 +143,12 @@ class Backend {
 };
 
 // "cpu", "cuda" or "auto" (cuda when a device is visible). threads: CPU worker threads, 0 = all.
+// "cuda" without a usable device (or in a build without CUDA) throws ResourceError saying so.
 std::unique_ptr<Backend> MakeBackend(const std::string& device, int threads);
+
+// Whether the CUDA backend can run here: built with CUDA and a device visible to the runtime.
+// Never throws and is safe without a driver. name: the device's name when true; reason: why not
+// when false (either may be nullptr).
+bool CudaDeviceAvailable(std::string* name, std::string* reason = nullptr);
 
 }  // namespace perf::recon

@@ -236,20 +236,9 @@ class CpuBackend final : public Backend {
     float* pm = vec(m).data();
     float* pv = vec(v).data();
     const VolumeShape shape = level_.shape;
-    const float c1 = 1.f / (1.f - std::pow(s.beta1, static_cast<float>(t)));
-    const float c2 = 1.f / (1.f - std::pow(s.beta2, static_cast<float>(t)));
+    const AdamCoefficients a = AdamCoefficientsAt(s, t);
     ForChunks([&](int64_t b, int64_t e) {
-      for (int64_t i = b; i < e; ++i) {
-        pm[i] = s.beta1 * pm[i] + (1 - s.beta1) * pg[i];
-        pv[i] = s.beta2 * pv[i] + (1 - s.beta2) * pg[i] * pg[i];
-        float lr = s.lr_colour;
-        switch (KindOf(shape, i)) {
-          case ParamKind::kGridDensity: lr = s.lr_density; break;
-          case ParamKind::kShellOpacity: lr = s.lr_opacity; break;
-          default: break;
-        }
-        px[i] -= lr * (pm[i] * c1) / (std::sqrt(pv[i] * c2) + s.epsilon);
-      }
+      for (int64_t i = b; i < e; ++i) AdamUpdate(a, KindOf(shape, i), pg[i], &px[i], &pm[i], &pv[i]);
     });
     Project(x);
   }

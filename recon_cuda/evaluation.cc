@@ -16,8 +16,6 @@ double Psnr(const RenderOutput& render, const Image& truth) {
   return PsnrFromMse(sse / static_cast<double>(render.colour.size()));
 }
 
-double PsnrFromMse(double mse) { return mse > 0 ? -10.0 * std::log10(mse) : 99.0; }
-
 Image ToImage(const RenderOutput& render) {
   Image im(render.width, render.height, 3);
   im.pixels = render.colour;

@@ -14,8 +14,6 @@ struct ViewScore {
   double psnr = 0;  // over all pixels and the three channels, values in [0, 1]
 };
 
-// -10 log10(mse), 99 dB for a perfect match.
-double PsnrFromMse(double mse);
 double Psnr(const RenderOutput& render, const Image& truth);
 Image ToImage(const RenderOutput& render);          // RGB
 Image OpacityImage(const RenderOutput& render);     // one channel: 1 - T_box

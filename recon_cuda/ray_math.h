@@ -21,6 +21,12 @@ struct PinholeCamera {
   T world_from_cam[12];  // row-major 3x4 [R | t], camera centre = t
 };
 
+// One training ray: pixel (x, y) of camera `camera` (an index into the level's cameras).
+struct RayPixel {
+  uint32_t camera;
+  uint16_t x, y;
+};
+
 // The box of scene.h: world p is box-local q = R^T (p - center), inside when |q| <= size / 2.
 template <class T>
 struct BoxFrame {

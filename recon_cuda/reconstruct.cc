@@ -41,25 +41,6 @@ class JsonLog {
   std::ofstream out_;
 };
 
-// The largest power-of-two downscale (at most `max_factor`) that keeps a voxel of the grid at
-// least one pixel wide in the median training view, measured at the box centre.
-int PyramidFactor(const std::vector<PosedImage>& images, const VolumeGeometry& geo, int n, int max_factor) {
-  if (images.empty() || max_factor <= 1) return 1;
-  std::vector<double> px_per_voxel;
-  const double voxel = std::min({geo.box.size.x, geo.box.size.y, geo.box.size.z}) / n;
-  for (const PosedImage& im : images) {
-    const float* m = im.camera.world_from_cam;
-    const double dx = m[3] - geo.box.center.x, dy = m[7] - geo.box.center.y, dz = m[11] - geo.box.center.z;
-    const double dist = std::max(1e-9, std::sqrt(dx * dx + dy * dy + dz * dz));
-    px_per_voxel.push_back(im.camera.fx * voxel / dist);
-  }
-  std::nth_element(px_per_voxel.begin(), px_per_voxel.begin() + px_per_voxel.size() / 2, px_per_voxel.end());
-  const double median = px_per_voxel[px_per_voxel.size() / 2];
-  int f = 1;
-  while (2 * f <= max_factor && median / (2 * f) >= 1.0) f *= 2;
-  return f;
-}
-
 std::string FormatBytes(int64_t b) {
   std::ostringstream s;
   s.precision(3);
@@ -201,6 +182,8 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   }
   JsonLog log(o.workspace / "recon" / "log.jsonl", start > 0);
   if (start > 0) log.Write({{"event", "resume"}, {"level", start}});
+  std::vector<PinholeCamera<float>> train_cameras;
+  for (const PosedImage& im : train) train_cameras.push_back(im.camera);
   const std::vector<PosedImage>& preview_views = test.empty() ? train : test;
   say(StrCat("backend: ", result.backend, "; ", train.size(), " training and ", test.size(), " held-out views; ",
              levels, " levels from ", o.start_resolution, "^3"));
@@ -214,7 +197,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     LevelReport lr;
     lr.level = level;
     lr.shape = shape;
-    lr.image_downscale = o.pyramid ? PyramidFactor(train, geometry, shape.n, 1 << (levels - 1 - level)) : 1;
+    lr.image_downscale = o.pyramid ? PyramidFactor(train_cameras, geometry, shape.n, 1 << (levels - 1 - level)) : 1;
     RaySet rays;
     if (lr.image_downscale > 1) {
       std::vector<PosedImage> small;

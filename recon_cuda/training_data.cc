@@ -59,39 +59,4 @@ PosedImage Downscaled(const PosedImage& image, int factor) {
   return out;
 }
 
-int64_t RaySet::Bytes() const {
-  return static_cast<int64_t>(cameras.size() * sizeof(PinholeCamera<float>) + pixels.size() * sizeof(RayPixel) +
-                              colours.size() * sizeof(float));
-}
-
-RaySet MakeRaySet(const std::vector<PosedImage>& images) {
-  RaySet rays;
-  int64_t total = 0;
-  for (const PosedImage& im : images) {
-    if (im.image.width > 65535 || im.image.height > 65535) {
-      throw InputError(im.name, "size", StrCat(im.image.width, "x", im.image.height), "images over 65535 pixels a side",
-                       "re-run perf import with --downscale");
-    }
-    total += static_cast<int64_t>(im.image.width) * im.image.height;
-  }
-  rays.pixels.reserve(total);
-  rays.colours.reserve(3 * total);
-  constexpr int kTile = 8;
-  for (size_t c = 0; c < images.size(); ++c) {
-    const Image& img = images[c].image;
-    rays.cameras.push_back(images[c].camera);
-    for (int ty = 0; ty < img.height; ty += kTile) {
-      for (int tx = 0; tx < img.width; tx += kTile) {
-        for (int y = ty; y < std::min(ty + kTile, img.height); ++y) {
-          for (int x = tx; x < std::min(tx + kTile, img.width); ++x) {
-            rays.pixels.push_back({static_cast<uint32_t>(c), static_cast<uint16_t>(x), static_cast<uint16_t>(y)});
-            for (int ch = 0; ch < 3; ++ch) rays.colours.push_back(img.at(x, y, ch));
-          }
-        }
-      }
-    }
-  }
-  return rays;
-}
-
 }  // namespace perf::recon

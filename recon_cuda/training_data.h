@@ -6,10 +6,12 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <span>
 #include <string>
 #include <vector>
 
 #include "recon_cuda/ray_math.h"
+#include "recon_cuda/volume.h"
 #include "sfm_import/image.h"
 #include "sfm_import/scene.h"
 
@@ -32,11 +34,6 @@ PinholeCamera<float> ToPinhole(const SceneCamera& camera, const Eigen::Matrix<do
 // scaled to match: pixel edges map to pixel edges, so f and c both divide by the factor.
 PosedImage Downscaled(const PosedImage& image, int factor);
 
-struct RayPixel {
-  uint32_t camera;
-  uint16_t x, y;
-};
-
 // Rays of one level. Ordered image by image in 8 x 8 pixel tiles, so that consecutive rays (one
 // thread's block) meet the same cells: better cache use than scanlines.
 struct RaySet {
@@ -48,5 +45,11 @@ struct RaySet {
 };
 
 RaySet MakeRaySet(const std::vector<PosedImage>& images);
+
+// The image pyramid's rule: the largest power-of-two downscale (at most `max_factor`) that keeps
+// a voxel of the n^3 grid at least one pixel wide in the median training view, measured at the
+// box centre.
+int PyramidFactor(std::span<const PinholeCamera<float>> cameras, const VolumeGeometry& geometry, int n,
+                  int max_factor);
 
 }  // namespace perf::recon

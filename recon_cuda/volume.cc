@@ -6,21 +6,8 @@
 #include <sstream>
 
 #include "common/errors.h"
-#include "sfm_import/scene.h"
 
 namespace perf::recon {
-
-VolumePlacement VolumePlacement::FromScene(const Scene& scene) {
-  VolumePlacement p;
-  for (int a = 0; a < 3; ++a) {
-    p.box_center[a] = scene.box.center[a];
-    p.box_size[a] = scene.box.size[a];
-    p.shell_center[a] = scene.shells.center[a];
-  }
-  for (int i = 0; i < 9; ++i) p.box_rotation[i] = scene.box.rotation(i / 3, i % 3);
-  p.shell_radii = scene.shells.radii;
-  return p;
-}
 
 VolumeGeometry VolumeGeometry::From(const VolumePlacement& p, const std::string& source) {
   const double* s = p.box_size;
@@ -47,10 +34,6 @@ VolumeGeometry VolumeGeometry::From(const VolumePlacement& p, const std::string&
   g.shell_center = {static_cast<float>(local[0]), static_cast<float>(local[1]), static_cast<float>(local[2])};
   for (double radius : p.shell_radii) g.shell_radii.push_back(static_cast<float>(radius));
   return g;
-}
-
-VolumeGeometry VolumeGeometry::FromScene(const Scene& scene) {
-  return From(VolumePlacement::FromScene(scene), "scene.json");
 }
 
 VolumeView<float> MakeView(const VolumeShape& shape, const VolumeGeometry& geometry, const float* params) {

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "recon_cuda/param_ops.h"
 #include "recon_cuda/ray_math.h"
 
 namespace perf {
@@ -83,19 +84,8 @@ std::vector<float> Resample(const VolumeShape& from, std::span<const float> para
 // The valid range (DESIGN.md "Gauss-Newton step"): sigma >= 0, colours and opacities in [0, 1].
 void ProjectToValidRange(const VolumeShape& shape, std::span<float> params);
 
-// Which of the 4 channels of parameter i is what (for per-kind learning rates and bounds).
-enum class ParamKind { kGridColour, kGridDensity, kShellColour, kShellOpacity };
-inline ParamKind KindOf(const VolumeShape& shape, int64_t i) {
-  const bool grid = i < shape.GridParamCount();
-  const bool fourth = i % 4 == 3;
-  return grid ? (fourth ? ParamKind::kGridDensity : ParamKind::kGridColour)
-              : (fourth ? ParamKind::kShellOpacity : ParamKind::kShellColour);
-}
-
-// The valid range of one parameter (ProjectToValidRange, element by element).
-inline float ProjectToValid(ParamKind kind, float v) {
-  return kind == ParamKind::kGridDensity ? std::max(v, 0.f) : std::clamp(v, 0.f, 1.f);
-}
+// Which of the 4 channels of parameter i is what (param_ops.h).
+inline ParamKind KindOf(const VolumeShape& shape, int64_t i) { return KindOfParam(shape.GridParamCount(), i); }
 
 // "128^3 grid, 4 shells of 6 x 128^2 texels (33.8 M parameters)".
 std::string DescribeShape(const VolumeShape& shape);

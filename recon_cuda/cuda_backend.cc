@@ -1,0 +1,298 @@
+#include "recon_cuda/cuda_backend.h"
+
+#include <cuda_runtime_api.h>
+
+#include <algorithm>
+#include <vector>
+
+#include "common/errors.h"
+#include "common/stopwatch.h"
+#include "recon_cuda/cuda_check.h"
+#include "recon_cuda/cuda_kernels.h"
+#include "recon_cuda/device_buffer.h"
+
+namespace perf::recon {
+namespace {
+
+using cuda::DeviceBuffer;
+
+static_assert(sizeof(RayPixel) == 8, "RayPixel is copied to the device as is");
+
+std::string Mib(int64_t bytes) { return StrCat((bytes + (1 << 20) - 1) >> 20, " MiB"); }
+
+// Device bytes of the training rays: cameras, pixels and 8-bit colours.
+int64_t RayBytes(const RaySet& rays) {
+  return static_cast<int64_t>(rays.cameras.size() * sizeof(PinholeCamera<float>)) +
+         rays.size() * static_cast<int64_t>(sizeof(RayPixel) + 3);
+}
+
+// The level's rays on the device (one owner: the backend, for one level).
+struct DeviceRays {
+  DeviceBuffer<PinholeCamera<float>> cameras;
+  DeviceBuffer<RayPixel> pixels;
+  DeviceBuffer<uint8_t> colours;
+
+  explicit DeviceRays(const RaySet& rays)
+      : cameras(static_cast<int64_t>(rays.cameras.size())), pixels(rays.size()), colours(3 * rays.size()) {
+    PERF_CHECK(static_cast<int64_t>(rays.colours.size()) == 3 * rays.size());
+    cameras.CopyFromHost(rays.cameras);
+    pixels.CopyFromHost(rays.pixels);
+    std::vector<uint8_t> bytes(rays.colours.size());
+    for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = cuda::ColourToByte(rays.colours[i]);
+    colours.CopyFromHost(bytes);
+  }
+  cuda::RaysView View() const { return {cameras.data(), pixels.data(), colours.data(), pixels.size()}; }
+};
+
+// Pass statistics and reductions' working memory.
+struct Scratch {
+  DeviceBuffer<cuda::RayStats> partials, total;
+  DeviceBuffer<double> result;
+  DeviceBuffer<uint8_t> temp;
+
+  static int64_t Bytes(int64_t rays, int64_t params) {
+    const int64_t blocks = cuda::PassBlocks(rays);
+    return (blocks + 1) * static_cast<int64_t>(sizeof(cuda::RayStats)) + static_cast<int64_t>(sizeof(double)) +
+           static_cast<int64_t>(std::max(cuda::StatsTempBytes(blocks), cuda::ReduceTempBytes(params)));
+  }
+  Scratch(int64_t rays, int64_t params)
+      : partials(std::max<int64_t>(cuda::PassBlocks(rays), 1)),
+        total(1),
+        result(1),
+        temp(static_cast<int64_t>(std::max(cuda::StatsTempBytes(cuda::PassBlocks(rays)), cuda::ReduceTempBytes(params)))) {}
+  cuda::StatsScratch Stats() {
+    return {partials.data(), partials.size(), total.data(), temp.data(), static_cast<size_t>(temp.size())};
+  }
+  cuda::ReduceScratch Reduce() { return {result.data(), temp.data(), static_cast<size_t>(temp.size())}; }
+};
+
+class CudaBackend final : public Backend {
+ public:
+  explicit CudaBackend(const CudaBackendOptions& o) : options_(o) {
+    PERF_CUDA_CHECK(cudaSetDevice(o.device));
+    cudaDeviceProp prop;
+    PERF_CUDA_CHECK(cudaGetDeviceProperties(&prop, o.device));
+    name_ = prop.name;
+    if (const char* e = cuda::KernelImageError()) {
+      throw ResourceError(StrCat("the CUDA device ", name_, " (compute capability ", prop.major, ".", prop.minor,
+                                 ") cannot run this build's kernels (", e,
+                                 "); it is built for sm_90 and newer; use --device cpu"));
+    }
+  }
+
+  std::string Describe() const override { return StrCat("cuda (", name_, ")"); }
+
+  MemoryEstimate EstimateMemory(const LevelProblem& p, int num_vectors) const override {
+    MemoryEstimate e;
+    const int64_t params = p.shape.ParamCount();
+    const int64_t rays = p.rays ? p.rays->size() : 0;
+    e.vectors = int64_t{num_vectors} * params * 4;
+    e.rays = p.rays ? RayBytes(*p.rays) : 0;
+    e.scratch = Scratch::Bytes(rays, params);
+    e.jacobian_cache = 0;  // never cached: MultiplyJtJ recomputes (cuda_passes.cu)
+    e.available = Available();
+    return e;
+  }
+
+  MemoryEstimate SetLevel(const LevelProblem& p, int num_vectors) override {
+    PERF_CHECK(p.rays != nullptr);
+    PERF_CHECK(p.shape.num_shells == p.geometry.num_shells() && p.shape.num_shells <= kMaxShells);
+    PERF_CHECK(num_vectors >= 0);
+    Release();
+    level_ = p;
+    const MemoryEstimate e = EstimateMemory(p, num_vectors);
+    if (e.Total() > e.available) throw ResourceError(TooLarge(p, num_vectors, e));
+    for (int v = 0; v < num_vectors; ++v) {
+      vectors_.emplace_back(p.shape.ParamCount());
+      cuda::Fill(vectors_.back().data(), p.shape.ParamCount(), 0.f);
+    }
+    rays_ = std::make_unique<DeviceRays>(*p.rays);
+    scratch_ = std::make_unique<Scratch>(p.rays->size(), p.shape.ParamCount());
+    held_ = e.Total();
+    return e;
+  }
+
+  const LevelProblem& level() const override { return level_; }
+  bool CachesJacobian() const override { return false; }
+
+  void Upload(VecId v, std::span<const float> host) override { vec(v).CopyFromHost(host); }
+  void Download(VecId v, std::span<float> host) const override { vec(v).CopyToHost(host); }
+  void Fill(VecId v, float value) override { cuda::Fill(ptr(v), n(), value); }
+  void Copy(VecId dst, VecId src) override { cuda::Copy(ptr(dst), ptr(src), n()); }
+  void Axpy(VecId y, double a, VecId x) override { cuda::Axpy(ptr(y), static_cast<float>(a), ptr(x), n()); }
+  void Xpby(VecId y, VecId x, double b) override { cuda::Xpby(ptr(y), ptr(x), static_cast<float>(b), n()); }
+  void DivideClamped(VecId z, VecId r, VecId d, float floor) override {
+    cuda::DivideClamped(ptr(z), ptr(r), ptr(d), floor, n());
+  }
+  void AxpyDiag(VecId y, double a, VecId d, VecId x) override {
+    cuda::AxpyDiag(ptr(y), static_cast<float>(a), ptr(d), ptr(x), n());
+  }
+  double Dot(VecId a, VecId b) const override { return cuda::Dot(ptr(a), ptr(b), n(), scratch_->Reduce()); }
+  double MaxAbs(VecId v) const override { return cuda::MaxAbs(ptr(v), n(), scratch_->Reduce()); }
+  void Project(VecId x) override { cuda::Project(ptr(x), n(), level_.shape.GridParamCount()); }
+  void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) override {
+    cuda::AdamStep(ptr(x), ptr(g), ptr(m), ptr(v), AdamCoefficientsAt(s, t), n(), level_.shape.GridParamCount());
+  }
+
+  PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag) override {
+    const auto t0 = WallClock::now();
+    const cuda::RayStats r = cuda::Linearize(Input(x, seed), ptr(g), diag == kNoVector ? nullptr : ptr(diag), n(),
+                                             scratch_->Stats());
+    lin_x_ = x;
+    lin_seed_ = seed;
+    linearized_ = true;
+    return ToPassStats(r, t0);
+  }
+
+  PassStats MultiplyJtJ(VecId p, VecId out) override {
+    PERF_CHECK_MSG(linearized_, "MultiplyJtJ before Linearize");
+    const auto t0 = WallClock::now();
+    const cuda::RayStats r = cuda::MultiplyJtJ(Input(lin_x_, lin_seed_), ptr(p), ptr(out), n(), scratch_->Stats());
+    return ToPassStats(r, t0);
+  }
+
+  PassStats Cost(VecId x, uint32_t seed, RaySubset subset) override {
+    PERF_CHECK(subset.stride >= 1 && subset.offset >= 0 && subset.offset < subset.stride);
+    const auto t0 = WallClock::now();
+    return ToPassStats(cuda::Cost(Input(x, seed), subset.stride, subset.offset, scratch_->Stats()), t0);
+  }
+
+  RenderOutput Render(VecId x, const PinholeCamera<float>& camera, int width, int height,
+                      float min_box_opacity) override {
+    PERF_CHECK(width >= 0 && height >= 0);
+    RenderOutput r;
+    r.width = width;
+    r.height = height;
+    const int64_t pixels = static_cast<int64_t>(width) * height;
+    r.colour.resize(3 * pixels);
+    r.opacity.resize(pixels);
+    DeviceBuffer<float> colour(3 * pixels), opacity(pixels);
+    cuda::Render(MakeView(level_.shape, level_.geometry, ptr(x)), level_.geometry.box, camera, width, height,
+                 level_.residuals.stop_transmittance, min_box_opacity, colour.data(), opacity.data());
+    colour.CopyToHost(r.colour);
+    opacity.CopyToHost(r.opacity);
+    return r;
+  }
+
+ private:
+  void Release() {
+    vectors_.clear();
+    rays_.reset();
+    scratch_.reset();
+    held_ = 0;
+    linearized_ = false;
+  }
+
+  // What the backend may use: free device memory plus what it holds now (SetLevel frees that
+  // first), less 5 % for the CUDA context's own growth and fragmentation.
+  int64_t Available() const {
+    if (options_.max_memory > 0) return options_.max_memory;
+    size_t free = 0, total = 0;
+    PERF_CUDA_CHECK(cudaMemGetInfo(&free, &total));
+    return (static_cast<int64_t>(free) + held_) / 20 * 19;
+  }
+
+  // The ResourceError message: what the level needs, what is free, and the largest grid that
+  // would fit with the same rays.
+  std::string TooLarge(const LevelProblem& p, int num_vectors, const MemoryEstimate& e) const {
+    std::string hint;
+    for (VolumeShape s = p.shape; s.n >= 2;) {
+      s = {s.n / 2, std::max(1, s.m / 2), s.num_shells};
+      LevelProblem q = p;
+      q.shape = s;
+      const MemoryEstimate f = EstimateMemory(q, num_vectors);
+      if (f.Total() <= e.available) {
+        hint = StrCat("the largest level that fits with these rays is ", DescribeShape(s), " (", Mib(f.Total()),
+                      "): use fewer --levels");
+        break;
+      }
+    }
+    if (hint.empty()) hint = StrCat("the rays alone need ", Mib(e.rays), ": use a larger --downscale");
+    return StrCat("level ", DescribeShape(p.shape), " needs ", Mib(e.Total()), " of GPU memory (", num_vectors,
+                  " solver vectors ", Mib(e.vectors), ", ", p.rays->size(), " rays ", Mib(e.rays), ", scratch ",
+                  Mib(e.scratch), ") but only ", Mib(e.available), " are free on ", name_, "; ", hint,
+                  ", a larger --downscale, or --device cpu");
+  }
+
+  cuda::PassInput Input(VecId x, uint32_t seed) const {
+    return {MakeView(level_.shape, level_.geometry, ptr(x)),
+            level_.geometry.box,
+            rays_->View(),
+            level_.residuals.lambda,
+            level_.residuals.stop_transmittance,
+            level_.residuals.jitter,
+            seed};
+  }
+
+  static PassStats ToPassStats(const cuda::RayStats& r, WallClock::time_point t0) {
+    PassStats s;
+    s.cost = r.cost;
+    s.colour_sse = r.colour_sse;
+    s.rays = r.rays;
+    s.samples = r.samples;
+    s.seconds = SecondsSince(t0);  // the pass has synchronised (its statistics are on the host)
+    return s;
+  }
+
+  DeviceBuffer<float>& vec(VecId v) {
+    PERF_CHECK(v >= 0 && v < static_cast<int>(vectors_.size()));
+    return vectors_[v];
+  }
+  const DeviceBuffer<float>& vec(VecId v) const {
+    PERF_CHECK(v >= 0 && v < static_cast<int>(vectors_.size()));
+    return vectors_[v];
+  }
+  float* ptr(VecId v) { return vec(v).data(); }
+  const float* ptr(VecId v) const { return vec(v).data(); }
+  int64_t n() const { return level_.shape.ParamCount(); }
+
+  CudaBackendOptions options_;
+  std::string name_;
+  LevelProblem level_;
+  std::vector<DeviceBuffer<float>> vectors_;
+  std::unique_ptr<DeviceRays> rays_;
+  std::unique_ptr<Scratch> scratch_;
+  int64_t held_ = 0;  // bytes of the current level (EstimateMemory's Total)
+  bool linearized_ = false;
+  VecId lin_x_ = kNoVector;
+  uint32_t lin_seed_ = 0;
+};
+
+}  // namespace
+
+bool ProbeCudaDevice(std::string* name, std::string* reason) {
+  int count = 0;
+  const cudaError_t e = cudaGetDeviceCount(&count);
+  if (e != cudaSuccess) {
+    cudaGetLastError();
+    if (reason) {
+      *reason = StrCat(cudaGetErrorString(e), " (", cudaGetErrorName(e),
+                       e == cudaErrorInsufficientDriver ? ": no NVIDIA driver, or one older than this CUDA runtime)"
+                                                        : ")");
+    }
+    return false;
+  }
+  if (count == 0) {
+    if (reason) *reason = "the CUDA runtime sees no device (check CUDA_VISIBLE_DEVICES)";
+    return false;
+  }
+  cudaDeviceProp prop;
+  const cudaError_t p = cudaGetDeviceProperties(&prop, 0);
+  if (p != cudaSuccess) {
+    cudaGetLastError();
+    if (reason) *reason = StrCat("cudaGetDeviceProperties: ", cudaGetErrorString(p));
+    return false;
+  }
+  if (name) *name = prop.name;
+  return true;
+}
+
+std::unique_ptr<Backend> MakeCudaBackend(const CudaBackendOptions& options) {
+  std::string reason;
+  if (!ProbeCudaDevice(nullptr, &reason)) {
+    throw ResourceError(StrCat("no CUDA device: ", reason, "; use --device cpu"));
+  }
+  return std::make_unique<CudaBackend>(options);
+}
+
+}  // namespace perf::recon

@@ -1,0 +1,17 @@
+#include "recon_cuda/cuda_check.h"
+
+#include "common/errors.h"
+
+namespace perf::recon::cuda {
+
+void ThrowCudaError(cudaError_t error, const char* call, const char* file, int line) {
+  const std::string what = StrCat(call, " failed at ", file, ":", line, ": ", cudaGetErrorName(error), " (",
+                                  cudaGetErrorString(error), ")");
+  if (error == cudaErrorMemoryAllocation) {
+    throw ResourceError(StrCat("out of GPU memory: ", what,
+                               "; use fewer --levels or a larger --downscale, or free the GPU of other work"));
+  }
+  throw InternalError(StrCat("CUDA error: ", what));
+}
+
+}  // namespace perf::recon::cuda

@@ -1,0 +1,271 @@
+// The ray passes of the CUDA backend: one thread per ray (per pixel for Render), calling the
+// per-ray code of ray_math.h and jacobian.h, with float atomics as the scatter sink. Nothing of
+// the per-ray math is written here; this file adds launches, the sink and the statistics.
+//
+// Differences from the CPU backend, by design:
+//   - no recorded Jacobian: MultiplyJtJ recomputes each ray's partials (Forward, then Backward
+//     twice: once gathering J p, once scattering J^T (J p)). A per-sample record at 256^3 on
+//     lego would need ~24 B x ~10^10 samples; memory traffic to re-read it would also cost about
+//     what the recompute's gathers do (L2-resident cells). Unmeasured;
+//   - J^T u scatters (Adam's gradient, J^T J p) go through the per-ray cell merge (CellMerger),
+//     so each cell gets one atomic per ray instead of one per sample (the CPU measured a direct
+//     scatter faster because its adds are plain; on the GPU atomics to the same few cells from a
+//     warp's neighbouring rays serialise);
+//   - the merged scatter adds 4 consecutive floats; on sm_90 that is one vector atomic (float4),
+//     elsewhere 4 scalar ones. Every Add4 index is a multiple of 4 (GridParam / ShellParam of
+//     channel 0) and cudaMalloc aligns to 256 bytes, so the float4 is aligned.
+// Float atomics make the order of the additions, hence the last bits of g, diag and J^T J p,
+// vary from run to run; the cost and counts are summed per block with CUB in a fixed order.
+#include <cub/block/block_reduce.cuh>
+#include <cub/device/device_reduce.cuh>
+
+#include "common/errors.h"
+#include "recon_cuda/cuda_check.h"
+#include "recon_cuda/cuda_kernels.h"
+#include "recon_cuda/jacobian.h"
+
+namespace perf::recon::cuda {
+namespace {
+
+constexpr int kRayThreads = 128;  // threads per block of the ray kernels (register-heavy)
+
+struct AtomicSink {
+  float* a;
+  __device__ __forceinline__ void Add4(int64_t i, float x, float y, float z, float w) {
+#if __CUDA_ARCH__ >= 900
+    atomicAdd(reinterpret_cast<float4*>(a + i), make_float4(x, y, z, w));
+#else
+    atomicAdd(a + i, x);
+    atomicAdd(a + i + 1, y);
+    atomicAdd(a + i + 2, z);
+    atomicAdd(a + i + 3, w);
+#endif
+  }
+};
+
+// The ray's scatter of J^T u (u: the residuals for the gradient, J p for J^T J p) and, with
+// kDiag, its exact share of diag(J^T J), merged cell by cell along the ray (jacobian.h).
+template <bool kDiag>
+struct ScatterVisitor {
+  static constexpr int K = kDiag ? 9 : 4;  // J^T u values, then the 5 row values of diag
+  float u[4];
+  AtomicSink g, d;
+  CellMerger<float, K> merger;
+
+  __device__ void Shell(int, const CubeCoord<float>&, const TexelSample<float>& ts, const ShellPartials<float>& sp) {
+    ScatterJtuShell(ts, sp, u, g);
+    if constexpr (kDiag) AddDiagShell(ts, sp, d);
+  }
+  __device__ void Sample(int, const MarchStep<float>&, const GridSample<float>& gs, const SamplePartials<float>& sp) {
+    float v[K];
+    JtuValues(sp, u, v);
+    if constexpr (kDiag) RowValues(sp, v + 4);
+    merger.Sample(gs, v, *this);
+  }
+  // A cell's merged sums are complete.
+  __device__ void operator()(int64_t cell, const float* acc) {
+    g.Add4(GridParam(cell, 0), acc[0], acc[1], acc[2], acc[3]);
+    if constexpr (kDiag) AddDiagFromRow(cell, acc + 4, d);
+  }
+  __device__ void Finish() { merger.Finish(*this); }
+};
+
+// u += J_ray p (a gather).
+struct JpVisitor {
+  const float* p;
+  float u[4];
+  __device__ void Shell(int, const CubeCoord<float>&, const TexelSample<float>& ts, const ShellPartials<float>& sp) {
+    AddJpShell(p, ts, sp, u);
+  }
+  __device__ void Sample(int, const MarchStep<float>&, const GridSample<float>& gs, const SamplePartials<float>& sp) {
+    AddJpSample(p, gs, sp, u);
+  }
+};
+
+struct SumStats {
+  __device__ __forceinline__ RayStats operator()(const RayStats& a, const RayStats& b) const {
+    return {a.cost + b.cost, a.colour_sse + b.colour_sse, a.rays + b.rays, a.samples + b.samples};
+  }
+};
+
+// The cost of one ray as the CPU backend sums it (BlockStats::Add): in double from the float
+// residuals.
+__device__ __forceinline__ RayStats StatsOf(const RayOutput<float>& o) {
+  double sse = 0;
+  for (int c = 0; c < 3; ++c) sse += static_cast<double>(o.residual[c]) * o.residual[c];
+  return {0.5 * (sse + static_cast<double>(o.residual[3]) * o.residual[3]), sse, 1, o.count};
+}
+
+__device__ __forceinline__ void WriteBlockStats(const RayStats& mine, RayStats* partials) {
+  using BlockReduce = cub::BlockReduce<RayStats, kRayThreads>;
+  __shared__ typename BlockReduce::TempStorage temp;
+  const RayStats sum = BlockReduce(temp).Reduce(mine, SumStats{});
+  if (threadIdx.x == 0) partials[blockIdx.x] = sum;
+}
+
+// Ray i as every pass of the iteration of in.seed sees it (the CPU backend's RayOf / JitterOf).
+struct RayAt {
+  BoxRay<float> ray;
+  Jitter jit;
+};
+__device__ __forceinline__ RayAt MakeRay(const PassInput& in, int64_t i) {
+  const RayPixel px = in.rays.pixels[i];
+  const Jitter jit{in.seed, static_cast<uint32_t>(i), in.jitter};
+  return {PixelBoxRay(in.rays.cameras[px.camera], in.box, in.vol.n, px.x, px.y, jit), jit};
+}
+__device__ __forceinline__ void TargetOf(const PassInput& in, int64_t i, float target[3]) {
+  for (int c = 0; c < 3; ++c) target[c] = ByteToColour(in.rays.colours[3 * i + c]);
+}
+
+template <bool kDiag>
+__global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, float* g, float* diag,
+                                                               RayStats* partials) {
+  const int64_t i = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  RayStats mine;
+  if (i < in.rays.count) {
+    const RayAt r = MakeRay(in, i);
+    float target[3];
+    TargetOf(in, i, target);
+    const RayOutput<float> fwd = Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance);
+    ScatterVisitor<kDiag> v{{fwd.residual[0], fwd.residual[1], fwd.residual[2], fwd.residual[3]}, {g}, {diag}, {}};
+    Backward(in.vol, r.ray, r.jit, in.lambda, fwd, v);
+    v.Finish();
+    mine = StatsOf(fwd);
+  }
+  WriteBlockStats(mine, partials);
+}
+
+__global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const float* p, float* out,
+                                                          RayStats* partials) {
+  const int64_t i = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  RayStats mine;
+  if (i < in.rays.count) {
+    const RayAt r = MakeRay(in, i);
+    // The partials depend on the forward's transmittances and colours, not on the target.
+    const float zero[3] = {0, 0, 0};
+    const RayOutput<float> fwd = Forward(in.vol, r.ray, r.jit, zero, in.lambda, in.stop_transmittance);
+    JpVisitor jp{p, {0, 0, 0, 0}};
+    Backward(in.vol, r.ray, r.jit, in.lambda, fwd, jp);
+    ScatterVisitor<false> v{{jp.u[0], jp.u[1], jp.u[2], jp.u[3]}, {out}, {nullptr}, {}};
+    Backward(in.vol, r.ray, r.jit, in.lambda, fwd, v);
+    v.Finish();
+    mine.rays = 1;
+    mine.samples = fwd.count;
+  }
+  WriteBlockStats(mine, partials);
+}
+
+// Thread j evaluates ray offset + j stride of `count` such rays.
+__global__ void __launch_bounds__(kRayThreads) CostKernel(PassInput in, int64_t stride, int64_t offset,
+                                                          int64_t count, RayStats* partials) {
+  const int64_t j = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  RayStats mine;
+  if (j < count) {
+    const int64_t i = offset + j * stride;
+    const RayAt r = MakeRay(in, i);
+    float target[3];
+    TargetOf(in, i, target);
+    mine = StatsOf(Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance));
+  }
+  WriteBlockStats(mine, partials);
+}
+
+// The CPU backend's Render, pixel by pixel: no jitter, the box treated as empty where its
+// opacity along the ray is below min_box_opacity.
+__global__ void RenderKernel(VolumeView<float> vol, BoxFrame<float> box, PinholeCamera<float> camera, int width,
+                             int height, float stop, float min_box_opacity, float* colour, float* opacity) {
+  const int x = blockIdx.x * blockDim.x + threadIdx.x, y = blockIdx.y * blockDim.y + threadIdx.y;
+  if (x >= width || y >= height) return;
+  const Jitter none{0, 0, false};
+  const float zero[3] = {0, 0, 0};
+  const BoxRay<float> ray = PixelBoxRay(camera, box, vol.n, x, y, none);
+  const RayOutput<float> o = Forward(vol, ray, none, zero, 0.f, stop);
+  const float a = 1 - o.t_box;
+  const bool empty = a < min_box_opacity;
+  const int64_t i = static_cast<int64_t>(y) * width + x;
+  for (int c = 0; c < 3; ++c) colour[3 * i + c] = empty ? o.shells[c] : o.h[c];
+  opacity[i] = a;
+}
+
+// Sums the per-block partials in a fixed order and returns the total (synchronises).
+RayStats Total(const StatsScratch& s, int64_t blocks) {
+  RayStats total;
+  if (blocks == 0) return total;
+  PERF_CHECK(blocks <= s.capacity);
+  size_t bytes = s.temp_bytes;
+  PERF_CUDA_CHECK(cub::DeviceReduce::Reduce(s.temp, bytes, s.partials, s.total, blocks, SumStats{}, RayStats{}));
+  PERF_CUDA_CHECK(cudaMemcpy(&total, s.total, sizeof(RayStats), cudaMemcpyDeviceToHost));
+  return total;
+}
+
+unsigned GridFor(int64_t blocks) {
+  PERF_CHECK_MSG(blocks < (int64_t{1} << 31), blocks, " blocks of rays");
+  return static_cast<unsigned>(blocks);
+}
+
+}  // namespace
+
+const char* KernelImageError() {
+  cudaFuncAttributes attr;
+  const cudaError_t e = cudaFuncGetAttributes(&attr, RenderKernel);
+  if (e == cudaSuccess) return nullptr;
+  cudaGetLastError();  // not sticky: clear it
+  return cudaGetErrorString(e);
+}
+
+int64_t PassBlocks(int64_t rays) { return (rays + kRayThreads - 1) / kRayThreads; }
+
+size_t StatsTempBytes(int64_t blocks) {
+  size_t bytes = 0;
+  PERF_CUDA_CHECK(cub::DeviceReduce::Reduce(nullptr, bytes, static_cast<RayStats*>(nullptr),
+                                            static_cast<RayStats*>(nullptr), std::max<int64_t>(blocks, 1), SumStats{},
+                                            RayStats{}));
+  return bytes;
+}
+
+RayStats Linearize(const PassInput& in, float* g, float* diag, int64_t params, const StatsScratch& s) {
+  PERF_CUDA_CHECK(cudaMemset(g, 0, params * sizeof(float)));
+  if (diag) PERF_CUDA_CHECK(cudaMemset(diag, 0, params * sizeof(float)));
+  const int64_t blocks = PassBlocks(in.rays.count);
+  if (blocks == 0) return {};
+  PERF_CHECK(blocks <= s.capacity);
+  if (diag) {
+    LinearizeKernel<true><<<GridFor(blocks), kRayThreads>>>(in, g, diag, s.partials);
+  } else {
+    LinearizeKernel<false><<<GridFor(blocks), kRayThreads>>>(in, g, nullptr, s.partials);
+  }
+  PERF_CUDA_CHECK_LAUNCH("LinearizeKernel");
+  return Total(s, blocks);
+}
+
+RayStats MultiplyJtJ(const PassInput& in, const float* p, float* out, int64_t params, const StatsScratch& s) {
+  PERF_CUDA_CHECK(cudaMemset(out, 0, params * sizeof(float)));
+  const int64_t blocks = PassBlocks(in.rays.count);
+  if (blocks == 0) return {};
+  PERF_CHECK(blocks <= s.capacity);
+  JtJpKernel<<<GridFor(blocks), kRayThreads>>>(in, p, out, s.partials);
+  PERF_CUDA_CHECK_LAUNCH("JtJpKernel");
+  return Total(s, blocks);
+}
+
+RayStats Cost(const PassInput& in, int stride, int offset, const StatsScratch& s) {
+  PERF_CHECK(stride >= 1 && offset >= 0 && offset < stride);
+  const int64_t count = in.rays.count > offset ? (in.rays.count - offset + stride - 1) / stride : 0;
+  const int64_t blocks = PassBlocks(count);
+  if (blocks == 0) return {};
+  PERF_CHECK(blocks <= s.capacity);
+  CostKernel<<<GridFor(blocks), kRayThreads>>>(in, stride, offset, count, s.partials);
+  PERF_CUDA_CHECK_LAUNCH("CostKernel");
+  return Total(s, blocks);
+}
+
+void Render(const VolumeView<float>& vol, const BoxFrame<float>& box, const PinholeCamera<float>& camera, int width,
+            int height, float stop_transmittance, float min_box_opacity, float* colour, float* opacity) {
+  if (width <= 0 || height <= 0) return;
+  const dim3 block(16, 8);
+  const dim3 grid((width + block.x - 1) / block.x, (height + block.y - 1) / block.y);
+  RenderKernel<<<grid, block>>>(vol, box, camera, width, height, stop_transmittance, min_box_opacity, colour, opacity);
+  PERF_CUDA_CHECK_LAUNCH("RenderKernel");
+}
+
+}  // namespace perf::recon::cuda

@@ -1,0 +1,64 @@
+// RaySet and MakeRaySet (training_data.h), apart from the image loading so that they link
+// without OpenImageIO and TBB (the GPU benchmark).
+#include "recon_cuda/training_data.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "common/errors.h"
+
+namespace perf::recon {
+
+int64_t RaySet::Bytes() const {
+  return static_cast<int64_t>(cameras.size() * sizeof(PinholeCamera<float>) + pixels.size() * sizeof(RayPixel) +
+                              colours.size() * sizeof(float));
+}
+
+RaySet MakeRaySet(const std::vector<PosedImage>& images) {
+  RaySet rays;
+  int64_t total = 0;
+  for (const PosedImage& im : images) {
+    if (im.image.width > 65535 || im.image.height > 65535) {
+      throw InputError(im.name, "size", StrCat(im.image.width, "x", im.image.height), "images over 65535 pixels a side",
+                       "re-run perf import with --downscale");
+    }
+    total += static_cast<int64_t>(im.image.width) * im.image.height;
+  }
+  rays.pixels.reserve(total);
+  rays.colours.reserve(3 * total);
+  constexpr int kTile = 8;
+  for (size_t c = 0; c < images.size(); ++c) {
+    const Image& img = images[c].image;
+    rays.cameras.push_back(images[c].camera);
+    for (int ty = 0; ty < img.height; ty += kTile) {
+      for (int tx = 0; tx < img.width; tx += kTile) {
+        for (int y = ty; y < std::min(ty + kTile, img.height); ++y) {
+          for (int x = tx; x < std::min(tx + kTile, img.width); ++x) {
+            rays.pixels.push_back({static_cast<uint32_t>(c), static_cast<uint16_t>(x), static_cast<uint16_t>(y)});
+            for (int ch = 0; ch < 3; ++ch) rays.colours.push_back(img.at(x, y, ch));
+          }
+        }
+      }
+    }
+  }
+  return rays;
+}
+
+int PyramidFactor(std::span<const PinholeCamera<float>> cameras, const VolumeGeometry& geo, int n, int max_factor) {
+  if (cameras.empty() || max_factor <= 1) return 1;
+  std::vector<double> px_per_voxel;
+  const double voxel = std::min({geo.box.size.x, geo.box.size.y, geo.box.size.z}) / n;
+  for (const PinholeCamera<float>& cam : cameras) {
+    const float* m = cam.world_from_cam;
+    const double dx = m[3] - geo.box.center.x, dy = m[7] - geo.box.center.y, dz = m[11] - geo.box.center.z;
+    const double dist = std::max(1e-9, std::sqrt(dx * dx + dy * dy + dz * dz));
+    px_per_voxel.push_back(cam.fx * voxel / dist);
+  }
+  std::nth_element(px_per_voxel.begin(), px_per_voxel.begin() + px_per_voxel.size() / 2, px_per_voxel.end());
+  const double median = px_per_voxel[px_per_voxel.size() / 2];
+  int f = 1;
+  while (2 * f <= max_factor && median / (2 * f) >= 1.0) f *= 2;
+  return f;
+}
+
+}  // namespace perf::recon
