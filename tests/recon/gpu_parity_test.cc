@@ -1,0 +1,262 @@
+// CUDA backend against the CPU backend (STYLE.md "Tests": CUDA against CPU on the same rays):
+// the same problem, seed and rays on both, compared pass by pass (cost, J^T r, diag(J^T J),
+// J^T J p, the cost on a subset, renders, the vector operations) and over short solves (GN and
+// Adam). Skips with "no CUDA device: ..." where there is none (CI); label gpu.
+//
+// Tolerances. Both backends run the same float code, but not the same float operations:
+//   - scatters are float atomics on the GPU (any order) and per-thread sums on the CPU, so every
+//     entry of g, diag and J^T J p is the same sum in another order; an entry sums at most a few
+//     hundred terms here, so the reordering moves it by ~k eps sum|terms| (eps = 6e-8), well
+//     under 1e-5 of the largest entry;
+//   - nvcc contracts a * b + c into FMAs and its expf differs from glibc's by ~1-2 ulp; these
+//     perturb every partial by ~1e-7 relative, again far below the bound;
+// so entries must agree to 1e-4 of the largest entry plus 1e-4 of their own size (the CPU test
+// against the double reference uses 2e-4), and costs (double sums of float residuals) to 1e-5.
+// Targets are quantised to k / 255 first, so the GPU's 8-bit training colours are exact.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <string>
+
+#include "common/errors.h"
+#include "recon_cuda/cpu_backend.h"
+#include "recon_cuda/cuda_backend.h"
+#include "recon_cuda/solver.h"
+#include "recon_cuda/volume.h"
+#include "tests/recon/recon_test_util.h"
+#include "tests/recon/synthetic_scene.h"
+
+namespace perf::recon {
+namespace {
+
+using test::TinyProblem;
+
+// Targets as 8-bit photos have them (the CUDA backend stores colours in 8 bits).
+void QuantiseColours(RaySet* rays) {
+  for (float& c : rays->colours) c = std::round(std::clamp(c, 0.f, 1.f) * 255.f) / 255.f;
+}
+
+void ExpectClose(const std::vector<float>& gpu, const std::vector<float>& cpu, const char* what) {
+  ASSERT_EQ(gpu.size(), cpu.size());
+  float scale = 0;
+  for (float v : cpu) scale = std::max(scale, std::abs(v));
+  ASSERT_GT(scale, 0) << what;
+  int nonzero = 0;
+  for (size_t i = 0; i < cpu.size(); ++i) {
+    ASSERT_NEAR(gpu[i], cpu[i], 1e-4 * scale + 1e-4 * std::abs(cpu[i])) << what << " entry " << i;
+    if (std::abs(cpu[i]) > 1e-3 * scale) ++nonzero;
+  }
+  EXPECT_GT(nonzero, static_cast<int>(cpu.size() / 10)) << what << ": too few entries exercised";
+}
+
+void ExpectStatsClose(const PassStats& gpu, const PassStats& cpu, const char* what) {
+  EXPECT_NEAR(gpu.cost, cpu.cost, 1e-5 * cpu.cost) << what;
+  EXPECT_NEAR(gpu.colour_sse, cpu.colour_sse, 1e-5 * cpu.colour_sse) << what;
+  EXPECT_EQ(gpu.rays, cpu.rays) << what;
+  // A march's length is a ceil of float values: an FMA may tip one by a sample.
+  EXPECT_NEAR(static_cast<double>(gpu.samples), static_cast<double>(cpu.samples), 1e-3 * cpu.samples) << what;
+}
+
+enum : VecId { kX, kG, kD, kP, kOut, kVectors };
+
+class GpuParityTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    std::string reason;
+    if (!ProbeCudaDevice(nullptr, &reason)) GTEST_SKIP() << "no CUDA device: " << reason;
+    gpu = MakeCudaBackend({});
+    CpuBackendOptions o;
+    o.threads = 2;
+    cpu = MakeCpuBackend(o);
+  }
+  // Both backends at the problem's level with its x in kX.
+  void SetLevel(const LevelProblem& level, const std::vector<float>& x, int vectors = kVectors) {
+    for (Backend* b : {cpu.get(), gpu.get()}) {
+      b->SetLevel(level, vectors);
+      b->Upload(kX, x);
+    }
+  }
+  std::vector<float> Get(Backend* b, VecId v) {
+    std::vector<float> out(b->level().shape.ParamCount());
+    b->Download(v, out);
+    return out;
+  }
+
+  std::unique_ptr<Backend> gpu, cpu;
+};
+
+// A problem with a few thousand rays and ~2.5k parameters, so most entries are reached.
+TinyProblem Problem(uint32_t seed) {
+  TinyProblem p(seed, 8, 4, 6, 24, 18);
+  QuantiseColours(&p.rays);
+  return p;
+}
+
+TEST_F(GpuParityTest, DescribesTheDevice) { EXPECT_EQ(gpu->Describe().rfind("cuda (", 0), 0u) << gpu->Describe(); }
+
+TEST_F(GpuParityTest, LinearizeCostGradientAndDiagonal) {
+  const TinyProblem p = Problem(1);
+  SetLevel(p.Level(), p.x);
+  for (bool with_diag : {true, false}) {
+    const PassStats c = cpu->Linearize(kX, 77, kG, with_diag ? kD : kNoVector);
+    const PassStats g = gpu->Linearize(kX, 77, kG, with_diag ? kD : kNoVector);
+    ExpectStatsClose(g, c, "linearize");
+    ExpectClose(Get(gpu.get(), kG), Get(cpu.get(), kG), with_diag ? "J^T r (GN)" : "J^T r (Adam)");
+    if (with_diag) ExpectClose(Get(gpu.get(), kD), Get(cpu.get(), kD), "diag(J^T J)");
+  }
+  // The cost is summed in a fixed order: the same on every run.
+  EXPECT_EQ(gpu->Linearize(kX, 77, kG, kD).cost, gpu->Linearize(kX, 77, kG, kD).cost);
+}
+
+TEST_F(GpuParityTest, JtJpAtTheLinearisationPoint) {
+  const TinyProblem p = Problem(3);
+  SetLevel(p.Level(), p.x);
+  std::mt19937 rng(4);
+  std::normal_distribution<float> n;
+  std::vector<float> pv(p.shape.ParamCount());
+  for (float& v : pv) v = n(rng);
+  for (Backend* b : {cpu.get(), gpu.get()}) {
+    b->Upload(kP, pv);
+    b->Linearize(kX, 11, kG, kD);
+  }
+  const PassStats c = cpu->MultiplyJtJ(kP, kOut);
+  const PassStats g = gpu->MultiplyJtJ(kP, kOut);
+  EXPECT_EQ(g.rays, c.rays);
+  EXPECT_NEAR(static_cast<double>(g.samples), static_cast<double>(c.samples), 1e-3 * c.samples);
+  ExpectClose(Get(gpu.get(), kOut), Get(cpu.get(), kOut), "J^T J p");
+}
+
+TEST_F(GpuParityTest, CostOnSubsetsAndWithEarlyTermination) {
+  TinyProblem p = Problem(4);
+  LevelProblem level = p.Level();
+  SetLevel(level, p.x);
+  for (RaySubset s : {RaySubset{1, 0}, RaySubset{4, 0}, RaySubset{3, 2}}) {
+    ExpectStatsClose(gpu->Cost(kX, 9, s), cpu->Cost(kX, 9, s), "cost");
+  }
+  // The default early termination: a ray whose transmittance crosses the threshold within float
+  // rounding of it may stop one sample apart on the two backends (a change below 1e-4 of its
+  // colour), so the cost agrees to 1e-4 here.
+  level.residuals = ResidualSettings{};
+  SetLevel(level, p.x);
+  const PassStats c = cpu->Cost(kX, 5), g = gpu->Cost(kX, 5);
+  EXPECT_NEAR(g.cost, c.cost, 1e-4 * c.cost);
+  EXPECT_EQ(g.rays, c.rays);
+}
+
+TEST_F(GpuParityTest, Render) {
+  const TinyProblem p = Problem(7);
+  SetLevel(p.Level(), p.x, 1);
+  for (float rule : {0.f, 0.7f}) {
+    const RenderOutput c = cpu->Render(kX, p.rays.cameras[1], 24, 18, rule);
+    const RenderOutput g = gpu->Render(kX, p.rays.cameras[1], 24, 18, rule);
+    ASSERT_EQ(g.colour.size(), c.colour.size());
+    int flipped = 0;  // pixels whose box opacity is within rounding of the rule's threshold
+    for (size_t i = 0; i < c.opacity.size(); ++i) {
+      EXPECT_NEAR(g.opacity[i], c.opacity[i], 1e-5) << i;
+      if (std::abs(c.opacity[i] - rule) < 1e-5f) {
+        ++flipped;
+        continue;
+      }
+      for (int ch = 0; ch < 3; ++ch) EXPECT_NEAR(g.colour[3 * i + ch], c.colour[3 * i + ch], 1e-5) << i;
+    }
+    EXPECT_LE(flipped, 1);
+  }
+}
+
+TEST_F(GpuParityTest, VectorOperations) {
+  const TinyProblem p = Problem(6);
+  SetLevel(p.Level(), p.x);
+  const int64_t n = p.shape.ParamCount();
+  std::mt19937 rng(5);
+  std::normal_distribution<float> g;
+  std::vector<float> a(n), c(n), d(n);
+  for (int64_t i = 0; i < n; ++i) {
+    a[i] = g(rng);
+    c[i] = g(rng);
+    d[i] = std::abs(g(rng));
+  }
+  for (Backend* b : {cpu.get(), gpu.get()}) {
+    b->Upload(kG, a);
+    b->Upload(kP, c);
+    b->Upload(kD, d);
+  }
+  // Double sums of float products: the orders differ, the values to ~1e-15 relative.
+  EXPECT_NEAR(gpu->Dot(kG, kP), cpu->Dot(kG, kP), 1e-12 * n);
+  EXPECT_EQ(gpu->Dot(kG, kP), gpu->Dot(kG, kP));
+  EXPECT_EQ(gpu->MaxAbs(kG), cpu->MaxAbs(kG));
+  for (Backend* b : {cpu.get(), gpu.get()}) {
+    b->Copy(kOut, kG);
+    b->Axpy(kOut, 0.3, kP);
+    b->Xpby(kOut, kP, -0.7);
+    b->AxpyDiag(kOut, 0.1, kD, kG);
+    b->DivideClamped(kOut, kOut, kD, 0.25f);
+  }
+  // Element-wise float operations: the same operations (FMA contraction aside), to a few ulp.
+  ExpectClose(Get(gpu.get(), kOut), Get(cpu.get(), kOut), "vector operations");
+  for (Backend* b : {cpu.get(), gpu.get()}) {
+    b->Fill(kOut, -0.5f);
+    b->Project(kOut);
+  }
+  EXPECT_EQ(Get(gpu.get(), kOut), Get(cpu.get(), kOut));
+  AdamSettings s;
+  for (Backend* b : {cpu.get(), gpu.get()}) {
+    b->Fill(kD, 0.f);
+    b->Fill(kOut, 0.f);
+    for (int t = 1; t <= 3; ++t) b->AdamStep(kX, kG, kD, kOut, s, t);
+  }
+  ExpectClose(Get(gpu.get(), kX), Get(cpu.get(), kX), "Adam");
+}
+
+TEST_F(GpuParityTest, ShortSolvesReachTheSameCost) {
+  // 20 views of 24 x 24 of the synthetic scene (synthetic_scene.h), a 16^3 grid from the random
+  // start. Each pass agrees to ~1e-6, but a solve makes discrete choices (CG's exit ratio, the
+  // line search's step) that such differences can tip, after which the paths differ slightly:
+  // final costs within 3 %, and both far below the start.
+  const test::SyntheticScene scene(16, 8, 20, 24, 5);
+  RaySet rays = MakeRaySet(scene.train);
+  QuantiseColours(&rays);
+  const VolumeShape shape{16, 8, 2};
+  const std::vector<float> x0 = InitialParams(shape, scene.geometry, InitOptions{});
+  for (SolverType type : {SolverType::kGaussNewton, SolverType::kAdam}) {
+    SolverOptions so;
+    so.type = type;
+    so.max_iterations = type == SolverType::kGaussNewton ? 6 : 30;
+    so.seed = 3;
+    SolverSummary sc, sg;
+    std::vector<float> xc = x0, xg = x0;
+    for (Backend* b : {cpu.get(), gpu.get()}) b->SetLevel({shape, scene.geometry, &rays, {}}, RequiredVectors(type));
+    Solve(so, cpu.get(), &xc, {}, &sc);
+    Solve(so, gpu.get(), &xg, {}, &sg);
+    EXPECT_EQ(sg.iterations, sc.iterations) << SolverName(type);
+    EXPECT_NEAR(sg.initial_cost, sc.initial_cost, 1e-5 * sc.initial_cost) << SolverName(type);
+    EXPECT_NEAR(sg.final_cost, sc.final_cost, 0.03 * sc.final_cost) << SolverName(type);
+    EXPECT_LT(sg.final_cost, 0.5 * sg.initial_cost) << SolverName(type);
+    std::printf("%s: cost %.6g -> cpu %.6g, cuda %.6g\n", SolverName(type), sc.initial_cost, sc.final_cost,
+                sg.final_cost);
+  }
+}
+
+TEST_F(GpuParityTest, ALevelThatDoesNotFitNamesTheLargestThatDoes) {
+  const TinyProblem p = Problem(8);
+  CudaBackendOptions o;
+  // Room for the rays and a small grid, not for 16^3.
+  const LevelProblem big{{16, 8, 2}, p.geometry, &p.rays, {}};
+  const LevelProblem small{{4, 2, 2}, p.geometry, &p.rays, {}};
+  o.max_memory = gpu->EstimateMemory(small, kVectors).Total() + 1;
+  auto b = MakeCudaBackend(o);
+  try {
+    b->SetLevel(big, kVectors);
+    FAIL() << "expected ResourceError";
+  } catch (const ResourceError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("16^3 grid"), std::string::npos) << what;
+    EXPECT_NE(what.find("largest level that fits"), std::string::npos) << what;
+    EXPECT_NE(what.find("4^3 grid"), std::string::npos) << what;
+  }
+  EXPECT_NO_THROW(b->SetLevel(small, kVectors));
+}
+
+}  // namespace
+}  // namespace perf::recon
