@@ -260,6 +260,12 @@ class CudaBackend final : public Backend {
 
 }  // namespace
 
+int64_t CudaMemoryInUse() {
+  size_t free = 0, total = 0;
+  PERF_CUDA_CHECK(cudaMemGetInfo(&free, &total));
+  return static_cast<int64_t>(total) - static_cast<int64_t>(free);
+}
+
 bool ProbeCudaDevice(std::string* name, std::string* reason) {
   int count = 0;
   const cudaError_t e = cudaGetDeviceCount(&count);

@@ -22,6 +22,9 @@ struct CudaBackendOptions {
 // Throws ResourceError when no device is usable (CudaDeviceAvailable says why).
 std::unique_ptr<Backend> MakeCudaBackend(const CudaBackendOptions& options);
 
+// Device memory in use on the current device, by any process (total - free), bytes.
+int64_t CudaMemoryInUse();
+
 // The CUDA side of CudaDeviceAvailable (backend.h): device 0's name, or why there is none.
 bool ProbeCudaDevice(std::string* name, std::string* reason);
 
