@@ -1,0 +1,154 @@
+#include "export/vdb_export.h"
+
+#include <openvdb/openvdb.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "common/atomic_file.h"
+#include "common/errors.h"
+
+namespace perf::exporter {
+
+namespace fs = std::filesystem;
+
+void CheckExportable(const recon::Checkpoint& c) {
+  const int n = c.shape.n;
+  if (n < 1) throw InputError("checkpoint", "n", StrCat(n), "the grid has no cells");
+  if (static_cast<int64_t>(c.params.size()) < recon::GridParamCount(n)) {
+    throw InputError("checkpoint", "parameters", StrCat(c.params.size()),
+                     StrCat("fewer than the ", recon::GridParamCount(n), " values of a ", n, "^3 grid"));
+  }
+  const double* s = c.placement.box_size;
+  if (!(std::min({s[0], s[1], s[2]}) > 0) || !std::isfinite(s[0] + s[1] + s[2])) {
+    throw InputError("checkpoint", "box size", StrCat(s[0], " ", s[1], " ", s[2]), "must be positive");
+  }
+}
+
+double CellLength(const recon::Checkpoint& c) {
+  const double* s = c.placement.box_size;
+  return std::min({s[0], s[1], s[2]}) / c.shape.n;
+}
+
+double SrgbToLinear(double v) {
+  return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4);
+}
+
+std::array<double, 12> WorldFromIndex(const recon::Checkpoint& c) {
+  // world = centre + R (diag(s) (ijk + 0.5) - size / 2), s = size / n per axis.
+  const recon::VolumePlacement& p = c.placement;
+  std::array<double, 12> a{};
+  double local0[3], s[3];
+  for (int b = 0; b < 3; ++b) {
+    s[b] = p.box_size[b] / c.shape.n;
+    local0[b] = 0.5 * s[b] - 0.5 * p.box_size[b];
+  }
+  for (int r = 0; r < 3; ++r) {
+    double t = p.box_center[r];
+    for (int b = 0; b < 3; ++b) {
+      a[4 * r + b] = p.box_rotation[3 * r + b] * s[b];
+      t += p.box_rotation[3 * r + b] * local0[b];
+    }
+    a[4 * r + 3] = t;
+  }
+  return a;
+}
+
+namespace {
+
+// OpenVDB multiplies row vectors on the left (world = index * M), with the translation in the
+// last row: M is the transpose of our column-vector affine map.
+openvdb::math::Transform::Ptr MakeTransform(const recon::Checkpoint& c) {
+  const std::array<double, 12> a = WorldFromIndex(c);
+  openvdb::math::Mat4d m = openvdb::math::Mat4d::identity();
+  for (int r = 0; r < 3; ++r) {
+    for (int col = 0; col < 4; ++col) m(col, r) = a[4 * r + col];
+  }
+  return openvdb::math::Transform::createLinearTransform(m);
+}
+
+}  // namespace
+
+VdbStats WriteVdb(const recon::Checkpoint& c, const fs::path& path, const VdbOptions& options) {
+  CheckExportable(c);
+  openvdb::initialize();  // registers the grid types; idempotent and thread-safe
+  const int n = c.shape.n;
+  const double length = CellLength(c);
+  // opacity >= min  <=>  sigma >= -log(1 - min) / length; min 0 keeps every sigma > 0.
+  const double min_opacity = std::clamp(options.min_cell_opacity, 0.0, 1.0);
+  const double min_sigma = min_opacity >= 1 ? INFINITY : -std::log1p(-min_opacity) / length;
+
+  VdbStats stats;
+  stats.total_voxels = static_cast<int64_t>(n) * n * n;
+  for (int a = 0; a < 3; ++a) stats.voxel_size[a] = c.placement.box_size[a] / n;
+  stats.density_grid = "density";
+  stats.colour_grid = options.houdini_names ? "Cd" : "color";
+
+  const openvdb::math::Transform::Ptr transform = MakeTransform(c);
+  openvdb::FloatGrid::Ptr density = openvdb::FloatGrid::create(0.f);
+  openvdb::Vec3SGrid::Ptr colour = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.f));
+  {
+    openvdb::FloatGrid::Accessor d = density->getAccessor();
+    openvdb::Vec3SGrid::Accessor col = colour->getAccessor();
+    for (int k = 0; k < n; ++k) {
+      for (int j = 0; j < n; ++j) {
+        for (int i = 0; i < n; ++i) {
+          const int64_t cell = recon::GridCell(n, i, j, k);
+          const float sigma = c.params[recon::GridParam(cell, 3)];
+          if (!(sigma > 0) || sigma < min_sigma) continue;
+          const openvdb::Coord xyz(i, j, k);
+          d.setValue(xyz, sigma);
+          openvdb::Vec3s rgb;
+          for (int ch = 0; ch < 3; ++ch) {
+            const double v = std::clamp(static_cast<double>(c.params[recon::GridParam(cell, ch)]), 0.0, 1.0);
+            rgb[ch] = static_cast<float>(SrgbToLinear(v));
+          }
+          col.setValue(xyz, rgb);
+          ++stats.active_voxels;
+        }
+      }
+    }
+  }
+  density->setName(stats.density_grid);
+  density->setGridClass(openvdb::GRID_FOG_VOLUME);
+  density->setTransform(transform);
+  density->insertMeta("units", openvdb::StringMetadata("extinction per world unit (1 / unit of the source frame)"));
+  colour->setName(stats.colour_grid);
+  colour->setVectorType(openvdb::VEC_INVARIANT);  // a colour, not a direction: no transform applies
+  colour->setTransform(transform->copy());
+  colour->insertMeta("colorspace", openvdb::StringMetadata("linear"));
+  colour->insertMeta("units", openvdb::StringMetadata("linear Rec.709 RGB (sRGB primaries), converted from sRGB"));
+  for (openvdb::GridBase* g : {static_cast<openvdb::GridBase*>(density.get()), static_cast<openvdb::GridBase*>(colour.get())}) {
+    g->setCreator("PERF");
+    g->setSaveFloatAsHalf(options.half_float);
+  }
+
+  openvdb::MetaMap file_meta;
+  file_meta.insertMeta("creator", openvdb::StringMetadata("PERF"));
+  file_meta.insertMeta("colorspace", openvdb::StringMetadata("linear"));
+  file_meta.insertMeta("units", openvdb::StringMetadata("world units of the source frame (COLMAP model or NeRF json)"));
+  file_meta.insertMeta("perf_level", openvdb::Int32Metadata(c.level));
+  file_meta.insertMeta("perf_grid_n", openvdb::Int32Metadata(n));
+  file_meta.insertMeta("perf_min_cell_opacity", openvdb::DoubleMetadata(min_opacity));
+  file_meta.insertMeta("perf_opacity_length", openvdb::DoubleMetadata(length));
+
+  openvdb::GridPtrVec grids{density, colour};
+  WriteAtomically(path, [&](const fs::path& tmp) {
+    try {
+      openvdb::io::File file(tmp.string());
+      file.write(grids, file_meta);
+      file.close();
+    } catch (const openvdb::Exception& e) {
+      throw IoError(path.string(), StrCat("cannot write the OpenVDB file: ", e.what()),
+                    "check that the folder exists and is writable");
+    } catch (const std::ios_base::failure& e) {
+      throw IoError(path.string(), StrCat("cannot write the OpenVDB file: ", e.what()),
+                    "check that the folder exists and is writable, and the free disk space");
+    }
+  });
+  std::error_code ec;
+  stats.file_bytes = static_cast<int64_t>(fs::file_size(path, ec));
+  return stats;
+}
+
+}  // namespace perf::exporter
