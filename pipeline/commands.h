@@ -12,5 +12,7 @@ void AddImportCommand(CLI::App& app);
 void AddSfmCommand(CLI::App& app);
 void AddReconstructCommand(CLI::App& app);
 void AddRenderCommand(CLI::App& app);
+void AddExportCommand(CLI::App& app);
+void AddEvalCommand(CLI::App& app);
 
 }  // namespace perf

@@ -17,6 +17,8 @@ int main(int argc, char** argv) {
   perf::AddImportCommand(app);
   perf::AddReconstructCommand(app);
   perf::AddRenderCommand(app);
+  perf::AddExportCommand(app);
+  perf::AddEvalCommand(app);
   // Exit codes: 0 ok, 1 internal error (a bug), 2 bad input, 3 file system, 4 other failure,
   // 5 not enough memory.
   try {

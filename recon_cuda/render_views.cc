@@ -9,21 +9,33 @@ namespace perf::recon {
 
 namespace fs = std::filesystem;
 
+LoadedCheckpoint LoadForRendering(const fs::path& workspace, const fs::path& checkpoint, const std::string& device,
+                                  int threads) {
+  LoadedCheckpoint l;
+  l.path = checkpoint;
+  if (l.path.empty()) {
+    const int last = LastCheckpointLevel(workspace);
+    if (last < 0) {
+      throw IoError((workspace / "recon").string(), "no checkpoint found", "run perf reconstruct on this workspace first");
+    }
+    l.path = CheckpointPath(workspace, last);
+  }
+  l.checkpoint = ReadCheckpoint(l.path);
+  l.no_rays = std::make_unique<RaySet>();
+  l.backend = MakeBackend(device, threads);
+  l.backend->SetLevel(LevelProblem{l.checkpoint.shape, GeometryOf(l.checkpoint), l.no_rays.get(), {}}, 1);
+  l.backend->Upload(LoadedCheckpoint::kParams, l.checkpoint.params);
+  return l;
+}
+
 RenderViewsResult RenderViews(const RenderViewsOptions& o) {
   if (o.split != "test" && o.split != "train" && o.split != "all") {
     throw InputError("command line", "--split", o.split, "unknown split", "use test, train or all");
   }
   const Scene scene = ReadScene(o.workspace / "scene.json");
+  LoadedCheckpoint loaded = LoadForRendering(o.workspace, o.checkpoint, o.device, o.threads);
   RenderViewsResult result;
-  result.checkpoint = o.checkpoint;
-  if (result.checkpoint.empty()) {
-    const int last = LastCheckpointLevel(o.workspace);
-    if (last < 0) {
-      throw IoError((o.workspace / "recon").string(), "no checkpoint found", "run perf reconstruct on this workspace first");
-    }
-    result.checkpoint = CheckpointPath(o.workspace, last);
-  }
-  Checkpoint c = ReadCheckpoint(result.checkpoint);
+  result.checkpoint = loaded.path;
 
   std::vector<PosedImage> views;
   for (Split s : {Split::kTrain, Split::kTest}) {
@@ -42,15 +54,12 @@ RenderViewsResult RenderViews(const RenderViewsOptions& o) {
     }
   }
 
-  std::unique_ptr<Backend> backend = MakeBackend(o.device, o.threads);
-  RaySet no_rays;
-  backend->SetLevel(LevelProblem{c.shape, GeometryOf(c), &no_rays, {}}, 1);
-  backend->Upload(0, c.params);
+  Backend* backend = loaded.backend.get();
   const fs::path out_dir = o.out_dir.empty() ? o.workspace / "renders" : o.out_dir;
   EnsureWritableDirectory(out_dir);
   int done = 0;
   for (const PosedImage& v : views) {
-    const RenderOutput render = backend->Render(0, v.camera, v.image.width, v.image.height, o.min_box_opacity);
+    const RenderOutput render = backend->Render(LoadedCheckpoint::kParams, v.camera, v.image.width, v.image.height, o.min_box_opacity);
     result.scores.push_back({v.name, Psnr(render, v.image)});
     const std::string stem = fs::path(v.name).filename().replace_extension().string();
     const fs::path file = out_dir / (stem + ".png");

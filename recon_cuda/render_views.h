@@ -5,12 +5,28 @@
 
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
+#include "recon_cuda/checkpoint.h"
 #include "recon_cuda/evaluation.h"
 
 namespace perf::recon {
+
+// A checkpoint in a backend, ready to render: its parameters are vector 0.
+struct LoadedCheckpoint {
+  std::filesystem::path path;
+  Checkpoint checkpoint;
+  std::unique_ptr<RaySet> no_rays;  // the level's (empty) ray set, which must outlive it
+  std::unique_ptr<Backend> backend;
+  static constexpr VecId kParams = 0;
+};
+
+// `checkpoint`, or the highest level in WORKSPACE/recon when empty; IoError saying to run perf
+// reconstruct when there is none, and the reader's errors for a missing or damaged file.
+LoadedCheckpoint LoadForRendering(const std::filesystem::path& workspace, const std::filesystem::path& checkpoint,
+                                  const std::string& device, int threads);
 
 struct RenderViewsOptions {
   std::filesystem::path workspace;

@@ -8,7 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "sfm_import/image_io.h"
-#include "tests/recon/synthetic_scene.h"
+#include "tests/pipeline/synthetic_workspace.h"
 #include "tests/test_util.h"
 
 namespace perf {
@@ -16,32 +16,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using test::RunCommand;
-
-// Writes the synthetic scene's views as PNGs plus transforms.json (Blender camera axes:
-// x right, y up, z backwards), then imports it into `ws`.
-void MakeWorkspace(const fs::path& dir, const fs::path& ws) {
-  const recon::test::SyntheticScene scene(16, 8, 18, 32, 6);
-  nlohmann::json frames = nlohmann::json::array();
-  std::vector<const recon::PosedImage*> all;
-  // Interleave so the importer's every-6th hold-out picks the scene's test views again.
-  size_t t = 0, r = 0;
-  for (int v = 0; v < 18; ++v) all.push_back(v % 6 == 0 ? &scene.test[t++] : &scene.train[r++]);
-  fs::create_directories(dir / "images");
-  for (size_t i = 0; i < all.size(); ++i) {
-    const recon::PosedImage& im = *all[i];
-    WriteImage(dir / "images" / (im.name + ".png"), im.image, PixelFormat::kUInt8);
-    const float* m = im.camera.world_from_cam;
-    nlohmann::json rows = nlohmann::json::array();
-    for (int row = 0; row < 3; ++row) rows.push_back({m[4 * row], -m[4 * row + 1], -m[4 * row + 2], m[4 * row + 3]});
-    rows.push_back({0, 0, 0, 1});
-    frames.push_back({{"file_path", "./images/" + im.name}, {"transform_matrix", rows}});
-  }
-  const double angle = 2 * std::atan(0.5 * 32 / all[0]->camera.fx);
-  std::ofstream(dir / "transforms.json") << nlohmann::json{{"camera_angle_x", angle}, {"frames", frames}}.dump();
-  const auto r2 = RunCommand(test::PerfBinary() + " import -q --nerf " + (dir / "transforms.json").string() +
-                             " --holdout 6 --workspace " + ws.string());
-  ASSERT_EQ(r2.exit_code, 0) << r2.output;
-}
 
 std::vector<nlohmann::json> ReadLog(const fs::path& path) {
   std::vector<nlohmann::json> lines;
@@ -53,7 +27,7 @@ std::vector<nlohmann::json> ReadLog(const fs::path& path) {
 
 class ReconstructCli : public ::testing::Test {
  protected:
-  void SetUp() override { MakeWorkspace(dir_.path(), ws_); }
+  void SetUp() override { test::MakeSyntheticWorkspace(dir_.path(), ws_); }
   std::string Perf(const std::string& args) { return test::PerfBinary() + " " + args; }
   test::TempDir dir_;
   fs::path ws_ = dir_ / "ws";

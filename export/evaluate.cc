@@ -1,0 +1,219 @@
+#include "export/evaluate.h"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <map>
+
+#include "common/atomic_file.h"
+#include "common/errors.h"
+#include "export/export.h"
+#include "export/masks.h"
+#include "export/report_html.h"
+#include "recon_cuda/render_views.h"
+#include "recon_cuda/training_data.h"
+#include "sfm_import/image_io.h"
+
+namespace perf::exporter {
+
+namespace fs = std::filesystem;
+using recon::LoadedCheckpoint;
+
+namespace {
+
+// How many held-out views the HTML report shows next to their photos.
+constexpr int kStripViews = 6;
+
+void Progress(const EvalOptions& o, const std::string& step, int done, int total) {
+  if (o.progress) o.progress(step, done, total);
+}
+
+// The true mask as one channel: the alpha of an image with alpha, else its first channel.
+Image MaskChannel(const Image& im) {
+  const int c = (im.channels == 2 || im.channels == 4) ? im.channels - 1 : 0;
+  Image out(im.width, im.height, 1);
+  for (size_t p = 0; p < out.pixels.size(); ++p) out.pixels[p] = im.pixels[p * im.channels + c];
+  return out;
+}
+
+// DIR/<name>.<ext> (the photo's name without extension) or DIR/<photo file name>.png (COLMAP's
+// mask convention); empty if neither exists.
+fs::path FindTrueMask(const fs::path& dir, const SceneImage& im) {
+  const fs::path name = OutputName(im);
+  for (const char* ext : {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr", ".bmp"}) {
+    const fs::path p = dir / fs::path(name).concat(ext);
+    if (fs::exists(p)) return p;
+  }
+  const fs::path colmap_style = dir / fs::path(im.name).concat(".png");
+  return fs::exists(colmap_style) ? colmap_style : fs::path();
+}
+
+void CompareWithTruth(const EvalOptions& o, const Scene& scene, LoadedCheckpoint& l, EvalResult* r) {
+  const bool from_dir = !o.gt_masks.empty();
+  if (from_dir && !fs::is_directory(o.gt_masks)) {
+    throw IoError(o.gt_masks.string(), "is not a folder", "pass the folder that holds one mask image per photo");
+  }
+  std::map<int, PhotoFrame> frames;
+  std::vector<const SceneImage*> with_truth;
+  for (const SceneImage& im : scene.images) {
+    if (from_dir ? !FindTrueMask(o.gt_masks, im).empty() : !im.alpha_path.empty()) with_truth.push_back(&im);
+  }
+  if (from_dir && with_truth.empty()) {
+    throw InputError(o.gt_masks.string(), "mask files", "none found",
+                     StrCat("expected one image per photo named like the photo, e.g. ",
+                            (o.gt_masks / OutputName(scene.images.front())).string(), ".png"),
+                     "check the folder and the names");
+  }
+  if (with_truth.empty()) return;
+  r->mask_truth = from_dir ? "gt-masks" : "alpha";
+  double iou_sum = 0;
+  int done = 0;
+  for (const SceneImage* im : with_truth) {
+    const SceneCamera& cam = scene.camera(im->camera_id);
+    Image ours, truth;
+    if (from_dir) {
+      const fs::path file = FindTrueMask(o.gt_masks, *im);
+      truth = MaskChannel(ReadImage(file));
+      if (truth.width != cam.source.width || truth.height != cam.source.height) {
+        throw InputError(file.string(), "size", StrCat(truth.width, "x", truth.height),
+                         StrCat("the photo '", im->name, "' is ", cam.source.width, "x", cam.source.height),
+                         "masks must have the photos' size");
+      }
+      auto it = frames.find(cam.id);
+      if (it == frames.end()) it = frames.emplace(cam.id, PhotoFrame::Create(cam)).first;
+      ours = RenderPhotoMask(l.backend.get(), LoadedCheckpoint::kParams, cam, *im, it->second, {});
+    } else {
+      const fs::path file = o.workspace / im->alpha_path;
+      truth = MaskChannel(ReadImage(file));
+      if (truth.width != cam.width || truth.height != cam.height) {
+        throw InputError(file.string(), "size", StrCat(truth.width, "x", truth.height),
+                         StrCat("the workspace image is ", cam.width, "x", cam.height),
+                         "the workspace changed after import; re-run perf import");
+      }
+      ours = RenderWorkspaceMask(l.backend.get(), LoadedCheckpoint::kParams, cam, *im);
+    }
+    const MaskAgreement m = CompareMasks(Binarize(ours, o.mask_threshold), Binarize(truth, 0.5));
+    r->masks.push_back({im->name, im->split == Split::kTest ? "test" : "train", m});
+    Accumulate(&r->pooled, m);
+    iou_sum += m.iou;
+    Progress(o, "masks", ++done, static_cast<int>(with_truth.size()));
+  }
+  r->mean_iou = iou_sum / with_truth.size();
+}
+
+nlohmann::json ScoresJson(const ImageScores& s) {
+  return {{"psnr", s.psnr},
+          {"ssim", s.ssim},
+          {"psnr_masked", s.psnr_masked},
+          {"ssim_masked", s.ssim_masked},
+          {"mask_coverage", s.mask_coverage}};
+}
+
+nlohmann::json AgreementJson(const MaskAgreement& m) {
+  return {{"iou", m.iou}, {"precision", m.precision}, {"recall", m.recall}};
+}
+
+nlohmann::json ReportJson(const EvalOptions& o, const EvalResult& r, const LoadedCheckpoint& l) {
+  nlohmann::json j;
+  j["format"] = "perf-report";
+  j["version"] = 1;
+  j["checkpoint"] = fs::relative(r.checkpoint, o.workspace).generic_string();
+  j["grid"] = {{"n", l.checkpoint.shape.n}, {"m", l.checkpoint.shape.m}, {"shells", l.checkpoint.shape.num_shells}};
+  j["settings"] = {{"mask_threshold", o.mask_threshold},
+                   {"min_box_opacity", o.min_box_opacity},
+                   {"ssim", "OpenCV quality::QualitySSIM (Gaussian 11x11, sigma 1.5), mean over RGB"},
+                   {"masked", "over the pixels inside our binary mask of the view"}};
+  nlohmann::json views = nlohmann::json::array();
+  for (const ViewReport& v : r.views) {
+    nlohmann::json e = ScoresJson(v.scores);
+    e["name"] = v.name;
+    views.push_back(e);
+  }
+  j["test_views"] = views;
+  j["mean"] = ScoresJson(r.mean);
+  if (!r.mask_truth.empty()) {
+    nlohmann::json per = nlohmann::json::array();
+    for (const MaskReport& m : r.masks) {
+      nlohmann::json e = AgreementJson(m.agreement);
+      e["name"] = m.name;
+      e["split"] = m.split;
+      per.push_back(e);
+    }
+    j["masks"] = {{"truth", r.mask_truth},
+                  {"images", r.masks.size()},
+                  {"pooled", AgreementJson(r.pooled)},
+                  {"mean_iou", r.mean_iou},
+                  {"per_image", per}};
+  }
+  const fs::path recon_json = o.workspace / "recon" / "recon.json";
+  if (fs::exists(recon_json)) {
+    try {
+      const nlohmann::json rj = nlohmann::json::parse(ReadFileToString(recon_json));
+      j["reconstruction"] = {{"solver", rj.value("solver", "")},
+                             {"backend", rj.value("backend", "")},
+                             {"levels", rj.value("levels", 0)},
+                             {"solve_seconds", rj.value("solve_seconds", 0.0)}};
+    } catch (const nlohmann::json::exception&) {
+      // recon.json is a summary for people; a damaged one leaves its fields out of the report.
+    }
+  }
+  return j;
+}
+
+}  // namespace
+
+EvalResult RunEval(const EvalOptions& o) {
+  if (!(o.mask_threshold > 0 && o.mask_threshold <= 1)) {
+    throw InputError("command line", "--mask-threshold", StrCat(o.mask_threshold), "must be in (0, 1]");
+  }
+  const Scene scene = ReadScene(o.workspace / "scene.json");
+  LoadedCheckpoint l = recon::LoadForRendering(o.workspace, o.checkpoint, o.device, o.threads);
+  EnsureWritableDirectory(o.workspace);
+  EvalResult r;
+  r.checkpoint = l.path;
+
+  const std::vector<recon::PosedImage> test = recon::LoadImages(scene, o.workspace, Split::kTest);
+  std::vector<ReportStripView> strip;
+  int masked_views = 0;
+  for (const recon::PosedImage& v : test) {
+    const recon::RenderOutput render =
+        l.backend->Render(LoadedCheckpoint::kParams, v.camera, v.image.width, v.image.height, o.min_box_opacity);
+    Image mask(render.width, render.height, 1);
+    mask.pixels = render.opacity;
+    const Image image = recon::ToImage(render);
+    const ImageScores s = ScoreImage(image, v.image, Binarize(mask, o.mask_threshold));
+    r.views.push_back({v.name, s});
+    r.mean.psnr += s.psnr;
+    r.mean.ssim += s.ssim;
+    r.mean.mask_coverage += s.mask_coverage;
+    if (s.mask_coverage > 0) {
+      r.mean.psnr_masked += s.psnr_masked;
+      r.mean.ssim_masked += s.ssim_masked;
+      ++masked_views;
+    }
+    if (static_cast<int>(strip.size()) < kStripViews) strip.push_back({v.name, v.image, image, s});
+    Progress(o, "views", static_cast<int>(r.views.size()), static_cast<int>(test.size()));
+  }
+  if (!r.views.empty()) {
+    const double n = static_cast<double>(r.views.size());
+    r.mean.psnr /= n;
+    r.mean.ssim /= n;
+    r.mean.mask_coverage /= n;
+  }
+  if (masked_views > 0) {
+    r.mean.psnr_masked /= masked_views;
+    r.mean.ssim_masked /= masked_views;
+  }
+  CompareWithTruth(o, scene, l, &r);
+
+  const nlohmann::json report = ReportJson(o, r, l);
+  WriteFileAtomically(o.workspace / "report.json", report.dump(2) + "\n");
+  if (o.html) {
+    const fs::path log = o.workspace / "recon" / "log.jsonl";
+    const std::string log_text = fs::exists(log) ? ReadFileToString(log) : std::string();
+    WriteFileAtomically(o.workspace / "report.html", ReportHtml(report, strip, log_text));
+  }
+  return r;
+}
+
+}  // namespace perf::exporter

@@ -1,0 +1,54 @@
+// `perf eval WORKSPACE`: scores the reconstruction on the held-out views and writes
+// WORKSPACE/report.json and the self-contained WORKSPACE/report.html.
+//   - PSNR and SSIM per held-out view and their means, over the whole image and inside our own
+//     binary foreground mask (the paper's metric for real scenes);
+//   - when a true foreground exists (the alpha of NeRF-synthetic photos, kept by perf import in
+//     WORKSPACE/alpha/, or mask images given with --gt-masks DIR, named like the photos), the
+//     IoU, precision and recall of our binary masks against it, per image and pooled.
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "export/metrics.h"
+
+namespace perf::exporter {
+
+struct EvalOptions {
+  std::filesystem::path workspace;
+  std::filesystem::path checkpoint;  // empty: the last level in WORKSPACE/recon
+  std::filesystem::path gt_masks;    // optional folder of true masks, in the photos' frame
+  double mask_threshold = 0.7;
+  float min_box_opacity = 0.7f;
+  bool html = true;
+  std::string device = "auto";
+  int threads = 0;
+  std::function<void(const std::string& step, int done, int total)> progress;
+};
+
+struct ViewReport {
+  std::string name;
+  ImageScores scores;
+};
+
+struct MaskReport {
+  std::string name;
+  std::string split;
+  MaskAgreement agreement;
+};
+
+struct EvalResult {
+  std::filesystem::path checkpoint;
+  std::vector<ViewReport> views;
+  ImageScores mean;                 // means over views (masked ones over views with a mask)
+  std::string mask_truth;           // "alpha", "gt-masks" or "" (none)
+  std::vector<MaskReport> masks;
+  MaskAgreement pooled;             // over every pixel of every image with a true mask
+  double mean_iou = 0;              // mean of the per-image IoUs
+};
+
+EvalResult RunEval(const EvalOptions& options);
+
+}  // namespace perf::exporter

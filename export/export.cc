@@ -1,0 +1,235 @@
+#include "export/export.h"
+
+#include <nlohmann/json.hpp>
+
+#include <cstdio>
+#include <map>
+#include <set>
+
+#include "common/atomic_file.h"
+#include "common/errors.h"
+#include "common/stopwatch.h"
+#include "recon_cuda/evaluation.h"
+#include "recon_cuda/render_views.h"
+#include "recon_cuda/training_data.h"
+#include "sfm_import/image_io.h"
+
+namespace perf::exporter {
+
+namespace fs = std::filesystem;
+using recon::LoadedCheckpoint;
+
+namespace {
+
+void Progress(const ExportOptions& o, const std::string& step, int done, int total) {
+  if (o.progress) o.progress(step, done, total);
+}
+
+// Writes one output, creating its folder, and records it relative to the workspace.
+class Outputs {
+ public:
+  Outputs(fs::path workspace, ExportResult* result) : workspace_(std::move(workspace)), result_(result) {}
+  fs::path Prepare(const fs::path& relative) {
+    const fs::path path = workspace_ / relative;
+    if (created_.insert(path.parent_path()).second) EnsureWritableDirectory(path.parent_path());
+    result_->files.push_back(relative);
+    return path;
+  }
+
+ private:
+  fs::path workspace_;
+  ExportResult* result_;
+  std::set<fs::path> created_;
+};
+
+// The photos must all be there, at the size their camera says, before anything is written.
+void CheckPhotos(const Scene& scene) {
+  for (const SceneImage& im : scene.images) {
+    const SceneCamera& cam = scene.camera(im.camera_id);
+    if (!fs::exists(im.source_path)) {
+      throw IoError(im.source_path, StrCat("the photo of image '", im.name, "' is missing"),
+                    "put the photos back where perf import found them, or export without cut-outs (--no-foreground)");
+    }
+    const ImageInfo info = ReadImageInfo(im.source_path);
+    if (info.width != cam.source.width || info.height != cam.source.height) {
+      throw InputError(im.source_path, "size", StrCat(info.width, "x", info.height),
+                       StrCat("scene.json says camera ", cam.id, "'s photos are ", cam.source.width, "x", cam.source.height),
+                       "the photos changed since perf import; re-run perf import and perf reconstruct");
+    }
+  }
+}
+
+void ExportMasks(const ExportOptions& o, const Scene& scene, LoadedCheckpoint& l, Outputs& out, ExportResult* r) {
+  if (o.foreground) CheckPhotos(scene);
+  std::map<int, PhotoFrame> frames;
+  double coverage = 0;
+  int done = 0;
+  const int total = static_cast<int>(scene.images.size());
+  for (const SceneImage& im : scene.images) {
+    const SceneCamera& cam = scene.camera(im.camera_id);
+    auto it = frames.find(cam.id);
+    if (it == frames.end()) it = frames.emplace(cam.id, PhotoFrame::Create(cam)).first;
+    const Image soft = RenderPhotoMask(l.backend.get(), LoadedCheckpoint::kParams, cam, im, it->second, o.mask);
+    const Image binary = Binarize(soft, o.mask_threshold);
+    const fs::path name = OutputName(im);
+    if (o.masks) {
+      if (o.soft_mask_exr) {
+        WriteImage(out.Prepare("masks/soft" / fs::path(name).concat(".exr")), soft, PixelFormat::kHalf);
+      } else {
+        WriteImage(out.Prepare("masks/soft" / fs::path(name).concat(".png")), soft, PixelFormat::kUInt16);
+      }
+      WriteImage(out.Prepare("masks/binary" / fs::path(name).concat(".png")), binary, PixelFormat::kUInt8);
+      ++r->masks;
+    }
+    double in = 0;
+    for (float v : binary.pixels) in += v;
+    coverage += in / binary.pixels.size();
+    if (o.foreground) {
+      ImageInfo info;
+      const Image photo = ToRgb(ReadImage(im.source_path, &info), {scene.background.x(), scene.background.y(), scene.background.z()});
+      const Image& alpha = o.foreground_soft_alpha ? soft : binary;
+      // OpenImageIO takes associated (premultiplied) colour and un-premultiplies for PNG.
+      Image rgba(photo.width, photo.height, 4);
+      for (size_t p = 0; p < alpha.pixels.size(); ++p) {
+        const float a = alpha.pixels[p];
+        for (int c = 0; c < 3; ++c) rgba.pixels[4 * p + c] = photo.pixels[3 * p + c] * a;
+        rgba.pixels[4 * p + 3] = a;
+      }
+      const PixelFormat format = info.format == PixelFormat::kUInt8 ? PixelFormat::kUInt8 : PixelFormat::kUInt16;
+      WriteImage(out.Prepare("foreground" / fs::path(name).concat(".png")), rgba, format);
+      ++r->foreground;
+    }
+    Progress(o, "masks", ++done, total);
+  }
+  r->mean_mask_coverage = total > 0 ? coverage / total : 0;
+}
+
+void ExportRenders(const ExportOptions& o, const Scene& scene, LoadedCheckpoint& l, Outputs& out, ExportResult* r) {
+  std::vector<const SceneImage*> test;
+  for (const SceneImage& im : scene.images) {
+    if (im.split == Split::kTest) test.push_back(&im);
+  }
+  const std::vector<OrbitView> orbit = o.orbit.frames > 0 ? OrbitCameras(scene, o.orbit) : std::vector<OrbitView>{};
+  const int total = static_cast<int>(test.size() + orbit.size());
+  int done = 0;
+  for (const SceneImage* im : test) {
+    const SceneCamera& cam = scene.camera(im->camera_id);
+    const recon::RenderOutput render = l.backend->Render(LoadedCheckpoint::kParams, recon::ToPinhole(cam, im->world_from_cam),
+                                                         cam.width, cam.height, o.min_box_opacity);
+    WriteImage(out.Prepare("renders/test" / fs::path(OutputName(*im)).concat(".png")), recon::ToImage(render),
+               PixelFormat::kUInt8);
+    ++r->renders;
+    Progress(o, "renders", ++done, total);
+  }
+  for (size_t k = 0; k < orbit.size(); ++k) {
+    const recon::RenderOutput render =
+        l.backend->Render(LoadedCheckpoint::kParams, orbit[k].camera, orbit[k].width, orbit[k].height, o.min_box_opacity);
+    char file[32];
+    std::snprintf(file, sizeof(file), "frame_%04zu.png", k);
+    WriteImage(out.Prepare(fs::path("renders/orbit") / file), recon::ToImage(render), PixelFormat::kUInt8);
+    ++r->orbit_frames;
+    Progress(o, "renders", ++done, total);
+  }
+}
+
+nlohmann::json Manifest(const ExportOptions& o, const ExportResult& r, const fs::path& workspace) {
+  nlohmann::json files = nlohmann::json::array();
+  for (const fs::path& f : r.files) files.push_back(f.generic_string());
+  nlohmann::json j;
+  j["format"] = "perf-export";
+  j["version"] = 1;
+  j["checkpoint"] = fs::relative(r.checkpoint, workspace).generic_string();
+  j["colour"] = {{"png", "srgb"}, {"vdb", "linear"}, {"glb", "linear"}, {"ply", "srgb"}, {"obj", "srgb"}};
+  j["masks"] = {{"count", r.masks},
+                {"threshold", o.mask_threshold},
+                {"soft_format", o.soft_mask_exr ? "exr (half)" : "png (16-bit)"},
+                {"mean_coverage", r.mean_mask_coverage},
+                {"foreground_cutouts", r.foreground},
+                {"foreground_alpha", o.foreground_soft_alpha ? "soft" : "binary"}};
+  if (o.volume) {
+    j["volume"] = {{"file", "volume.vdb"},
+                   {"density_grid", r.vdb.density_grid},
+                   {"colour_grid", r.vdb.colour_grid},
+                   {"active_voxels", r.vdb.active_voxels},
+                   {"total_voxels", r.vdb.total_voxels},
+                   {"voxel_size", {r.vdb.voxel_size[0], r.vdb.voxel_size[1], r.vdb.voxel_size[2]}},
+                   {"bytes", r.vdb.file_bytes},
+                   {"min_cell_opacity", o.vdb.min_cell_opacity},
+                   {"half_float", o.vdb.half_float}};
+  }
+  if (o.mesh) {
+    j["mesh"] = {{"files", {"mesh.ply", "mesh.obj", "mesh.glb"}},
+                 {"vertices", r.mesh_vertices},
+                 {"triangles", r.mesh_triangles},
+                 {"components_found", r.mesh_components_found},
+                 {"components_kept", r.mesh_components_kept},
+                 {"iso_opacity", o.mesh_options.iso_opacity},
+                 {"min_component_fraction", o.mesh_options.min_component_fraction}};
+  }
+  j["renders"] = {{"test", r.renders}, {"orbit", r.orbit_frames}, {"min_box_opacity", o.min_box_opacity}};
+  j["seconds"] = r.seconds;
+  j["files"] = files;
+  return j;
+}
+
+}  // namespace
+
+fs::path OutputName(const SceneImage& image) {
+  fs::path rel = fs::path(image.path).lexically_relative("images");
+  if (rel.empty() || *rel.begin() == "..") rel = fs::path(image.path).filename();
+  return rel.replace_extension();
+}
+
+ExportResult RunExport(const ExportOptions& o) {
+  const auto start = WallClock::now();
+  if (!(o.mask_threshold > 0 && o.mask_threshold <= 1)) {
+    throw InputError("command line", "--mask-threshold", StrCat(o.mask_threshold), "must be in (0, 1]");
+  }
+  if (!(o.mask.render_scale > 0 && o.mask.render_scale <= 8)) {
+    throw InputError("command line", "--mask-render-scale", StrCat(o.mask.render_scale), "must be in (0, 8]");
+  }
+  const Scene scene = ReadScene(o.workspace / "scene.json");
+  LoadedCheckpoint l = recon::LoadForRendering(o.workspace, o.checkpoint, o.device, o.threads);
+  ExportResult r;
+  r.checkpoint = l.path;
+  // Every output folder is checked before any work, so a bad one fails fast and writes nothing.
+  EnsureWritableDirectory(o.workspace);
+  if (o.masks) {
+    EnsureWritableDirectory(o.workspace / "masks" / "soft");
+    EnsureWritableDirectory(o.workspace / "masks" / "binary");
+  }
+  if (o.foreground) EnsureWritableDirectory(o.workspace / "foreground");
+  if (o.renders) {
+    EnsureWritableDirectory(o.workspace / "renders" / "test");
+    if (o.orbit.frames > 0) EnsureWritableDirectory(o.workspace / "renders" / "orbit");
+  }
+  Outputs out(o.workspace, &r);
+
+  if (o.masks || o.foreground) ExportMasks(o, scene, l, out, &r);
+  if (o.volume) {
+    Progress(o, "volume", 0, 1);
+    r.vdb = WriteVdb(l.checkpoint, out.Prepare("volume.vdb"), o.vdb);
+    Progress(o, "volume", 1, 1);
+  }
+  if (o.mesh) {
+    Progress(o, "mesh", 0, 4);
+    const Mesh mesh = ExtractMesh(l.checkpoint, o.mesh_options);
+    r.mesh_vertices = static_cast<int64_t>(mesh.positions.size());
+    r.mesh_triangles = static_cast<int64_t>(mesh.triangles.size());
+    r.mesh_components_found = mesh.components_found;
+    r.mesh_components_kept = mesh.components_kept;
+    Progress(o, "mesh", 1, 4);
+    WritePly(out.Prepare("mesh.ply"), mesh);
+    Progress(o, "mesh", 2, 4);
+    WriteObj(out.Prepare("mesh.obj"), mesh);
+    Progress(o, "mesh", 3, 4);
+    WriteGlb(out.Prepare("mesh.glb"), mesh);
+    Progress(o, "mesh", 4, 4);
+  }
+  if (o.renders) ExportRenders(o, scene, l, out, &r);
+  r.seconds = SecondsSince(start);
+  WriteFileAtomically(o.workspace / "export.json", Manifest(o, r, o.workspace).dump(2) + "\n");
+  return r;
+}
+
+}  // namespace perf::exporter

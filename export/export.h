@@ -1,0 +1,62 @@
+// `perf export WORKSPACE` (DESIGN.md "Export"): from the last checkpoint (or a given one),
+//   masks/soft/<name>.png     soft foreground mask (16-bit PNG, or EXR) of every input photo,
+//   masks/binary/<name>.png   the mask thresholded (0.7 by default, the paper's rule), 8-bit,
+//                             both at the photo's size on disk and in its own (distorted) frame;
+//   foreground/<name>.png     the photo with the mask as alpha (RGBA);
+//   volume.vdb                density + colour grids (vdb_export.h);
+//   mesh.ply, mesh.obj, mesh.glb   the coloured iso-surface (mesh_export.h);
+//   renders/test/<name>.png   held-out views, renders/orbit/frame_<k>.png an orbit of the box;
+//   export.json               what was written, with sizes and settings.
+// <name> is the workspace image's path under images/ without its extension (the photo's name).
+// Every file is written atomically; the output folders are checked to be writable first.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "export/masks.h"
+#include "export/mesh_export.h"
+#include "export/orbit.h"
+#include "export/vdb_export.h"
+
+namespace perf::exporter {
+
+struct ExportOptions {
+  std::filesystem::path workspace;
+  std::filesystem::path checkpoint;  // empty: the last level in WORKSPACE/recon
+  // What to write.
+  bool masks = true, foreground = true, volume = true, mesh = true, renders = true;
+  double mask_threshold = 0.7;  // binary mask: soft >= threshold
+  bool soft_mask_exr = false;   // soft masks as float EXR instead of 16-bit PNG
+  bool foreground_soft_alpha = false;  // cut-outs with the soft mask as alpha (default binary)
+  MaskOptions mask;
+  VdbOptions vdb;
+  MeshOptions mesh_options;
+  OrbitOptions orbit;           // frames = 0: no orbit
+  float min_box_opacity = 0.7f; // renders: the paper's rule
+  std::string device = "auto";
+  int threads = 0;
+  // Called as work proceeds: step ("masks", "volume", "mesh", "renders"), done, total.
+  std::function<void(const std::string& step, int done, int total)> progress;
+};
+
+struct ExportResult {
+  std::filesystem::path checkpoint;
+  int masks = 0, foreground = 0, renders = 0, orbit_frames = 0;
+  double mean_mask_coverage = 0;  // mean fraction of photo pixels in the binary mask
+  VdbStats vdb;
+  int64_t mesh_vertices = 0, mesh_triangles = 0;
+  int mesh_components_found = 0, mesh_components_kept = 0;
+  std::vector<std::filesystem::path> files;  // relative to the workspace
+  double seconds = 0;
+};
+
+ExportResult RunExport(const ExportOptions& options);
+
+// The <name> above for a scene image.
+std::filesystem::path OutputName(const SceneImage& image);
+
+}  // namespace perf::exporter

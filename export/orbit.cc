@@ -1,0 +1,65 @@
+#include "export/orbit.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include "common/errors.h"
+
+namespace perf::exporter {
+
+namespace {
+
+double Median(std::vector<double> v) {
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+}  // namespace
+
+std::vector<OrbitView> OrbitCameras(const Scene& scene, const OrbitOptions& o) {
+  if (o.frames < 1) throw InputError("command line", "--orbit-frames", StrCat(o.frames), "must be at least 1");
+  if (!(std::abs(o.elevation_degrees) < 89)) {
+    throw InputError("command line", "--orbit-elevation", StrCat(o.elevation_degrees), "must be between -89 and 89 degrees");
+  }
+  if (scene.images.empty()) throw InputError("scene.json", "images", "[]", "the scene has no images", "re-run perf import");
+  std::vector<double> distance, fov_y;
+  for (const SceneImage& im : scene.images) {
+    const SceneCamera& cam = scene.camera(im.camera_id);
+    distance.push_back((im.world_from_cam.col(3) - scene.box.center).norm());
+    fov_y.push_back(2 * std::atan(0.5 * cam.height / cam.fy));
+  }
+  const SceneCamera& first = scene.camera(scene.images.front().camera_id);
+  const int width = o.width > 0 ? o.width : first.width;
+  const int height = o.height > 0 ? o.height : first.height;
+  const double radius = Median(distance);
+  const double f = 0.5 * height / std::tan(0.5 * Median(fov_y));
+
+  const Eigen::Matrix3d& box = scene.box.rotation;  // world_from_box
+  const Eigen::Vector3d up = box.col(2);
+  const double elevation = o.elevation_degrees * std::numbers::pi / 180;
+  std::vector<OrbitView> views;
+  for (int k = 0; k < o.frames; ++k) {
+    const double a = 2 * std::numbers::pi * k / o.frames;
+    const Eigen::Vector3d dir_box(std::cos(elevation) * std::cos(a), std::cos(elevation) * std::sin(a), std::sin(elevation));
+    const Eigen::Vector3d eye = scene.box.center + radius * (box * dir_box);
+    // Camera frame x right, y down, z forward: right = forward x up, down = forward x right.
+    const Eigen::Vector3d forward = (scene.box.center - eye).normalized();
+    const Eigen::Vector3d right = forward.cross(up).normalized();
+    const Eigen::Vector3d down = forward.cross(right);
+    Eigen::Matrix<double, 3, 4> world_from_cam;
+    world_from_cam << right, down, forward, eye;
+    OrbitView v;
+    v.width = width;
+    v.height = height;
+    v.camera.fx = v.camera.fy = static_cast<float>(f);
+    v.camera.cx = static_cast<float>(0.5 * width);
+    v.camera.cy = static_cast<float>(0.5 * height);
+    for (int i = 0; i < 12; ++i) v.camera.world_from_cam[i] = static_cast<float>(world_from_cam(i / 4, i % 4));
+    views.push_back(v);
+  }
+  return views;
+}
+
+}  // namespace perf::exporter

@@ -1,0 +1,28 @@
+// An orbit of cameras around the reconstruction box, for turntable renders: on a circle about
+// the box's up axis (scene.json's box z, turned upright on import), at the median distance of
+// the photos' cameras from the box centre, looking at the centre, with the median photo's
+// field of view.
+#pragma once
+
+#include <vector>
+
+#include "recon_cuda/ray_math.h"
+#include "sfm_import/scene.h"
+
+namespace perf::exporter {
+
+struct OrbitOptions {
+  int frames = 60;
+  double elevation_degrees = 20;  // above the box's horizontal plane
+  int width = 0, height = 0;      // 0: the first camera's workspace size
+};
+
+struct OrbitView {
+  recon::PinholeCamera<float> camera;
+  int width = 0, height = 0;
+};
+
+// Throws InputError (naming the option) for frames < 1 or a scene without images.
+std::vector<OrbitView> OrbitCameras(const Scene& scene, const OrbitOptions& options);
+
+}  // namespace perf::exporter
