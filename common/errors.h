@@ -48,6 +48,12 @@ class ResourceError : public Error {
   using Error::Error;
 };
 
+// The user stopped the work (Ctrl-C) at a safe point; what was saved can be resumed.
+class Interrupted : public Error {
+ public:
+  using Error::Error;
+};
+
 // A broken invariant in PERF itself (a bug), with the source location.
 class InternalError : public Error {
  public:

@@ -14,5 +14,6 @@ void AddReconstructCommand(CLI::App& app);
 void AddRenderCommand(CLI::App& app);
 void AddExportCommand(CLI::App& app);
 void AddEvalCommand(CLI::App& app);
+void AddRunCommand(CLI::App& app);
 
 }  // namespace perf

@@ -19,8 +19,9 @@ int main(int argc, char** argv) {
   perf::AddRenderCommand(app);
   perf::AddExportCommand(app);
   perf::AddEvalCommand(app);
+  perf::AddRunCommand(app);
   // Exit codes: 0 ok, 1 internal error (a bug), 2 bad input, 3 file system, 4 other failure,
-  // 5 not enough memory.
+  // 5 not enough memory, 130 stopped by Ctrl-C (resumable).
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -34,6 +35,9 @@ int main(int argc, char** argv) {
   } catch (const perf::ResourceError& e) {
     std::cerr << "error: " << e.what() << "\n";
     return 5;
+  } catch (const perf::Interrupted& e) {
+    std::cerr << "stopped: " << e.what() << "\n";
+    return 130;
   } catch (const perf::InternalError& e) {
     std::cerr << "error: " << e.what() << "\nThis is a bug in perf; please report it with the command line.\n";
     return 1;

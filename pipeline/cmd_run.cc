@@ -1,0 +1,70 @@
+// `perf run`: every stage in one command (run_pipeline.h), with Ctrl-C stopping at a safe point.
+#include <CLI/CLI.hpp>
+#include <atomic>
+#include <csignal>
+#include <iostream>
+
+#include "common/errors.h"
+#include "pipeline/commands.h"
+#include "pipeline/run_pipeline.h"
+
+namespace perf {
+
+namespace {
+
+std::atomic<bool> g_stop{false};
+
+// First Ctrl-C: stop at the next safe point; the second one kills as usual.
+extern "C" void OnInterrupt(int) {
+  g_stop.store(true);
+  std::signal(SIGINT, SIG_DFL);
+}
+
+}  // namespace
+
+void AddRunCommand(CLI::App& app) {
+  struct Args {
+    RunOptions o;
+    std::string images, colmap, nerf, workspace, log_json, log_level = "info";
+  };
+  auto args = std::make_shared<Args>();
+  RunOptions& o = args->o;
+  CLI::App* cmd = app.add_subcommand(
+      "run",
+      "Photos (or a COLMAP model, or a NeRF transforms.json) to masks, volume, mesh and report: runs sfm, import, "
+      "reconstruct, export and eval, skipping stages whose outputs are up to date. Ctrl-C stops cleanly; run the same "
+      "command again to resume.");
+  cmd->add_option("--images", args->images, "Folder of photos (alone: runs COLMAP first; with --colmap: its photos)");
+  cmd->add_option("--colmap", args->colmap, "Existing COLMAP sparse model folder (e.g. project/sparse/0)");
+  cmd->add_option("--nerf", args->nerf, "NeRF-synthetic transforms.json");
+  cmd->add_option("-w,--workspace", args->workspace, "Workspace folder")->required();
+  cmd->add_option("--preset", o.preset, "preview, default or high (quality vs time)")->capture_default_str();
+  cmd->add_option("--max-size", o.max_size, "Override the preset: longest image side in pixels");
+  cmd->add_option("--levels", o.levels, "Override the preset: hierarchy levels");
+  cmd->add_option("--iterations", o.iterations, "Override the preset: Gauss-Newton iterations per level");
+  cmd->add_option("--device", o.device, "cpu, cuda or auto")->capture_default_str();
+  cmd->add_option("-j,--threads", o.threads, "CPU worker threads (0: all cores)")->capture_default_str();
+  cmd->add_flag("--force", o.force, "Re-run every stage even when its outputs are up to date");
+  cmd->add_option("--log-level", args->log_level, "info (progress and summary) or quiet (errors only)")
+      ->capture_default_str();
+  cmd->add_option("--log-json", args->log_json, "Append JSON lines of stage events to this file (for scripts)");
+  cmd->callback([args]() {
+    RunOptions& o = args->o;
+    o.images = args->images;
+    o.colmap = args->colmap;
+    o.nerf = args->nerf;
+    o.workspace = args->workspace;
+    o.log_json = args->log_json;
+    if (args->log_level != "info" && args->log_level != "quiet") {
+      throw InputError("command line", "--log-level", args->log_level, "unknown level", "use info or quiet");
+    }
+    o.quiet = args->log_level == "quiet";
+    o.stop = &g_stop;
+    std::signal(SIGINT, OnInterrupt);
+    const RunResult r = RunPipeline(o);
+    std::signal(SIGINT, SIG_DFL);
+    if (!o.quiet) std::cout << RunSummary(o, r);
+  });
+}
+
+}  // namespace perf

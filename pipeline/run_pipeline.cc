@@ -1,0 +1,363 @@
+#include "pipeline/run_pipeline.h"
+
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <sstream>
+
+#include "common/atomic_file.h"
+#include "common/errors.h"
+#include "common/stopwatch.h"
+#include "export/evaluate.h"
+#include "export/export.h"
+#include "pipeline/progress.h"
+#include "recon_cuda/checkpoint.h"
+#include "recon_cuda/reconstruct.h"
+#include "sfm_import/colmap_runner.h"
+#include "sfm_import/importer.h"
+
+namespace perf {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr const char* kCommandLine = "command line";
+
+fs::file_time_type ModTime(const fs::path& p) {
+  std::error_code ec;
+  const auto t = fs::last_write_time(p, ec);
+  return ec ? fs::file_time_type::min() : t;
+}
+
+// The newest file directly in `dir` (a COLMAP model folder), or the file itself.
+fs::file_time_type NewestInput(const fs::path& p) {
+  if (!fs::is_directory(p)) return ModTime(p);
+  fs::file_time_type newest = fs::file_time_type::min();
+  for (const auto& e : fs::directory_iterator(p)) {
+    if (e.is_regular_file()) newest = std::max(newest, ModTime(e.path()));
+  }
+  return newest;
+}
+
+bool NewerThan(const fs::path& output, fs::file_time_type input) {
+  return fs::exists(output) && ModTime(output) >= input;
+}
+
+// JSON lines for scripts: one object per stage event, flushed as written.
+class JsonLog {
+ public:
+  explicit JsonLog(const fs::path& path) {
+    if (path.empty()) return;
+    if (path.has_parent_path()) EnsureWritableDirectory(path.parent_path());
+    out_.open(path, std::ios::app);
+    if (!out_) throw IoError(path.string(), "cannot open the log for writing", "check the folder is writable");
+  }
+  void Write(nlohmann::json j) {
+    if (!out_.is_open()) return;
+    j["time"] = std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+    out_ << j.dump() << "\n" << std::flush;
+  }
+
+ private:
+  std::ofstream out_;
+};
+
+class Runner {
+ public:
+  Runner(const RunOptions& o, RunResult* r) : o_(o), r_(r), log_(o.log_json), preset_(PresetFor(o)) {}
+
+  void Run() {
+    Say("preset " + o_.preset + ": " + preset_.Describe());
+    fs::path model = o_.colmap;
+    if (o_.nerf.empty() && model.empty()) {
+      Stage("sfm", [&](StageReport* s) { model = Sfm(s); });
+    }
+    Stage("import", [&](StageReport* s) { Import(model, s); });
+    Stage("reconstruct", [&](StageReport* s) { Reconstruct(s); });
+    Stage("export", [&](StageReport* s) { Export(s); });
+    Stage("eval", [&](StageReport* s) { Eval(s); });
+  }
+
+ private:
+  template <class F>
+  void Stage(const std::string& name, F&& body) {
+    StageReport s;
+    s.name = name;
+    const auto start = WallClock::now();
+    log_.Write({{"stage", name}, {"event", "start"}});
+    try {
+      body(&s);
+    } catch (const Interrupted&) {
+      log_.Write({{"stage", name}, {"event", "interrupted"}, {"seconds", SecondsSince(start)}});
+      throw;
+    } catch (const std::exception& e) {
+      log_.Write({{"stage", name}, {"event", "failed"}, {"error", e.what()}});
+      throw;
+    }
+    s.seconds = SecondsSince(start);
+    log_.Write({{"stage", name}, {"event", s.skipped ? "skipped" : "done"}, {"reason", s.reason}, {"seconds", s.seconds}});
+    if (s.skipped) Say(name + ": skipped (" + s.reason + ")");
+    r_->stages.push_back(s);
+  }
+
+  void Say(const std::string& line) {
+    if (!o_.quiet) std::cout << line << "\n" << std::flush;
+  }
+
+  void CheckStop() const {
+    if (o_.stop != nullptr && o_.stop->load()) {
+      throw Interrupted("the workspace is consistent; run the same command again to resume");
+    }
+  }
+
+  fs::path Sfm(StageReport* s) {
+    const fs::path sparse = o_.workspace / "sparse" / "0";
+    if (!o_.force && (fs::exists(sparse / "cameras.bin") || fs::exists(sparse / "cameras.txt"))) {
+      s->skipped = true;
+      s->reason = "sparse/0 exists";
+      return sparse;
+    }
+    SfmOptions so;
+    so.images = o_.images;
+    so.workspace = o_.workspace;
+    so.force = o_.force;
+    so.progress = [&](const std::string& line) {
+      CheckStop();
+      Say("sfm: " + line);
+    };
+    const SfmResult r = RunSfm(so);
+    s->reason = StrCat(r.num_registered_images, " of ", r.num_input_images, " photos registered");
+    return r.sparse_dir;
+  }
+
+  void Import(const fs::path& model, StageReport* s) {
+    const fs::path input = o_.nerf.empty() ? model : o_.nerf;
+    const fs::path scene = o_.workspace / "scene.json";
+    if (!o_.force && NewerThan(scene, NewestInput(input))) {
+      s->skipped = true;
+      s->reason = "scene.json is newer than " + input.filename().string();
+      return;
+    }
+    ImportOptions io;
+    if (o_.nerf.empty()) {
+      io.colmap_dir = model;
+      io.images_dir = o_.images;
+    } else {
+      io.nerf_json = o_.nerf;
+    }
+    io.workspace = o_.workspace;
+    io.max_size = preset_.max_size;
+    io.num_threads = o_.threads;
+    Progress progress("import", o_.quiet);
+    io.progress = [&](int done, int total) {
+      CheckStop();
+      progress.Update(done, total, "images");
+    };
+    const ImportResult r = RunImport(io);
+    progress.Finish();
+    s->reason = StrCat(r.scene.images.size(), " images");
+  }
+
+  void Reconstruct(StageReport* s) {
+    const fs::path scene = o_.workspace / "scene.json";
+    const int last = recon::LastCheckpointLevel(o_.workspace);
+    const bool fresh = last >= 0 && NewerThan(recon::CheckpointPath(o_.workspace, last), ModTime(scene));
+    recon::ReconstructOptions ro;
+    ro.workspace = o_.workspace;
+    ro.device = o_.device;
+    ro.threads = o_.threads;
+    ro.levels = preset_.levels;
+    ro.iterations = preset_.iterations;
+    ro.resume = fresh && !o_.force;
+    if (!ro.resume) {
+      // Checkpoints of an older import (or --force): start over, so none of them is exported.
+      for (int k = 0; k <= last; ++k) fs::remove(recon::CheckpointPath(o_.workspace, k));
+    }
+    Progress progress("reconstruct", o_.quiet);
+    ro.on_event = [&](const recon::ReconstructOptions::Event& e) {
+      CheckStop();
+      if (!e.message.empty()) {
+        progress.Message(e.message);
+        return;
+      }
+      std::ostringstream unit;
+      unit << "iterations, level " << e.level + 1 << "/" << e.levels << ", cost " << std::setprecision(5) << e.cost;
+      progress.Update(e.iteration, e.iterations, unit.str());
+      log_.Write({{"stage", "reconstruct"}, {"event", "iteration"}, {"level", e.level}, {"iteration", e.iteration},
+                  {"iterations", e.iterations}, {"cost", e.cost}, {"train_psnr", e.train_psnr}});
+    };
+    const recon::ReconstructResult r = recon::Reconstruct(ro);
+    progress.Finish();
+    r_->final_checkpoint = r.final_checkpoint;
+    if (r.already_complete) {
+      s->skipped = true;
+      s->reason = "every level is checkpointed";
+    } else {
+      s->reason = ro.resume ? "resumed after the last checkpoint" : "from the start";
+    }
+  }
+
+  void Export(StageReport* s) {
+    const auto checkpoint_time = ModTime(r_->final_checkpoint);
+    if (!o_.force && NewerThan(o_.workspace / "export.json", checkpoint_time)) {
+      s->skipped = true;
+      s->reason = "export.json is newer than the checkpoint";
+      const nlohmann::json j = nlohmann::json::parse(ReadFileToString(o_.workspace / "export.json"), nullptr, false);
+      if (j.is_object() && j.contains("masks")) r_->mask_coverage = j["masks"].value("mean_coverage", 0.0);
+      return;
+    }
+    exporter::ExportOptions eo;
+    eo.workspace = o_.workspace;
+    eo.checkpoint = r_->final_checkpoint;
+    eo.orbit.frames = preset_.orbit_frames;
+    eo.device = o_.device;
+    eo.threads = o_.threads;
+    std::unique_ptr<Progress> bar;
+    std::string step;
+    eo.progress = [&](const std::string& st, int done, int total) {
+      CheckStop();
+      if (st != step) {
+        if (bar) bar->Finish();
+        bar = std::make_unique<Progress>("export " + st, o_.quiet);
+        step = st;
+      }
+      bar->Update(done, total, "");
+    };
+    const exporter::ExportResult r = exporter::RunExport(eo);
+    if (bar) bar->Finish();
+    r_->mask_coverage = r.mean_mask_coverage;
+    s->reason = StrCat(r.files.size(), " files");
+  }
+
+  void Eval(StageReport* s) {
+    const fs::path report = o_.workspace / "report.json";
+    if (!o_.force && NewerThan(report, ModTime(r_->final_checkpoint))) {
+      s->skipped = true;
+      s->reason = "report.json is newer than the checkpoint";
+    } else {
+      exporter::EvalOptions eo;
+      eo.workspace = o_.workspace;
+      eo.checkpoint = r_->final_checkpoint;
+      eo.device = o_.device;
+      eo.threads = o_.threads;
+      Progress progress("eval", o_.quiet);
+      eo.progress = [&](const std::string&, int done, int total) {
+        CheckStop();
+        progress.Update(done, total, "images");
+      };
+      exporter::RunEval(eo);
+      progress.Finish();
+    }
+    const nlohmann::json j = nlohmann::json::parse(ReadFileToString(report), nullptr, false);
+    if (j.is_object() && j.contains("mean")) {
+      r_->test_psnr = j["mean"].value("psnr", 0.0);
+      r_->test_ssim = j["mean"].value("ssim", 0.0);
+      if (j.contains("masks")) r_->mask_iou = j["masks"]["pooled"].value("iou", -1.0);
+    }
+  }
+
+  const RunOptions& o_;
+  RunResult* r_;
+  JsonLog log_;
+  PresetSettings preset_;
+};
+
+}  // namespace
+
+void RunOptions::Check() const {
+  const int sources = !colmap.empty() + !nerf.empty();
+  if (sources > 1) throw InputError(kCommandLine, "--colmap/--nerf", "both", "give one source", "use --colmap or --nerf");
+  if (sources == 0 && images.empty()) {
+    throw InputError(kCommandLine, "--images", "(none)", "no input given",
+                     "pass --images DIR (photos), --colmap MODEL (with --images), or --nerf transforms.json");
+  }
+  if (!nerf.empty() && !images.empty()) {
+    throw InputError(kCommandLine, "--images", images.string(), "not used with --nerf (its json names the images)");
+  }
+  if (preset != "preview" && preset != "default" && preset != "high") {
+    throw InputError(kCommandLine, "--preset", preset, "unknown preset", "use preview, default or high");
+  }
+  if (max_size < 0) throw InputError(kCommandLine, "--max-size", StrCat(max_size), "must be >= 0");
+  if (levels < 0 || levels > 6) throw InputError(kCommandLine, "--levels", StrCat(levels), "must be 1 to 6");
+  if (iterations < 0) throw InputError(kCommandLine, "--iterations", StrCat(iterations), "must be >= 0");
+  for (const fs::path* p : {&images, &colmap, &nerf}) {
+    if (!p->empty() && !fs::exists(*p)) throw IoError(p->string(), "does not exist", "check the path");
+  }
+}
+
+std::string PresetSettings::Describe() const {
+  std::ostringstream s;
+  s << "images " << (max_size > 0 ? "at most " + std::to_string(max_size) + " px" : std::string("full size")) << ", "
+    << (levels > 0 ? std::to_string(levels) : std::string("default")) << " levels x " << iterations
+    << " Gauss-Newton iterations, " << orbit_frames << " orbit frames";
+  return s.str();
+}
+
+PresetSettings PresetFor(const RunOptions& o) {
+  // preview: a first look in a minute or two on a laptop CPU (the README's example);
+  // default: the paper's 30 iterations per level at a size a CPU still manages;
+  // high: full-size images and one more level (meant for a GPU).
+  PresetSettings p;
+  if (o.preset == "preview") {
+    p = {128, 2, 8, 24};
+  } else if (o.preset == "high") {
+    p = {0, 0, 30, 120};
+  } else {
+    p = {400, 0, 30, 60};
+  }
+  if (o.max_size > 0) p.max_size = o.max_size;
+  if (o.levels > 0) p.levels = o.levels;
+  if (o.iterations > 0) p.iterations = o.iterations;
+  return p;
+}
+
+RunResult RunPipeline(const RunOptions& o) {
+  o.Check();
+  EnsureWritableDirectory(o.workspace);
+  const auto start = WallClock::now();
+  RunResult r;
+  Runner(o, &r).Run();
+  r.seconds = SecondsSince(start);
+  nlohmann::json stages = nlohmann::json::array();
+  for (const StageReport& s : r.stages) {
+    stages.push_back({{"stage", s.name}, {"skipped", s.skipped}, {"reason", s.reason}, {"seconds", s.seconds}});
+  }
+  const nlohmann::json summary = {{"format", "perf-run"},
+                                  {"version", 1},
+                                  {"preset", o.preset},
+                                  {"stages", stages},
+                                  {"test_psnr", r.test_psnr},
+                                  {"test_ssim", r.test_ssim},
+                                  {"mask_coverage", r.mask_coverage},
+                                  {"seconds", r.seconds}};
+  WriteFileAtomically(o.workspace / "run.json", summary.dump(2) + "\n");
+  return r;
+}
+
+std::string RunSummary(const RunOptions& o, const RunResult& r) {
+  const fs::path ws = o.workspace;
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(1);
+  s << "\nDone in " << r.seconds << " s (";
+  for (size_t i = 0; i < r.stages.size(); ++i) {
+    s << (i ? ", " : "") << r.stages[i].name << " " << r.stages[i].seconds << " s" << (r.stages[i].skipped ? " skipped" : "");
+  }
+  s << ")\n";
+  s << std::setprecision(2) << "Held-out views: PSNR " << r.test_psnr << " dB, SSIM " << std::setprecision(3) << r.test_ssim
+    << std::setprecision(1) << "; masks cover " << 100 * r.mask_coverage << " % of the photos on average";
+  if (r.mask_iou >= 0) s << std::setprecision(3) << ", IoU " << r.mask_iou << " against the true masks";
+  s << "\nOutputs in " << ws.string() << ":\n"
+    << "  masks/binary/, masks/soft/   foreground masks of every photo\n"
+    << "  foreground/                  the photos cut out (RGBA PNG)\n"
+    << "  volume.vdb                   OpenVDB density + color grids (Blender, Houdini)\n"
+    << "  mesh.ply, mesh.obj, mesh.glb coloured mesh\n"
+    << "  renders/test/, renders/orbit/  held-out views and an orbit\n"
+    << "  report.html, report.json     scores, PSNR-vs-time plot, renders next to photos\n";
+  return s.str();
+}
+
+}  // namespace perf

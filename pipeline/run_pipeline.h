@@ -1,0 +1,66 @@
+// `perf run`: photos (or a COLMAP model, or a NeRF transforms.json) to masks, volume, mesh and
+// report in one command. The stages of DESIGN.md "Stages and the workspace" run in order, each
+// skipped when its outputs are present and newer than its inputs (unless `force`):
+//   sfm          only from --images alone: WORKSPACE/sparse/0 present -> skipped;
+//   import       scene.json newer than the model (or transforms.json);
+//   reconstruct  resumed after the last checkpoint newer than scene.json, so a killed run picks
+//                up at the last finished level; started over when scene.json is newer;
+//   export       export.json newer than the final checkpoint;
+//   eval         report.json newer than the final checkpoint.
+// Ctrl-C stops between solver iterations (or between images) and leaves every file whole.
+#pragma once
+
+#include <atomic>
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace perf {
+
+struct RunOptions {
+  std::filesystem::path images, colmap, nerf, workspace;
+  std::string preset = "default";  // preview, default, high
+  std::string device = "auto";
+  int threads = 0;
+  bool force = false;
+  // Overrides of the preset (0: the preset's).
+  int max_size = 0, levels = 0, iterations = 0;
+  bool quiet = false;
+  std::filesystem::path log_json;  // JSON lines of stage events for scripts (empty: none)
+  const std::atomic<bool>* stop = nullptr;  // set (by a signal handler) to stop at a safe point
+
+  void Check() const;  // InputError naming the option
+};
+
+// What a preset sets (printed at the start of a run).
+struct PresetSettings {
+  int max_size = 0;     // import: longest image side (0: full size)
+  int levels = 0;       // reconstruct: hierarchy levels (0: the backend's default)
+  int iterations = 30;  // per level
+  int orbit_frames = 60;
+  std::string Describe() const;
+};
+PresetSettings PresetFor(const RunOptions& options);
+
+struct StageReport {
+  std::string name;
+  bool skipped = false;
+  std::string reason;  // why it ran or was skipped
+  double seconds = 0;
+};
+
+struct RunResult {
+  std::vector<StageReport> stages;
+  double test_psnr = 0, test_ssim = 0, mask_coverage = 0;
+  double mask_iou = -1;  // against the true masks when there are any
+  std::filesystem::path final_checkpoint;
+  double seconds = 0;
+};
+
+RunResult RunPipeline(const RunOptions& options);
+
+// The end-of-run summary: where each output is, the held-out scores, time per stage.
+std::string RunSummary(const RunOptions& options, const RunResult& result);
+
+}  // namespace perf
