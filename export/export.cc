@@ -1,7 +1,9 @@
 #include "export/export.h"
 
 #include <nlohmann/json.hpp>
+#include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <map>
 #include <set>
@@ -59,47 +61,75 @@ void CheckPhotos(const Scene& scene) {
   }
 }
 
+// The files of one photo: masks and cut-out. Paths are prepared (folders created) by the caller.
+struct MaskFiles {
+  fs::path soft, binary, foreground;
+};
+
+// Binarises, writes and cuts out one photo (thread-safe: touches only its own files).
+double WriteMaskFiles(const ExportOptions& o, const Scene& scene, const SceneImage& im, const Image& soft,
+                      const MaskFiles& files) {
+  const Image binary = Binarize(soft, o.mask_threshold);
+  if (o.masks) {
+    WriteImage(files.soft, soft, o.soft_mask_exr ? PixelFormat::kHalf : PixelFormat::kUInt16);
+    WriteImage(files.binary, binary, PixelFormat::kUInt8);
+  }
+  if (o.foreground) {
+    ImageInfo info;
+    const Image photo = ToRgb(ReadImage(im.source_path, &info), {scene.background.x(), scene.background.y(), scene.background.z()});
+    const Image& alpha = o.foreground_soft_alpha ? soft : binary;
+    // OpenImageIO takes associated (premultiplied) colour and un-premultiplies for PNG.
+    Image rgba(photo.width, photo.height, 4);
+    for (size_t p = 0; p < alpha.pixels.size(); ++p) {
+      const float a = alpha.pixels[p];
+      for (int c = 0; c < 3; ++c) rgba.pixels[4 * p + c] = photo.pixels[3 * p + c] * a;
+      rgba.pixels[4 * p + 3] = a;
+    }
+    const PixelFormat format = info.format == PixelFormat::kUInt8 ? PixelFormat::kUInt8 : PixelFormat::kUInt16;
+    WriteImage(files.foreground, rgba, format);
+  }
+  double in = 0;
+  for (float v : binary.pixels) in += v;
+  return in / binary.pixels.size();
+}
+
 void ExportMasks(const ExportOptions& o, const Scene& scene, LoadedCheckpoint& l, Outputs& out, ExportResult* r) {
   if (o.foreground) CheckPhotos(scene);
   std::map<int, PhotoFrame> frames;
   double coverage = 0;
   int done = 0;
   const int total = static_cast<int>(scene.images.size());
-  for (const SceneImage& im : scene.images) {
-    const SceneCamera& cam = scene.camera(im.camera_id);
-    auto it = frames.find(cam.id);
-    if (it == frames.end()) it = frames.emplace(cam.id, PhotoFrame::Create(cam)).first;
-    const Image soft = RenderPhotoMask(l.backend.get(), LoadedCheckpoint::kParams, cam, im, it->second, o.mask);
-    const Image binary = Binarize(soft, o.mask_threshold);
-    const fs::path name = OutputName(im);
-    if (o.masks) {
-      if (o.soft_mask_exr) {
-        WriteImage(out.Prepare("masks/soft" / fs::path(name).concat(".exr")), soft, PixelFormat::kHalf);
-      } else {
-        WriteImage(out.Prepare("masks/soft" / fs::path(name).concat(".png")), soft, PixelFormat::kUInt16);
+  // Masks are rendered one photo at a time (the backend uses every core per render) and then
+  // encoded in parallel a batch at a time: PNG encoding of full-size photos would otherwise
+  // take most of the time.
+  constexpr size_t kBatch = 8;
+  for (size_t first = 0; first < scene.images.size(); first += kBatch) {
+    const size_t count = std::min(kBatch, scene.images.size() - first);
+    std::vector<Image> soft(count);
+    std::vector<MaskFiles> files(count);
+    for (size_t k = 0; k < count; ++k) {
+      const SceneImage& im = scene.images[first + k];
+      const SceneCamera& cam = scene.camera(im.camera_id);
+      auto it = frames.find(cam.id);
+      if (it == frames.end()) it = frames.emplace(cam.id, PhotoFrame::Create(cam)).first;
+      soft[k] = RenderPhotoMask(l.backend.get(), LoadedCheckpoint::kParams, cam, im, it->second, o.mask);
+      const fs::path name = OutputName(im);
+      if (o.masks) {
+        files[k].soft = out.Prepare("masks/soft" / fs::path(name).concat(o.soft_mask_exr ? ".exr" : ".png"));
+        files[k].binary = out.Prepare("masks/binary" / fs::path(name).concat(".png"));
       }
-      WriteImage(out.Prepare("masks/binary" / fs::path(name).concat(".png")), binary, PixelFormat::kUInt8);
-      ++r->masks;
+      if (o.foreground) files[k].foreground = out.Prepare("foreground" / fs::path(name).concat(".png"));
     }
-    double in = 0;
-    for (float v : binary.pixels) in += v;
-    coverage += in / binary.pixels.size();
-    if (o.foreground) {
-      ImageInfo info;
-      const Image photo = ToRgb(ReadImage(im.source_path, &info), {scene.background.x(), scene.background.y(), scene.background.z()});
-      const Image& alpha = o.foreground_soft_alpha ? soft : binary;
-      // OpenImageIO takes associated (premultiplied) colour and un-premultiplies for PNG.
-      Image rgba(photo.width, photo.height, 4);
-      for (size_t p = 0; p < alpha.pixels.size(); ++p) {
-        const float a = alpha.pixels[p];
-        for (int c = 0; c < 3; ++c) rgba.pixels[4 * p + c] = photo.pixels[3 * p + c] * a;
-        rgba.pixels[4 * p + 3] = a;
-      }
-      const PixelFormat format = info.format == PixelFormat::kUInt8 ? PixelFormat::kUInt8 : PixelFormat::kUInt16;
-      WriteImage(out.Prepare("foreground" / fs::path(name).concat(".png")), rgba, format);
-      ++r->foreground;
+    std::vector<double> cover(count);
+    tbb::parallel_for(size_t{0}, count, [&](size_t k) {
+      cover[k] = WriteMaskFiles(o, scene, scene.images[first + k], soft[k], files[k]);
+    });
+    for (size_t k = 0; k < count; ++k) {
+      coverage += cover[k];
+      r->masks += o.masks;
+      r->foreground += o.foreground;
+      Progress(o, "masks", ++done, total);
     }
-    Progress(o, "masks", ++done, total);
   }
   r->mean_mask_coverage = total > 0 ? coverage / total : 0;
 }

@@ -1,10 +1,14 @@
 // The real data: lego (NeRF synthetic) imported at 50 x 50 and reconstructed with the default
-// solver on the CPU, 32^3 then 64^3, 8 Gauss-Newton iterations each (CALIBRATION.md's setting).
-// Label `slow` (about a minute on 2 cores); skips without ../shared/data.
+// solver on the CPU, 32^3 then 64^3, 8 Gauss-Newton iterations each (CALIBRATION.md's setting),
+// then exported and evaluated against the photos' alpha (the true foreground).
+// Label `slow` (about a minute and a half on 2 cores); skips without ../shared/data.
 #include <gtest/gtest.h>
 
 #include <cstdio>
+#include <memory>
 
+#include "export/evaluate.h"
+#include "export/export.h"
 #include "recon_cuda/reconstruct.h"
 #include "sfm_import/importer.h"
 #include "tests/test_util.h"
@@ -12,20 +16,46 @@
 namespace perf::recon {
 namespace {
 
-TEST(LegoReconstructTest, HeldOutPsnrAt50Pixels) {
-  PERF_REQUIRE_DATA(lego, "lego");
-  test::TempDir dir;
-  ImportOptions io;
-  io.nerf_json = lego / "transforms_train.json";
-  io.workspace = dir / "ws";
-  io.downscale = 16;
-  RunImport(io);
-  ReconstructOptions o;
-  o.workspace = io.workspace;
-  o.device = "cpu";
-  o.levels = 2;
-  o.iterations = 8;
-  const ReconstructResult r = Reconstruct(o);
+namespace fs = std::filesystem;
+
+class LegoTest : public ::testing::Test {
+ protected:
+  // One reconstruction for both tests.
+  static void SetUpTestSuite() {
+    const fs::path lego = test::SharedData("lego");
+    if (lego.empty()) return;
+    dir_ = new test::TempDir();
+    ImportOptions io;
+    io.nerf_json = lego / "transforms_train.json";
+    io.workspace = *dir_ / "ws";
+    io.downscale = 16;
+    RunImport(io);
+    ReconstructOptions o;
+    o.workspace = io.workspace;
+    o.device = "cpu";
+    o.levels = 2;
+    o.iterations = 8;
+    result_ = new ReconstructResult(Reconstruct(o));
+  }
+  static void TearDownTestSuite() {
+    delete result_;
+    delete dir_;
+    result_ = nullptr;
+    dir_ = nullptr;
+  }
+  void SetUp() override {
+    PERF_REQUIRE_DATA(lego, "lego");
+    ASSERT_NE(result_, nullptr);
+  }
+  static fs::path Workspace() { return *dir_ / "ws"; }
+  static test::TempDir* dir_;
+  static ReconstructResult* result_;
+};
+test::TempDir* LegoTest::dir_ = nullptr;
+ReconstructResult* LegoTest::result_ = nullptr;
+
+TEST_F(LegoTest, HeldOutPsnrAt50Pixels) {
+  const ReconstructResult& r = *result_;
   ASSERT_EQ(r.levels.size(), 2u);
   std::printf("lego 50x50, 8 + 8 GN iterations: held-out PSNR %.2f dB in %.1f s (%s)\n", r.test_psnr,
               r.solve_seconds, r.backend.c_str());
@@ -34,6 +64,37 @@ TEST(LegoReconstructTest, HeldOutPsnrAt50Pixels) {
   EXPECT_GT(r.test_psnr, 21.5);
   EXPECT_GT(r.levels[1].test_psnr, r.levels[0].test_psnr + 0.5);
   EXPECT_GT(r.levels[1].train_psnr, 20.0);
+}
+
+TEST_F(LegoTest, ExportAndMasksAgainstAlpha) {
+  exporter::ExportOptions eo;
+  eo.workspace = Workspace();
+  eo.device = "cpu";
+  eo.orbit.frames = 4;
+  const exporter::ExportResult x = exporter::RunExport(eo);
+  EXPECT_EQ(x.masks, 100);  // every photo, train and held out
+  EXPECT_GT(x.vdb.active_voxels, 0);
+  EXPECT_GT(x.mesh_triangles, 1000);
+  exporter::EvalOptions vo;
+  vo.workspace = Workspace();
+  vo.device = "cpu";
+  const exporter::EvalResult e = exporter::RunEval(vo);
+  std::printf("lego 50x50: held-out PSNR %.2f dB, SSIM %.3f; masks vs alpha: IoU %.3f, precision %.3f, recall %.3f; "
+              "vdb %lld voxels, %lld KiB; mesh %lld triangles\n",
+              e.mean.psnr, e.mean.ssim, e.pooled.iou, e.pooled.precision, e.pooled.recall,
+              static_cast<long long>(x.vdb.active_voxels), static_cast<long long>(x.vdb.file_bytes / 1024),
+              static_cast<long long>(x.mesh_triangles));
+  EXPECT_EQ(e.mask_truth, "alpha");
+  ASSERT_EQ(e.masks.size(), 100u);
+  // The masks must hold the whole object (a cut-out that loses parts of it is useless): recall
+  // measured 0.998. Their precision is poor at this setting (0.39 measured: white fog left in
+  // the box's empty space explains the white background as well as the shells do; issue 3), so
+  // the IoU bar only asserts that the masks are about the object and not the whole frame
+  // (the box covers ~80 % of each photo, the object ~30 %).
+  EXPECT_GT(e.pooled.recall, 0.97);
+  EXPECT_GT(e.pooled.iou, 0.33);
+  EXPECT_GT(e.mean.ssim, 0.8);
+  EXPECT_NEAR(e.mean.psnr, result_->test_psnr, 0.05) << "eval and reconstruct score the same renders";
 }
 
 }  // namespace
