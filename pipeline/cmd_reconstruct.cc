@@ -65,6 +65,7 @@ void AddReconstructCommand(CLI::App& app) {
   cmd->add_option("--lr-density", o.solver.adam.lr_density, "Adam learning rate of densities")->capture_default_str();
   cmd->add_option("--init-opacity", o.init.box_opacity, "Opacity of the box across its shortest side at the start")
       ->capture_default_str();
+  cmd->add_flag("--init-shells-mean", o.init_shells_from_photos, "Shells start at the photos' mean colour (else random)");
   cmd->add_option("--min-box-opacity", o.min_box_opacity,
                   "Render rule: rays whose box opacity is below this see only the shells")->capture_default_str();
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");

@@ -193,7 +193,21 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     const auto t_level = WallClock::now();
     double eval_seconds = 0;
     const VolumeShape shape = shape_of(level);
-    if (x.empty()) x = InitialParams(shape, geometry, o.init);  // level 0 of a fresh start
+    if (x.empty()) {  // level 0 of a fresh start
+      InitOptions init = o.init;
+      if (o.init_shells_from_photos) {
+        double sum[3] = {0, 0, 0};
+        int64_t count = 0;
+        for (const PosedImage& im : train) {
+          for (size_t p = 0; p < im.image.pixels.size(); p += 3) {
+            for (int c = 0; c < 3; ++c) sum[c] += im.image.pixels[p + c];
+          }
+          count += static_cast<int64_t>(im.image.pixels.size() / 3);
+        }
+        for (int c = 0; c < 3; ++c) init.shell_colour[c] = count > 0 ? static_cast<float>(sum[c] / count) : -1.f;
+      }
+      x = InitialParams(shape, geometry, init);
+    }
     LevelReport lr;
     lr.level = level;
     lr.shape = shape;

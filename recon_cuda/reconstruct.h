@@ -35,6 +35,7 @@ struct ReconstructOptions {
   int iterations = 30;          // solver iterations per level (paper: 30)
   SolverOptions solver;         // max_iterations and seed are set per level
   InitOptions init;
+  bool init_shells_from_photos = false;  // shells start at the training photos' mean colour
   ResidualSettings residuals;
   // Coarse levels fit downscaled photos: the largest power-of-two downscale that keeps a voxel
   // at least one pixel wide in the median view (fewer rays, same information at that level).

@@ -69,6 +69,8 @@ struct InitOptions {
   // from nothing.
   double box_opacity = 0.99;
   double shell_opacity = 0.1;  // mean opacity of the inner shells' texels, uniform in [0, 2 a]
+  // Shell texel colours: this colour (e.g. the photos' mean) when set (>= 0), else random.
+  float shell_colour[3] = {-1, -1, -1};
 };
 
 // Random colours in [0, 1], low densities and shell opacities (the outermost shell's opacity is

@@ -102,6 +102,12 @@ TEST(VolumeTest, InitialParamsAreRandomValidAndFaint) {
   EXPECT_EQ(InitialParams(s, g, o), x);  // seeded
   o.seed = 2;
   EXPECT_NE(InitialParams(s, g, o), x);
+  // A given shell colour (--init-shells-mean) sets every shell texel's colour, nothing else.
+  o.shell_colour[0] = 0.9f, o.shell_colour[1] = 0.8f, o.shell_colour[2] = 0.7f;
+  const std::vector<float> y = InitialParams(s, g, o);
+  for (int64_t i = s.GridParamCount(); i < s.ParamCount(); ++i) {
+    if (KindOf(s, i) == ParamKind::kShellColour) ASSERT_EQ(y[i], o.shell_colour[i % 4]) << i;
+  }
 }
 
 TEST(VolumeTest, GeometryFromSceneAndItsErrors) {
