@@ -54,9 +54,12 @@ void CompareWithTruth(const EvalOptions& o, const Scene& scene, LoadedCheckpoint
     throw IoError(o.gt_masks.string(), "is not a folder", "pass the folder that holds one mask image per photo");
   }
   std::map<int, PhotoFrame> frames;
-  std::vector<const SceneImage*> with_truth;
+  // Each image with a true mask, and that mask's file.
+  std::vector<std::pair<const SceneImage*, fs::path>> with_truth;
   for (const SceneImage& im : scene.images) {
-    if (from_dir ? !FindTrueMask(o.gt_masks, im).empty() : !im.alpha_path.empty()) with_truth.push_back(&im);
+    const fs::path file = from_dir ? FindTrueMask(o.gt_masks, im)
+                                   : (im.alpha_path.empty() ? fs::path() : o.workspace / im.alpha_path);
+    if (!file.empty()) with_truth.emplace_back(&im, file);
   }
   if (from_dir && with_truth.empty()) {
     throw InputError(o.gt_masks.string(), "mask files", "none found",
@@ -68,12 +71,11 @@ void CompareWithTruth(const EvalOptions& o, const Scene& scene, LoadedCheckpoint
   r->mask_truth = from_dir ? "gt-masks" : "alpha";
   double iou_sum = 0;
   int done = 0;
-  for (const SceneImage* im : with_truth) {
+  for (const auto& [im, file] : with_truth) {
     const SceneCamera& cam = scene.camera(im->camera_id);
-    Image ours, truth;
+    const Image truth = MaskChannel(ReadImage(file));
+    Image ours;
     if (from_dir) {
-      const fs::path file = FindTrueMask(o.gt_masks, *im);
-      truth = MaskChannel(ReadImage(file));
       if (truth.width != cam.source.width || truth.height != cam.source.height) {
         throw InputError(file.string(), "size", StrCat(truth.width, "x", truth.height),
                          StrCat("the photo '", im->name, "' is ", cam.source.width, "x", cam.source.height),
@@ -83,8 +85,6 @@ void CompareWithTruth(const EvalOptions& o, const Scene& scene, LoadedCheckpoint
       if (it == frames.end()) it = frames.emplace(cam.id, PhotoFrame::Create(cam)).first;
       ours = RenderPhotoMask(l.backend.get(), LoadedCheckpoint::kParams, cam, *im, it->second, {});
     } else {
-      const fs::path file = o.workspace / im->alpha_path;
-      truth = MaskChannel(ReadImage(file));
       if (truth.width != cam.width || truth.height != cam.height) {
         throw InputError(file.string(), "size", StrCat(truth.width, "x", truth.height),
                          StrCat("the workspace image is ", cam.width, "x", cam.height),
@@ -178,10 +178,8 @@ EvalResult RunEval(const EvalOptions& o) {
   for (const recon::PosedImage& v : test) {
     const recon::RenderOutput render =
         l.backend->Render(LoadedCheckpoint::kParams, v.camera, v.image.width, v.image.height, o.min_box_opacity);
-    Image mask(render.width, render.height, 1);
-    mask.pixels = render.opacity;
     const Image image = recon::ToImage(render);
-    const ImageScores s = ScoreImage(image, v.image, Binarize(mask, o.mask_threshold));
+    const ImageScores s = ScoreImage(image, v.image, Binarize(recon::OpacityImage(render), o.mask_threshold));
     r.views.push_back({v.name, s});
     r.mean.psnr += s.psnr;
     r.mean.ssim += s.ssim;

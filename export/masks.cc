@@ -7,6 +7,7 @@
 #include <cmath>
 
 #include "common/errors.h"
+#include "recon_cuda/evaluation.h"
 #include "recon_cuda/training_data.h"
 #include "sfm_import/camera_models.h"
 #include "sfm_import/colmap_model.h"
@@ -53,11 +54,8 @@ PhotoFrame PhotoFrame::Create(const SceneCamera& camera) {
 
 Image RenderWorkspaceMask(recon::Backend* backend, recon::VecId x, const SceneCamera& camera,
                           const SceneImage& image) {
-  const recon::RenderOutput r =
-      backend->Render(x, recon::ToPinhole(camera, image.world_from_cam), camera.width, camera.height, 0.f);
-  Image out(r.width, r.height, 1);
-  out.pixels = r.opacity;
-  return out;
+  return recon::OpacityImage(
+      backend->Render(x, recon::ToPinhole(camera, image.world_from_cam), camera.width, camera.height, 0.f));
 }
 
 Image RenderPhotoMask(recon::Backend* backend, recon::VecId x, const SceneCamera& camera,
