@@ -2,41 +2,13 @@
 #include <CLI/CLI.hpp>
 #include <iomanip>
 #include <iostream>
-#include <memory>
 
 #include "export/evaluate.h"
 #include "export/export.h"
 #include "pipeline/commands.h"
-#include "pipeline/progress.h"
+#include "pipeline/stage_progress.h"
 
 namespace perf {
-
-namespace {
-
-// One progress line per step ("export masks", "export mesh", ...), each finished when the next
-// step starts.
-class StepProgress {
- public:
-  StepProgress(std::string label, bool quiet) : label_(std::move(label)), quiet_(quiet) {}
-  void Update(const std::string& step, int done, int total) {
-    if (step != step_) {
-      if (bar_) bar_->Finish();
-      bar_ = std::make_unique<Progress>(label_ + " " + step, quiet_);
-      step_ = step;
-    }
-    bar_->Update(done, total, step == "masks" || step == "views" ? "images" : (step == "renders" ? "frames" : "parts"));
-  }
-  void Finish() {
-    if (bar_) bar_->Finish();
-  }
-
- private:
-  std::string label_, step_;
-  bool quiet_;
-  std::unique_ptr<Progress> bar_;
-};
-
-}  // namespace
 
 void AddExportCommand(CLI::App& app) {
   struct Args {

@@ -1,11 +1,10 @@
 // `perf reconstruct WORKSPACE` and `perf render WORKSPACE`.
 #include <CLI/CLI.hpp>
-#include <iomanip>
 #include <iostream>
 
 #include "common/errors.h"
 #include "pipeline/commands.h"
-#include "pipeline/progress.h"
+#include "pipeline/stage_progress.h"
 #include "recon_cuda/reconstruct.h"
 #include "recon_cuda/render_views.h"
 
@@ -83,16 +82,7 @@ void AddReconstructCommand(CLI::App& app) {
     if (args->no_aux) o.residuals.lambda = 0;
     if (args->no_pyramid) o.pyramid = false;
     Progress progress("reconstruct", args->quiet);
-    o.on_event = [&](const recon::ReconstructOptions::Event& e) {
-      if (!e.message.empty()) {
-        progress.Message(e.message);
-        return;
-      }
-      std::ostringstream unit;
-      unit << "iterations, level " << e.level + 1 << "/" << e.levels << ", cost " << std::setprecision(5) << e.cost;
-      if (e.train_psnr > 0) unit << ", train PSNR " << std::setprecision(4) << e.train_psnr << " dB";
-      progress.Update(e.iteration, e.iterations, unit.str());
-    };
+    o.on_event = [&](const recon::ReconstructOptions::Event& e) { ShowReconstructEvent(progress, e); };
     const recon::ReconstructResult r = recon::Reconstruct(o);
     progress.Finish();
     if (!args->quiet) std::cout << recon::ReconstructSummary(r);

@@ -13,7 +13,7 @@
 #include "common/stopwatch.h"
 #include "export/evaluate.h"
 #include "export/export.h"
-#include "pipeline/progress.h"
+#include "pipeline/stage_progress.h"
 #include "recon_cuda/checkpoint.h"
 #include "recon_cuda/reconstruct.h"
 #include "sfm_import/colmap_runner.h"
@@ -180,13 +180,8 @@ class Runner {
     Progress progress("reconstruct", o_.quiet);
     ro.on_event = [&](const recon::ReconstructOptions::Event& e) {
       CheckStop();
-      if (!e.message.empty()) {
-        progress.Message(e.message);
-        return;
-      }
-      std::ostringstream unit;
-      unit << "iterations, level " << e.level + 1 << "/" << e.levels << ", cost " << std::setprecision(5) << e.cost;
-      progress.Update(e.iteration, e.iterations, unit.str());
+      ShowReconstructEvent(progress, e);
+      if (!e.message.empty()) return;
       log_.Write({{"stage", "reconstruct"}, {"event", "iteration"}, {"level", e.level}, {"iteration", e.iteration},
                   {"iterations", e.iterations}, {"cost", e.cost}, {"train_psnr", e.train_psnr}});
     };
@@ -216,19 +211,13 @@ class Runner {
     eo.orbit.frames = preset_.orbit_frames;
     eo.device = o_.device;
     eo.threads = o_.threads;
-    std::unique_ptr<Progress> bar;
-    std::string step;
-    eo.progress = [&](const std::string& st, int done, int total) {
+    StepProgress progress("export", o_.quiet);
+    eo.progress = [&](const std::string& step, int done, int total) {
       CheckStop();
-      if (st != step) {
-        if (bar) bar->Finish();
-        bar = std::make_unique<Progress>("export " + st, o_.quiet);
-        step = st;
-      }
-      bar->Update(done, total, "");
+      progress.Update(step, done, total);
     };
     const exporter::ExportResult r = exporter::RunExport(eo);
-    if (bar) bar->Finish();
+    progress.Finish();
     r_->mask_coverage = r.mean_mask_coverage;
     s->reason = StrCat(r.files.size(), " files");
   }
