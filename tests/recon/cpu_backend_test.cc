@@ -19,24 +19,10 @@ namespace {
 using test::DenseJacobian;
 using test::TinyProblem;
 
-double MaxAbs(const std::vector<double>& v) {
-  double m = 0;
-  for (double x : v) m = std::max(m, std::abs(x));
-  return m;
-}
-
 // Float pass vs double reference: each entry within 2e-4 of the largest entry (float sums over
 // a few hundred contributions) plus 1e-4 relative.
 void ExpectClose(const std::vector<float>& got, const std::vector<double>& want, const char* what) {
-  ASSERT_EQ(got.size(), want.size());
-  const double scale = MaxAbs(want);
-  ASSERT_GT(scale, 0) << what;
-  int nonzero = 0;
-  for (size_t i = 0; i < want.size(); ++i) {
-    ASSERT_NEAR(got[i], want[i], 2e-4 * scale + 1e-4 * std::abs(want[i])) << what << " entry " << i;
-    if (std::abs(want[i]) > 1e-3 * scale) ++nonzero;
-  }
-  EXPECT_GT(nonzero, static_cast<int>(want.size() / 10)) << what << ": too few entries exercised";
+  test::ExpectAllClose(got, want, 2e-4, 1e-4, what);
 }
 
 std::unique_ptr<Backend> Cpu(int threads, bool cache = true) {

@@ -39,16 +39,7 @@ void QuantiseColours(RaySet* rays) {
 }
 
 void ExpectClose(const std::vector<float>& gpu, const std::vector<float>& cpu, const char* what) {
-  ASSERT_EQ(gpu.size(), cpu.size());
-  float scale = 0;
-  for (float v : cpu) scale = std::max(scale, std::abs(v));
-  ASSERT_GT(scale, 0) << what;
-  int nonzero = 0;
-  for (size_t i = 0; i < cpu.size(); ++i) {
-    ASSERT_NEAR(gpu[i], cpu[i], 1e-4 * scale + 1e-4 * std::abs(cpu[i])) << what << " entry " << i;
-    if (std::abs(cpu[i]) > 1e-3 * scale) ++nonzero;
-  }
-  EXPECT_GT(nonzero, static_cast<int>(cpu.size() / 10)) << what << ": too few entries exercised";
+  test::ExpectAllClose(gpu, cpu, 1e-4, 1e-4, what);
 }
 
 void ExpectStatsClose(const PassStats& gpu, const PassStats& cpu, const char* what) {

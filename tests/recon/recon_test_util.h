@@ -3,6 +3,9 @@
 // from the double-precision per-ray math, to check the float backends against.
 #pragma once
 
+#include <gtest/gtest.h>
+
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <utility>
@@ -142,5 +145,23 @@ struct DenseJacobian {
     return c;
   }
 };
+
+// Every entry of `got` within scale_tol * max|want| + rel_tol * |want_i| of `want`, and more than a
+// tenth of the entries clearly non-zero (so the comparison exercised something).
+template <class G, class W>
+void ExpectAllClose(const std::vector<G>& got, const std::vector<W>& want, double scale_tol, double rel_tol,
+                    const char* what) {
+  ASSERT_EQ(got.size(), want.size());
+  double scale = 0;
+  for (W v : want) scale = std::max(scale, std::abs(static_cast<double>(v)));
+  ASSERT_GT(scale, 0) << what;
+  int nonzero = 0;
+  for (size_t i = 0; i < want.size(); ++i) {
+    const double w = want[i];
+    ASSERT_NEAR(got[i], w, scale_tol * scale + rel_tol * std::abs(w)) << what << " entry " << i;
+    if (std::abs(w) > 1e-3 * scale) ++nonzero;
+  }
+  EXPECT_GT(nonzero, static_cast<int>(want.size() / 10)) << what << ": too few entries exercised";
+}
 
 }  // namespace perf::recon::test
