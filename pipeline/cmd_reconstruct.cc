@@ -15,7 +15,7 @@ void AddReconstructCommand(CLI::App& app) {
     recon::ReconstructOptions o;
     std::string workspace;
     std::string solver = "gn";
-    bool no_aux = false, no_pyramid = false, quiet = false;
+    bool no_aux = false, no_pyramid = false, no_hold = false, quiet = false;
   };
   auto args = std::make_shared<Args>();
   recon::ReconstructOptions& o = args->o;
@@ -65,6 +65,14 @@ void AddReconstructCommand(CLI::App& app) {
   cmd->add_option("--init-opacity", o.init.box_opacity, "Opacity of the box across its shortest side at the start")
       ->capture_default_str();
   cmd->add_flag("--init-shells-mean", o.init_shells_from_photos, "Shells start at the photos' mean colour (else random)");
+  cmd->add_option("--background", o.background,
+                  "Shells: learn them, or keep them fixed at scene.json's background colour (auto: fixed when "
+                  "every photo had alpha)")
+      ->capture_default_str();
+  cmd->add_flag("--pixel-jitter", o.residuals.pixel_jitter,
+                "Move every training ray to a random point of its pixel each iteration (default: pixel centres)");
+  cmd->add_flag("--no-hold-at-bounds", args->no_hold,
+                "Let CG move parameters at a bound of their range that the gradient pushes out (plain projected GN)");
   cmd->add_option("--min-box-opacity", o.min_box_opacity,
                   "Render rule: rays whose box opacity is below this see only the shells")->capture_default_str();
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
@@ -81,6 +89,7 @@ void AddReconstructCommand(CLI::App& app) {
     o.solver.adam.lr_opacity = o.solver.adam.lr_colour;
     if (args->no_aux) o.residuals.lambda = 0;
     if (args->no_pyramid) o.pyramid = false;
+    if (args->no_hold) o.solver.hold_at_bounds = false;
     Progress progress("reconstruct", args->quiet);
     o.on_event = [&](const recon::ReconstructOptions::Event& e) { ShowReconstructEvent(progress, e); };
     const recon::ReconstructResult r = recon::Reconstruct(o);

@@ -230,6 +230,27 @@ class CpuBackend final : public Backend {
       for (int64_t i = b; i < e; ++i) p[i] = ProjectToValid(KindOf(shape, i), p[i]);
     });
   }
+  void HoldParameters(VecId x, VecId g, VecId free, bool bounds) override {
+    const float* px = vec(x).data();
+    float* pg = vec(g).data();
+    float* pf = vec(free).data();
+    const VolumeShape shape = level_.shape;
+    const bool fixed_shells = level_.fixed_shells;
+    ForChunks([&](int64_t b, int64_t e) {
+      for (int64_t i = b; i < e; ++i) {
+        const bool held = HeldParameter(KindOf(shape, i), px[i], pg[i], fixed_shells, bounds);
+        pf[i] = held ? 0.f : 1.f;
+        if (held) pg[i] = 0.f;
+      }
+    });
+  }
+  void Multiply(VecId y, VecId m) override {
+    float* py = vec(y).data();
+    const float* pm = vec(m).data();
+    ForChunks([&](int64_t b, int64_t e) {
+      for (int64_t i = b; i < e; ++i) py[i] *= pm[i];
+    });
+  }
   void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) override {
     float* px = vec(x).data();
     const float* pg = vec(g).data();
@@ -353,7 +374,7 @@ class CpuBackend final : public Backend {
     arena_.execute([&] {
       tbb::parallel_for(0, height, [&](int y) {
         for (int px = 0; px < width; ++px) {
-          const Jitter none{0, 0, false};
+          const Jitter none{0, 0, false, false};
           const BoxRay<float> ray = PixelBoxRay(camera, level_.geometry.box, vol.n, px, y, none);
           const RayOutput<float> o = Forward(vol, ray, none, zero, 0.f, level_.residuals.stop_transmittance);
           const float opacity = 1 - o.t_box;
@@ -416,7 +437,7 @@ class CpuBackend final : public Backend {
 
   // Ray i's jitter in the iteration of `seed` (every pass of the iteration sees the same).
   Jitter JitterOf(int64_t i, uint32_t seed) const {
-    return {seed, static_cast<uint32_t>(i), level_.residuals.jitter};
+    return {seed, static_cast<uint32_t>(i), level_.residuals.jitter, level_.residuals.pixel_jitter};
   }
 
   BoxRay<float> RayOf(int64_t i, uint32_t seed) const {
@@ -463,7 +484,7 @@ class CpuBackend final : public Backend {
         for (int64_t i = b * kBlockRays; i < std::min(n, (b + 1) * kBlockRays); ++i) {
           const RayPixel& px = p.rays->pixels[i];
           const BoxRay<float> ray = PixelBoxRay(p.rays->cameras[px.camera], p.geometry.box, p.shape.n, px.x, px.y,
-                                                Jitter{0, 0, false});
+                                                Jitter{0, 0, false, false});
           count += MakeMarch(vol, ray).count;
         }
         per_block[b] = count;

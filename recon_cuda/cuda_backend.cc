@@ -130,6 +130,10 @@ class CudaBackend final : public Backend {
   double Dot(VecId a, VecId b) const override { return cuda::Dot(ptr(a), ptr(b), n(), scratch_->Reduce()); }
   double MaxAbs(VecId v) const override { return cuda::MaxAbs(ptr(v), n(), scratch_->Reduce()); }
   void Project(VecId x) override { cuda::Project(ptr(x), n(), level_.shape.GridParamCount()); }
+  void HoldParameters(VecId x, VecId g, VecId free, bool bounds) override {
+    cuda::HoldParameters(ptr(x), ptr(g), ptr(free), n(), level_.shape.GridParamCount(), level_.fixed_shells, bounds);
+  }
+  void Multiply(VecId y, VecId m) override { cuda::Multiply(ptr(y), ptr(m), n()); }
   void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) override {
     cuda::AdamStep(ptr(x), ptr(g), ptr(m), ptr(v), AdamCoefficientsAt(s, t), n(), level_.shape.GridParamCount());
   }
@@ -221,6 +225,7 @@ class CudaBackend final : public Backend {
             level_.residuals.lambda,
             level_.residuals.stop_transmittance,
             level_.residuals.jitter,
+            level_.residuals.pixel_jitter,
             seed};
   }
 

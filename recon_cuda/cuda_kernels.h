@@ -38,7 +38,7 @@ struct PassInput {
   BoxFrame<float> box;
   RaysView rays;
   float lambda, stop_transmittance;
-  bool jitter;
+  bool jitter, pixel_jitter;
   uint32_t seed;
 };
 
@@ -80,6 +80,10 @@ void Xpby(float* y, const float* x, float b, int64_t n);               // y = x 
 void DivideClamped(float* z, const float* r, const float* d, float floor, int64_t n);
 void AxpyDiag(float* y, float a, const float* d, const float* x, int64_t n);  // y += a d x
 void Project(float* x, int64_t n, int64_t grid_params);
+// backend.h HoldParameters and Multiply.
+void HoldParameters(const float* x, float* g, float* free, int64_t n, int64_t grid_params, bool fixed_shells,
+                    bool bounds);
+void Multiply(float* y, const float* m, int64_t n);
 void AdamStep(float* x, const float* g, float* m, float* v, const AdamCoefficients& c, int64_t n,
               int64_t grid_params);
 

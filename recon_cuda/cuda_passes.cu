@@ -114,7 +114,7 @@ struct RayAt {
 };
 __device__ __forceinline__ RayAt MakeRay(const PassInput& in, int64_t i) {
   const RayPixel px = in.rays.pixels[i];
-  const Jitter jit{in.seed, static_cast<uint32_t>(i), in.jitter};
+  const Jitter jit{in.seed, static_cast<uint32_t>(i), in.jitter, in.pixel_jitter};
   return {PixelBoxRay(in.rays.cameras[px.camera], in.box, in.vol.n, px.x, px.y, jit), jit};
 }
 __device__ __forceinline__ void TargetOf(const PassInput& in, int64_t i, float target[3]) {
@@ -180,7 +180,7 @@ __global__ void RenderKernel(VolumeView<float> vol, BoxFrame<float> box, Pinhole
                              int height, float stop, float min_box_opacity, float* colour, float* opacity) {
   const int x = blockIdx.x * blockDim.x + threadIdx.x, y = blockIdx.y * blockDim.y + threadIdx.y;
   if (x >= width || y >= height) return;
-  const Jitter none{0, 0, false};
+  const Jitter none{0, 0, false, false};
   const float zero[3] = {0, 0, 0};
   const BoxRay<float> ray = PixelBoxRay(camera, box, vol.n, x, y, none);
   const RayOutput<float> o = Forward(vol, ray, none, zero, 0.f, stop);

@@ -85,6 +85,20 @@ void AxpyDiag(float* y, float a, const float* d, const float* x, int64_t n) {
 void Project(float* x, int64_t n, int64_t grid_params) {
   ForEach(n, [=] __device__(int64_t i) { x[i] = ProjectToValid(KindOfParam(grid_params, i), x[i]); }, "Project");
 }
+void HoldParameters(const float* x, float* g, float* free, int64_t n, int64_t grid_params, bool fixed_shells,
+                    bool bounds) {
+  ForEach(
+      n,
+      [=] __device__(int64_t i) {
+        const bool held = HeldParameter(KindOfParam(grid_params, i), x[i], g[i], fixed_shells, bounds);
+        free[i] = held ? 0.f : 1.f;
+        if (held) g[i] = 0.f;
+      },
+      "HoldParameters");
+}
+void Multiply(float* y, const float* m, int64_t n) {
+  ForEach(n, [=] __device__(int64_t i) { y[i] *= m[i]; }, "Multiply");
+}
 void AdamStep(float* x, const float* g, float* m, float* v, const AdamCoefficients& c, int64_t n,
               int64_t grid_params) {
   ForEach(n, [=] __device__(int64_t i) { AdamUpdate(c, KindOfParam(grid_params, i), g[i], &x[i], &m[i], &v[i]); },

@@ -24,6 +24,20 @@ PERF_HD_INLINE float ProjectToValid(ParamKind kind, float v) {
   return kind == ParamKind::kGridDensity ? Max(v, 0.f) : Clamp(v, 0.f, 1.f);
 }
 
+// Whether parameter x (gradient g, kind `kind`) is held for one iteration, given whether the
+// shells are fixed (a known background) and whether bounds are active: the active set of a
+// projected Gauss-Newton method (Bertsekas, "Projected Newton methods for optimization
+// problems with simple constraints", 1982). A parameter at a bound of its valid range whose
+// gradient points out of the range would only be moved out by a descent step and projected
+// back; leaving it in the system lets CG spend the step on that move and shape every other
+// parameter's step around it. Held parameters are left out of that iteration's system.
+PERF_HD_INLINE bool HeldParameter(ParamKind kind, float x, float g, bool fixed_shells, bool bounds) {
+  if (fixed_shells && (kind == ParamKind::kShellColour || kind == ParamKind::kShellOpacity)) return true;
+  if (!bounds) return false;
+  if (x <= 0 && g > 0) return true;
+  return kind != ParamKind::kGridDensity && x >= 1 && g < 0;
+}
+
 // One Adam step (Kingma & Ba) in scalars: the host computes the bias corrections once per step.
 struct AdamCoefficients {
   float lr_colour, lr_density, lr_opacity;  // grid and shell colours share lr_colour

@@ -128,6 +128,7 @@ struct MarchStep {
 struct Jitter {
   uint32_t seed, ray;
   bool enabled;  // false: u_k = 0.5 (rendering)
+  bool pixel;    // with enabled: the ray also moves inside its pixel (false: through the centre)
 };
 
 template <class T>
@@ -192,12 +193,14 @@ inline constexpr uint32_t kPixelJitterX = 0xfffffffeu;
 inline constexpr uint32_t kPixelJitterY = 0xffffffffu;
 
 // The ray of pixel (px, py) as every pass of one iteration sees it: jittered inside the pixel
-// when jit.enabled (training), through the pixel centre otherwise (rendering).
+// when jit.enabled and jit.pixel, through the pixel centre otherwise (rendering, and training by
+// default: ResidualSettings::pixel_jitter says why).
 template <class T>
 PERF_HD_INLINE BoxRay<T> PixelBoxRay(const PinholeCamera<T>& cam, const BoxFrame<T>& box, int n, int px, int py,
                                      const Jitter& jit) {
-  const T jx = jit.enabled ? Uniform01<T>(jit.seed, jit.ray, kPixelJitterX) : T(0.5);
-  const T jy = jit.enabled ? Uniform01<T>(jit.seed, jit.ray, kPixelJitterY) : T(0.5);
+  const bool move = jit.enabled && jit.pixel;
+  const T jx = move ? Uniform01<T>(jit.seed, jit.ray, kPixelJitterX) : T(0.5);
+  const T jy = move ? Uniform01<T>(jit.seed, jit.ray, kPixelJitterY) : T(0.5);
   Vec3<T> o, d;
   PixelRay(cam, px, py, jx, jy, &o, &d);
   return ToBoxRay(box, n, o, d);

@@ -59,6 +59,7 @@ json IterationJson(const LevelReport& lr, const SolverOptions& so, const Iterati
               {"cost_after", s.cost_after},
               {"train_psnr", s.train_psnr},
               {"cg_iterations", s.cg_iterations},
+              {"held", s.held},
               {"step", s.step},
               {"line_search_steps", s.line_search_steps},
               {"accepted", s.accepted},
@@ -116,10 +117,19 @@ void ReconstructOptions::Check() const {
   if (!(residuals.stop_transmittance >= 0 && residuals.stop_transmittance < 1)) {
     Fail("--stop-transmittance", StrCat(residuals.stop_transmittance), "must be in [0, 1)");
   }
+  if (background != "auto" && background != "fixed" && background != "learn") {
+    Fail("--background", background, "must be auto, fixed or learn");
+  }
   if (!(min_box_opacity >= 0 && min_box_opacity <= 1)) {
     Fail("--min-box-opacity", StrCat(min_box_opacity), "must be in [0, 1]");
   }
   solver.Check();
+}
+
+bool FixedBackground(const std::string& background, const Scene& scene) {
+  if (background != "auto") return background == "fixed";
+  return !scene.images.empty() &&
+         std::all_of(scene.images.begin(), scene.images.end(), [](const SceneImage& im) { return !im.alpha_path.empty(); });
 }
 
 ReconstructResult Reconstruct(const ReconstructOptions& o) {
@@ -140,6 +150,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   ReconstructResult result;
   result.backend = backend->Describe();
   const int levels = o.levels > 0 ? o.levels : DefaultLevels(result.backend);
+  result.fixed_background = FixedBackground(o.background, scene);
   const int num_shells = geometry.num_shells();
   const auto shape_of = [&](int level) {
     return VolumeShape{o.start_resolution << level, o.start_resolution << level, num_shells};
@@ -187,6 +198,10 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   const std::vector<PosedImage>& preview_views = test.empty() ? train : test;
   say(StrCat("backend: ", result.backend, "; ", train.size(), " training and ", test.size(), " held-out views; ",
              levels, " levels from ", o.start_resolution, "^3"));
+  say(result.fixed_background
+          ? StrCat("background: fixed at (", scene.background[0], ", ", scene.background[1], ", ", scene.background[2],
+                   ")", o.background == "auto" ? ", the colour every photo's alpha was composited over" : "")
+          : std::string("background: learned (environment shells)"));
 
   double elapsed = 0;  // solver time so far (excludes held-out evaluation and previews)
   for (int level = start; level < levels; ++level) {
@@ -206,6 +221,10 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
         }
         for (int c = 0; c < 3; ++c) init.shell_colour[c] = count > 0 ? static_cast<float>(sum[c] / count) : -1.f;
       }
+      if (result.fixed_background) {
+        for (int c = 0; c < 3; ++c) init.shell_colour[c] = static_cast<float>(scene.background[c]);
+        init.opaque_shells = true;
+      }
       x = InitialParams(shape, geometry, init);
     }
     LevelReport lr;
@@ -221,7 +240,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
       rays = MakeRaySet(train);
     }
     lr.rays = rays.size();
-    LevelProblem problem{shape, geometry, &rays, o.residuals};
+    LevelProblem problem{shape, geometry, &rays, o.residuals, result.fixed_background};
     const MemoryEstimate mem = backend->SetLevel(problem, RequiredVectors(o.solver.type));
     say(StrCat("level ", level + 1, "/", levels, ": ", DescribeShape(shape), ", ", lr.rays, " rays",
                lr.image_downscale > 1 ? StrCat(" (images / ", lr.image_downscale, ")") : std::string(),
@@ -329,6 +348,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                      {"version", 1},
                      {"backend", result.backend},
                      {"solver", SolverName(o.solver.type)},
+                     {"background", result.fixed_background ? "fixed" : "learned"},
                      {"levels", levels},
                      {"start_resolution", o.start_resolution},
                      {"iterations_per_level", o.iterations},

@@ -13,9 +13,11 @@ namespace {
 
 
 // Vector ids of the Gauss-Newton solver.
-enum : VecId { kX = kSolverX, kG, kDiag, kStep, kResidual, kZ, kDir, kAp, kTrial, kGnVectors };
-// Adam reuses kX and kG; its moments live in two more.
-enum : VecId { kAdamM = 2, kAdamV = 3, kAdamVectors = 4 };
+// kFree: 1 for the parameters that are variables of this iteration, 0 for held ones.
+enum : VecId { kX = kSolverX, kG, kDiag, kStep, kResidual, kZ, kDir, kAp, kTrial, kFree, kGnVectors };
+static_assert(kStep == kSolverStep);
+// Adam reuses kX and kG; its moments and free mask live in three more.
+enum : VecId { kAdamM = 2, kAdamV = 3, kAdamFree = 4, kAdamVectors = 5 };
 
 void Fail(const char* field, const std::string& value, const std::string& problem) {
   throw InputError("solver options", field, value, problem);
@@ -46,7 +48,7 @@ int RequiredVectors(SolverType type) {
 void SolverOptions::Check() const {
   if (max_iterations < 0) Fail("max_iterations", std::to_string(max_iterations), "must be >= 0");
   if (max_cg_iterations < 1) Fail("max_cg_iterations", std::to_string(max_cg_iterations), "must be >= 1");
-  if (!(cg_exit_ratio > 0 && cg_exit_ratio <= 1)) Fail("cg_exit_ratio", StrCat(cg_exit_ratio), "must be in (0, 1]");
+  if (!(cg_exit_ratio > 0)) Fail("cg_exit_ratio", StrCat(cg_exit_ratio), "must be > 0");
   if (!(damping >= 0)) Fail("damping", StrCat(damping), "must be >= 0");
   if (!(initial_step > 0)) Fail("initial_step", StrCat(initial_step), "must be > 0");
   if (!(step_factor > 0 && step_factor < 1)) Fail("step_factor", StrCat(step_factor), "must be in (0, 1)");
@@ -84,6 +86,7 @@ int SolvePcg(const SolverOptions& o, Backend* b, SolverSummary* summary) {
   int k = 0;
   while (k < o.max_cg_iterations) {
     b->MultiplyJtJ(kDir, kAp);
+    b->Multiply(kAp, kFree);  // the system of the free parameters only
     ++summary->jtj_passes;
     if (o.damping > 0) b->AxpyDiag(kAp, o.damping, kDiag, kDir);
     const double pap = b->Dot(kDir, kAp);
@@ -146,12 +149,19 @@ void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const Iter
 
     if (o.type == SolverType::kAdam) {
       t0 = WallClock::now();
+      if (b->level().fixed_shells) {
+        b->HoldParameters(kX, kG, kAdamFree, false);
+        s.held = b->level().shape.ParamCount() - std::llround(b->Dot(kAdamFree, kAdamFree));
+      }
       b->AdamStep(kX, kG, kAdamM, kAdamV, o.adam, it + 1);
       s.seconds_update = SecondsSince(t0);
       s.step = 1;
       s.cost_after = lin.cost;  // of the step's own pass: Adam evaluates nothing else
     } else {
       t0 = WallClock::now();
+      b->HoldParameters(kX, kG, kFree, o.hold_at_bounds);
+      b->Multiply(kDiag, kFree);  // the reduced system's diagonal (and the floor's reference)
+      s.held = b->level().shape.ParamCount() - std::llround(b->Dot(kFree, kFree));
       s.cg_iterations = SolvePcg(o, b, summary);
       s.seconds_cg = SecondsSince(t0);
 

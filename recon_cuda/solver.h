@@ -6,7 +6,9 @@
 // Gauss-Newton iteration:
 //   1. Linearize at x: cost, g = J^T r, D = diag(J^T J), one jitter seed for the whole iteration;
 //   2. PCG (paper Algorithm 2) on (J^T J + mu D) d = -g from d = 0, Jacobi preconditioner D,
-//      leaving when R / R_prev > 0.85 (R = |r|^2) or after max_cg_iterations;
+//      leaving when R / R_prev > 0.85 (R = |r|^2) or after max_cg_iterations; restricted to the
+//      free parameters: fixed shells and (hold_at_bounds) those at a bound that g points out of
+//      keep d = 0 (param_ops.h HeldParameter);
 //   3. backtracking line search (paper Algorithm 3) on x(gamma) = P(x + gamma d), P the
 //      projection to the valid range: gamma = 1, 0.7, 0.49, ... while the cost keeps falling;
 //   4. x = x(gamma) if that lowers the cost, else the step is rejected.
@@ -34,7 +36,9 @@ struct SolverOptions {
 
   // PCG (paper Algorithm 2). The paper leaves after 1-3 iterations through the ratio test.
   int max_cg_iterations = 3;
-  double cg_exit_ratio = 0.85;     // leave when |r_k+1|^2 / |r_k|^2 > this
+  // Leave when |r_k+1|^2 / |r_k|^2 > this. CG's residual need not fall monotonically, so values
+  // above 1 tolerate a rise, and infinity runs max_cg_iterations (or to cg_relative_tolerance).
+  double cg_exit_ratio = 0.85;
   double cg_relative_tolerance = 1e-10;  // or when |r|^2 < this |r_0|^2
   // Levenberg-Marquardt style damping: solves (J^T J + damping D) d = -g. 0: plain Gauss-Newton.
   double damping = 0.0;
@@ -43,6 +47,14 @@ struct SolverOptions {
   // nearly clear cell), which otherwise overshoot and are clamped. Measured on lego 50x50
   // (8 + 8 GN): 1e-9 22.43 dB, 1e-5 22.63, 1e-4 22.73, 1e-3 21.75, 1e-2 21.0.
   double diagonal_floor = 1e-4;
+
+  // Projected Gauss-Newton: leave the parameters at a bound of their range whose gradient
+  // points out of it (sigma = 0 with g > 0, a colour at 0 or 1 pushed further) out of the
+  // iteration's CG system, instead of letting the step move them and the projection undo it.
+  // On lego 50x50 (8 + 8 GN, pixel jitter on) about 40 % of the parameters are held per
+  // iteration; held-out PSNR 22.73 -> 23.18 dB with learned shells, 23.77 -> 24.29 dB with a
+  // fixed white background and no auxiliary residual.
+  bool hold_at_bounds = true;
 
   // Line search (paper Algorithm 3).
   double initial_step = 1.0;
@@ -78,6 +90,7 @@ struct IterationSummary {
   double cost_after = 0;      // after the accepted step (line search rays)
   double train_psnr = 0;      // on the fixed subset after the step; 0 when off
   int cg_iterations = 0;
+  int64_t held = 0;           // parameters left out of the step (fixed shells, at a bound)
   double step = 0;            // accepted gamma (0: rejected; Adam: 1)
   int line_search_steps = 0;  // cost evaluations in the line search
   bool accepted = true;
@@ -113,5 +126,8 @@ int RequiredVectors(SolverType type);
 
 // The backend vector that holds x during and after Solve (for renders from a callback).
 inline constexpr VecId kSolverX = 0;
+// Gauss-Newton: the backend vector holding the last iteration's PCG step d (before the line
+// search scales it), for inspection after Solve.
+inline constexpr VecId kSolverStep = 3;
 
 }  // namespace perf::recon

@@ -71,6 +71,7 @@ struct InitOptions {
   double shell_opacity = 0.1;  // mean opacity of the inner shells' texels, uniform in [0, 2 a]
   // Shell texel colours: this colour (e.g. the photos' mean) when set (>= 0), else random.
   float shell_colour[3] = {-1, -1, -1};
+  bool opaque_shells = false;  // every shell texel starts opaque (a fixed background)
 };
 
 // Random colours in [0, 1], low densities and shell opacities (the outermost shell's opacity is

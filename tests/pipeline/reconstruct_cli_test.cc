@@ -7,6 +7,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "recon_cuda/checkpoint.h"
 #include "sfm_import/image_io.h"
 #include "tests/pipeline/synthetic_workspace.h"
 #include "tests/test_util.h"
@@ -106,6 +107,45 @@ TEST_F(ReconstructCli, ResumeContinuesAfterTheLastLevel) {
   r = RunCommand(Perf("reconstruct " + ws_.string() + " --levels 2 --start-resolution 16 --resume"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("level_0.perfvol"), std::string::npos) << r.output;
+}
+
+// The shells of a checkpoint: (min, max) over every shell parameter.
+std::pair<float, float> ShellRange(const fs::path& checkpoint) {
+  const recon::Checkpoint c = recon::ReadCheckpoint(checkpoint);
+  float lo = 1e30f, hi = -1e30f;
+  for (int64_t i = c.shape.GridParamCount(); i < c.shape.ParamCount(); ++i) {
+    lo = std::min(lo, c.params[i]);
+    hi = std::max(hi, c.params[i]);
+  }
+  return {lo, hi};
+}
+
+TEST_F(ReconstructCli, BackgroundIsLearnedOrFixed) {
+  // These photos had no alpha: auto learns the shells.
+  auto r = RunCommand(Perf("reconstruct " + ws_.string() + " --levels 1 --start-resolution 8 --iterations 2"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("background: learned"), std::string::npos) << r.output;
+  auto range = ShellRange(ws_ / "recon" / "level_0.perfvol");
+  EXPECT_LT(range.first, 0.9f);
+  nlohmann::json summary = nlohmann::json::parse(std::ifstream(ws_ / "recon" / "recon.json"));
+  EXPECT_EQ(summary["background"], "learned");
+
+  // Fixed: every shell texel stays scene.json's background (white, opaque) through two levels.
+  r = RunCommand(Perf("reconstruct " + ws_.string() + " --levels 2 --start-resolution 8 --iterations 2 "
+                      "--background fixed"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("background: fixed at (1, 1, 1)"), std::string::npos) << r.output;
+  for (int level : {0, 1}) {
+    range = ShellRange(recon::CheckpointPath(ws_, level));
+    EXPECT_EQ(range.first, 1.f) << level;
+    EXPECT_EQ(range.second, 1.f) << level;
+  }
+  summary = nlohmann::json::parse(std::ifstream(ws_ / "recon" / "recon.json"));
+  EXPECT_EQ(summary["background"], "fixed");
+
+  r = RunCommand(Perf("reconstruct " + ws_.string() + " --background sky"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("--background"), std::string::npos) << r.output;
 }
 
 TEST_F(ReconstructCli, BadInputsAreNamed) {

@@ -36,20 +36,26 @@ enum : VecId { kX, kG, kD, kP, kOut, kVectors };
 
 TEST(CpuBackendTest, LinearizeMatchesTheDenseJacobian) {
   const TinyProblem p(1);
-  auto b = Cpu(2);
-  b->SetLevel(p.Level(), kVectors);
-  b->Upload(kX, p.x);
-  const uint32_t seed = 77;
-  const PassStats s = b->Linearize(kX, seed, kG, kD);
-  const DenseJacobian j(p, p.x, seed, 0.1);
-  EXPECT_NEAR(s.cost, j.Cost(), 1e-5 * j.Cost());
-  EXPECT_EQ(s.rays, p.rays.size());
-  EXPECT_GT(s.samples, p.rays.size());
-  std::vector<float> g(p.shape.ParamCount()), d(p.shape.ParamCount());
-  b->Download(kG, g);
-  b->Download(kD, d);
-  ExpectClose(g, j.Jtr(), "J^T r");
-  ExpectClose(d, j.Diag(), "diag(J^T J)");
+  for (const bool pixel_jitter : {true, false}) {
+    SCOPED_TRACE(pixel_jitter ? "rays jittered in their pixels" : "rays through pixel centres");
+    auto b = Cpu(2);
+    b->SetLevel(p.Level(0.1f, pixel_jitter), kVectors);
+    b->Upload(kX, p.x);
+    const uint32_t seed = 77;
+    const PassStats s = b->Linearize(kX, seed, kG, kD);
+    const DenseJacobian j(p, p.x, seed, 0.1, true, pixel_jitter);
+    EXPECT_NEAR(s.cost, j.Cost(), 1e-5 * j.Cost());
+    EXPECT_EQ(s.rays, p.rays.size());
+    EXPECT_GT(s.samples, p.rays.size());
+    std::vector<float> g(p.shape.ParamCount()), d(p.shape.ParamCount());
+    b->Download(kG, g);
+    b->Download(kD, d);
+    ExpectClose(g, j.Jtr(), "J^T r");
+    ExpectClose(d, j.Diag(), "diag(J^T J)");
+    // The other choice of ray is a different problem: its cost differs.
+    const DenseJacobian other(p, p.x, seed, 0.1, true, !pixel_jitter);
+    EXPECT_GT(std::abs(s.cost - other.Cost()), 1e-4 * j.Cost());
+  }
 }
 
 TEST(CpuBackendTest, DiagonalMergesVisitsOfTheSameCell) {

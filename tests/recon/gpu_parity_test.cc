@@ -191,6 +191,25 @@ TEST_F(GpuParityTest, VectorOperations) {
     b->Project(kOut);
   }
   EXPECT_EQ(Get(gpu.get(), kOut), Get(cpu.get(), kOut));
+  // The active set: x with a third of its entries at 0 or 1, g of both signs; exact on both.
+  std::vector<float> xb = p.x;
+  for (int64_t i = 0; i < n; i += 3) xb[i] = (i / 3) % 2 ? 1.f : 0.f;
+  for (const bool fixed_shells : {false, true}) {
+    LevelProblem level = p.Level();
+    level.fixed_shells = fixed_shells;
+    SetLevel(level, xb);
+    for (const bool bounds : {false, true}) {
+      for (Backend* b : {cpu.get(), gpu.get()}) {
+        b->Upload(kG, a);
+        b->HoldParameters(kX, kG, kOut, bounds);
+        b->Multiply(kG, kOut);
+      }
+      EXPECT_EQ(Get(gpu.get(), kOut), Get(cpu.get(), kOut));
+      EXPECT_EQ(Get(gpu.get(), kG), Get(cpu.get(), kG));
+    }
+  }
+  SetLevel(p.Level(), p.x);
+  for (Backend* b : {cpu.get(), gpu.get()}) b->Upload(kG, a);
   AdamSettings s;
   for (Backend* b : {cpu.get(), gpu.get()}) {
     b->Fill(kD, 0.f);

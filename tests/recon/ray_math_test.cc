@@ -92,7 +92,7 @@ TEST(RayMathTest, EveryPartialMatchesCentralDifferences) {
   rays.push_back(ToBoxRay(s.box, s.vol.n, s.box.center + V3{0, 0, 2.5}, V3{0, 0, 1}));  // misses the box
   int nonzero[6] = {};  // grid colour, grid sigma, shell colour, shell opacity, dL/dsigma, dH/d(box) on miss
   for (size_t r = 0; r < rays.size(); ++r) {
-    const Jitter jit{1234u, static_cast<uint32_t>(r), true};
+    const Jitter jit{1234u, static_cast<uint32_t>(r), true, true};
     const RayOutput<double> out = Forward(s.vol, rays[r], jit, target, lambda);
     DenseRow row(s.x.size());
     BackwardPerParam(s.vol, rays[r], jit, lambda, out, row);
@@ -188,7 +188,7 @@ TEST(RayMathTest, MarchCoversTheBoxWithJitteredSamples) {
     EXPECT_DOUBLE_EQ(m.delta, 1.2 / 4);  // shortest cell side, world units
     double total = 0;
     for (int k = 0; k < m.count; ++k) {
-      const MarchStep<double> st = StepAt(m, k, Jitter{9, static_cast<uint32_t>(i), true});
+      const MarchStep<double> st = StepAt(m, k, Jitter{9, static_cast<uint32_t>(i), true, true});
       const double start = m.t_min + k * m.delta;
       EXPECT_GE(st.t, start);
       EXPECT_LE(st.t, start + st.delta);
@@ -302,7 +302,7 @@ TEST(RayMathTest, ZeroDensityShowsTheShells) {
   }
   const double target[3] = {0, 0, 0};
   for (int t = 0; t < 10; ++t) {
-    const RayOutput<double> out = Forward(s.vol, RandomCameraRay(s, rng), Jitter{1, 2, true}, target, 0.1);
+    const RayOutput<double> out = Forward(s.vol, RandomCameraRay(s, rng), Jitter{1, 2, true, true}, target, 0.1);
     EXPECT_DOUBLE_EQ(out.t_box, 1);
     EXPECT_NEAR(out.residual[3], 0, 1e-15);
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(out.h[c], e0[3] * e0[c] + (1 - e0[3]) * e1[c], 1e-14);
@@ -322,7 +322,7 @@ TEST(RayMathTest, DenseFrontCellHidesEverythingBehind) {
   // Along +x through the centres of row (j, k) = (1, 2): grid (-1, 1.5, 2.5).
   const BoxRay<double> ray = ToBoxRay(box, n, V3{-3, -0.5, 0.5}, V3{1, 0, 0});
   const double target[3] = {0, 0, 0};
-  const RayOutput<double> out = Forward(vol, ray, Jitter{3, 4, true}, target, 0.1);
+  const RayOutput<double> out = Forward(vol, ray, Jitter{3, 4, true, true}, target, 0.1);
   EXPECT_LT(out.t_box, 1e-100);
   for (int c = 0; c < 3; ++c) EXPECT_NEAR(out.h[c], c0[c], 1e-12);
   EXPECT_NEAR(out.residual[3], 0, 1e-12);  // lambda (1 - 4 * 0.25)

@@ -66,7 +66,10 @@ struct TinyProblem {
     }
   }
 
-  LevelProblem Level(float lambda = 0.1f) const { return {shape, geometry, &rays, {lambda, 0.f}}; }
+  // Pixel jitter on by default so that the tests cover the jittered ray as well.
+  LevelProblem Level(float lambda = 0.1f, bool pixel_jitter = true) const {
+    return {shape, geometry, &rays, {lambda, 0.f, true, pixel_jitter}};
+  }
 };
 
 // The dense Jacobian [4 rays, params] and residuals of every ray, in double, from the per-ray
@@ -78,7 +81,8 @@ struct DenseJacobian {
   std::vector<std::pair<int64_t, double>> naive_diag_terms;
 
   template <class S>
-  DenseJacobian(const TinyProblem& p, const std::vector<S>& xs, uint32_t seed, double lambda, bool jitter = true) {
+  DenseJacobian(const TinyProblem& p, const std::vector<S>& xs, uint32_t seed, double lambda, bool jitter = true,
+                bool pixel_jitter = true) {
     const std::vector<double> x(xs.begin(), xs.end());
     VolumeView<double> vol{};
     vol.params = x.data();
@@ -97,7 +101,7 @@ struct DenseJacobian {
       const PinholeCamera<float>& cf = p.rays.cameras[px.camera];
       PinholeCamera<double> cam{cf.fx, cf.fy, cf.cx, cf.cy, {}};
       for (int k = 0; k < 12; ++k) cam.world_from_cam[k] = cf.world_from_cam[k];
-      const Jitter jit{seed, static_cast<uint32_t>(i), jitter};
+      const Jitter jit{seed, static_cast<uint32_t>(i), jitter, pixel_jitter};
       const BoxRay<double> ray = PixelBoxRay(cam, box, vol.n, px.x, px.y, jit);
       const double target[3] = {p.rays.colours[3 * i], p.rays.colours[3 * i + 1], p.rays.colours[3 * i + 2]};
       const RayOutput<double> out = Forward(vol, ray, jit, target, lambda);

@@ -86,7 +86,7 @@ struct SyntheticScene {
             Vec3<float> o, d;
             PixelRay(im.camera, x, y, (s % 4 + 0.5f) / 4, (s / 4 + 0.5f) / 4, &o, &d);
             const BoxRay<float> ray = ToBoxRay(geometry.box, n, o, d);
-            const RayOutput<float> out = Forward(vol, ray, Jitter{0, 0, false}, zero, 0.f);
+            const RayOutput<float> out = Forward(vol, ray, Jitter{0, 0, false, false}, zero, 0.f);
             for (int ch = 0; ch < 3; ++ch) im.image.at(x, y, ch) += out.h[ch] / 16;
           }
         }

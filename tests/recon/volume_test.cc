@@ -106,7 +106,20 @@ TEST(VolumeTest, InitialParamsAreRandomValidAndFaint) {
   o.shell_colour[0] = 0.9f, o.shell_colour[1] = 0.8f, o.shell_colour[2] = 0.7f;
   const std::vector<float> y = InitialParams(s, g, o);
   for (int64_t i = s.GridParamCount(); i < s.ParamCount(); ++i) {
-    if (KindOf(s, i) == ParamKind::kShellColour) ASSERT_EQ(y[i], o.shell_colour[i % 4]) << i;
+    if (KindOf(s, i) == ParamKind::kShellColour) {
+      ASSERT_EQ(y[i], o.shell_colour[i % 4]) << i;
+    }
+  }
+  // A fixed background: every texel opaque in that colour; the grid as before.
+  o.opaque_shells = true;
+  const std::vector<float> z = InitialParams(s, g, o);
+  for (int64_t i = 0; i < s.ParamCount(); ++i) {
+    const ParamKind k = KindOf(s, i);
+    if (k == ParamKind::kShellOpacity) {
+      ASSERT_EQ(z[i], 1.f) << i;
+    } else {
+      ASSERT_EQ(z[i], y[i]) << i;
+    }
   }
 }
 
