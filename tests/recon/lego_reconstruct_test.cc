@@ -59,9 +59,11 @@ TEST_F(LegoTest, HeldOutPsnrAt50Pixels) {
   ASSERT_EQ(r.levels.size(), 2u);
   std::printf("lego 50x50, 8 + 8 GN iterations: held-out PSNR %.2f dB in %.1f s (%s)\n", r.test_psnr,
               r.solve_seconds, r.backend.c_str());
-  // Measured 22.7 dB (closing note of issue 3); the bar leaves 1.2 dB for float summation order
-  // across thread counts and machines. Level 1 must improve on level 0.
-  EXPECT_GT(r.test_psnr, 21.5);
+  // Measured 24.41 dB (fixed white background, projected GN, centred rays; it was 22.73 dB
+  // before those). The bar leaves 0.9 dB for float summation order across thread counts and
+  // machines, and sits above what any one of the three changes reaches alone. Level 1 must
+  // improve on level 0.
+  EXPECT_GT(r.test_psnr, 23.5);
   EXPECT_GT(r.levels[1].test_psnr, r.levels[0].test_psnr + 0.5);
   EXPECT_GT(r.levels[1].train_psnr, 20.0);
 }
@@ -87,13 +89,13 @@ TEST_F(LegoTest, ExportAndMasksAgainstAlpha) {
   EXPECT_EQ(e.mask_truth, "alpha");
   ASSERT_EQ(e.masks.size(), 100u);
   // The masks must hold the whole object (a cut-out that loses parts of it is useless): recall
-  // measured 0.998. Their precision is poor at this setting (0.39 measured: white fog left in
-  // the box's empty space explains the white background as well as the shells do; issue 3), so
-  // the IoU bar only asserts that the masks are about the object and not the whole frame
-  // (the box covers ~80 % of each photo, the object ~30 %).
+  // measured 0.997. Their precision is poor at this setting (0.40 measured: white fog left in
+  // the box's empty space, outside the object's visual hull, is invisible against the white
+  // background; issue 3), so the IoU bar only asserts that the masks are about the object and
+  // not the whole frame (the box covers ~80 % of each photo, the object ~30 %).
   EXPECT_GT(e.pooled.recall, 0.97);
   EXPECT_GT(e.pooled.iou, 0.33);
-  EXPECT_GT(e.mean.ssim, 0.8);
+  EXPECT_GT(e.mean.ssim, 0.9);  // measured 0.939
   EXPECT_NEAR(e.mean.psnr, result_->test_psnr, 0.05) << "eval and reconstruct score the same renders";
 }
 
