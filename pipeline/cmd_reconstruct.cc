@@ -15,7 +15,7 @@ void AddReconstructCommand(CLI::App& app) {
     recon::ReconstructOptions o;
     std::string workspace;
     std::string solver = "gn";
-    bool no_aux = false, no_pyramid = false, no_hold = false, quiet = false;
+    bool no_aux = false, no_alpha = false, no_pyramid = false, no_hold = false, quiet = false;
   };
   auto args = std::make_shared<Args>();
   recon::ReconstructOptions& o = args->o;
@@ -69,6 +69,9 @@ void AddReconstructCommand(CLI::App& app) {
                   "Shells: learn them, or keep them fixed at scene.json's background colour (auto: fixed when "
                   "every photo had alpha)")
       ->capture_default_str();
+  cmd->add_flag("--no-alpha", args->no_alpha,
+                "Ignore the photos' alpha: the opacity residual is the paper's auxiliary term (default: where every "
+                "photo had alpha, the box opacity fits it)");
   cmd->add_flag("--pixel-jitter", o.residuals.pixel_jitter,
                 "Move every training ray to a random point of its pixel each iteration (default: pixel centres)");
   cmd->add_flag("--no-hold-at-bounds", args->no_hold,
@@ -90,6 +93,7 @@ void AddReconstructCommand(CLI::App& app) {
     if (args->no_aux) o.residuals.lambda = 0;
     if (args->no_pyramid) o.pyramid = false;
     if (args->no_hold) o.solver.hold_at_bounds = false;
+    if (args->no_alpha) o.residuals.use_alpha = false;
     Progress progress("reconstruct", args->quiet);
     o.on_event = [&](const recon::ReconstructOptions::Event& e) { ShowReconstructEvent(progress, e); };
     const recon::ReconstructResult r = recon::Reconstruct(o);

@@ -38,6 +38,9 @@ struct ResidualSettings {
   // centred rays), and held-out views are rendered through pixel centres. Lego 50x50, 32^3 +
   // 64^3, 8 + 8 GN: 24.88 dB held-out with centred rays against 24.29 dB with pixel jitter.
   bool pixel_jitter = false;
+  // Where the rays carry the photos' alpha (RaySet::alphas), the fourth residual fits the box
+  // opacity to it instead of the paper's auxiliary term (ray_math.h AuxResidual).
+  bool use_alpha = true;
 };
 
 // Everything a backend needs for one level of the hierarchy.
@@ -50,6 +53,11 @@ struct LevelProblem {
   // colour, which RGBA photos were composited over). Solvers leave them where they start.
   bool fixed_shells = false;
 };
+
+// Whether the level's fourth residual is the alpha one (ResidualSettings::use_alpha).
+inline bool UsesAlpha(const LevelProblem& p) {
+  return p.residuals.use_alpha && p.rays != nullptr && !p.rays->alphas.empty();
+}
 
 using VecId = int;
 inline constexpr VecId kNoVector = -1;

@@ -353,7 +353,7 @@ class CpuBackend final : public Backend {
       for (; i < end; i += subset.stride) {
         const RayOutput<float> fwd =
             Forward(vol, RayOf(i, seed), JitterOf(i, seed), &level_.rays->colours[3 * i],
-                    level_.residuals.lambda, level_.residuals.stop_transmittance);
+                    level_.residuals.lambda, level_.residuals.stop_transmittance, nullptr, AlphaOf(i));
         bs.Add(fwd);
       }
       return bs;
@@ -420,14 +420,14 @@ class CpuBackend final : public Backend {
       const BoxRay<float> ray = RayOf(i, seed);
       const Jitter jit = JitterOf(i, seed);
       const RayOutput<float> fwd = Forward(vol, ray, jit, &level_.rays->colours[3 * i], lambda,
-                                           level_.residuals.stop_transmittance, s.record.data());
+                                           level_.residuals.stop_transmittance, s.record.data(), AlphaOf(i));
       LinearizeVisitor<kDiag> v{{fwd.residual[0], fwd.residual[1], fwd.residual[2], fwd.residual[3]},
                                 AddSink{s.acc[0].data()},
                                 AddSink{kDiag ? s.acc[1].data() : nullptr},
                                 {},
                                 out,
                                 out ? &out->shells[(i - begin) * level_.shape.num_shells] : nullptr};
-      Backward(vol, ray, jit, lambda, fwd, v, s.record.data());
+      Backward(vol, ray, jit, fwd, v, s.record.data());
       v.Finish();
       if (out) out->end[i - begin] = static_cast<uint32_t>(out->samples.size());
       bs.Add(fwd);
@@ -435,6 +435,8 @@ class CpuBackend final : public Backend {
     return bs;
   }
 
+  // Ray i's alpha target (AuxResidual), or -1: the paper's auxiliary term.
+  float AlphaOf(int64_t i) const { return UsesAlpha(level_) ? level_.rays->alphas[i] : -1.f; }
   // Ray i's jitter in the iteration of `seed` (every pass of the iteration sees the same).
   Jitter JitterOf(int64_t i, uint32_t seed) const {
     return {seed, static_cast<uint32_t>(i), level_.residuals.jitter, level_.residuals.pixel_jitter};
@@ -457,9 +459,9 @@ class CpuBackend final : public Backend {
     const Jitter jit = JitterOf(i, lin_seed_);
     ClearBlock(&s.row, 1);
     const RayOutput<float> fwd = Forward(vol, ray, jit, &level_.rays->colours[3 * i], level_.residuals.lambda,
-                                         level_.residuals.stop_transmittance, s.record.data());
+                                         level_.residuals.stop_transmittance, s.record.data(), AlphaOf(i));
     RecordOnly visitor{&s.row};
-    Backward(vol, ray, jit, level_.residuals.lambda, fwd, visitor, s.record.data());
+    Backward(vol, ray, jit, fwd, visitor, s.record.data());
   }
   // Records a ray's partials without scattering anything.
   struct RecordOnly {

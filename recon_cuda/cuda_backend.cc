@@ -20,10 +20,10 @@ static_assert(sizeof(RayPixel) == 8, "RayPixel is copied to the device as is");
 
 std::string Mib(int64_t bytes) { return StrCat((bytes + (1 << 20) - 1) >> 20, " MiB"); }
 
-// Device bytes of the training rays: cameras, pixels and 8-bit colours.
+// Device bytes of the training rays: cameras, pixels and 8-bit colours (and alphas when there are).
 int64_t RayBytes(const RaySet& rays) {
   return static_cast<int64_t>(rays.cameras.size() * sizeof(PinholeCamera<float>)) +
-         rays.size() * static_cast<int64_t>(sizeof(RayPixel) + 3);
+         rays.size() * static_cast<int64_t>(sizeof(RayPixel) + 3 + (rays.alphas.empty() ? 0 : 1));
 }
 
 // The level's rays on the device (one owner: the backend, for one level).
@@ -31,17 +31,28 @@ struct DeviceRays {
   DeviceBuffer<PinholeCamera<float>> cameras;
   DeviceBuffer<RayPixel> pixels;
   DeviceBuffer<uint8_t> colours;
+  DeviceBuffer<uint8_t> alphas;  // empty when the level has no alpha residual
 
-  explicit DeviceRays(const RaySet& rays)
-      : cameras(static_cast<int64_t>(rays.cameras.size())), pixels(rays.size()), colours(3 * rays.size()) {
+  DeviceRays(const RaySet& rays, bool use_alpha)
+      : cameras(static_cast<int64_t>(rays.cameras.size())),
+        pixels(rays.size()),
+        colours(3 * rays.size()),
+        alphas(use_alpha ? rays.size() : 0) {
     PERF_CHECK(static_cast<int64_t>(rays.colours.size()) == 3 * rays.size());
     cameras.CopyFromHost(rays.cameras);
     pixels.CopyFromHost(rays.pixels);
     std::vector<uint8_t> bytes(rays.colours.size());
     for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = cuda::ColourToByte(rays.colours[i]);
     colours.CopyFromHost(bytes);
+    if (use_alpha) {
+      bytes.resize(rays.alphas.size());
+      for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = cuda::ColourToByte(rays.alphas[i]);
+      alphas.CopyFromHost(bytes);
+    }
   }
-  cuda::RaysView View() const { return {cameras.data(), pixels.data(), colours.data(), pixels.size()}; }
+  cuda::RaysView View() const {
+    return {cameras.data(), pixels.data(), colours.data(), alphas.size() > 0 ? alphas.data() : nullptr, pixels.size()};
+  }
 };
 
 // Pass statistics and reductions' working memory.
@@ -106,7 +117,7 @@ class CudaBackend final : public Backend {
       vectors_.emplace_back(p.shape.ParamCount());
       cuda::Fill(vectors_.back().data(), p.shape.ParamCount(), 0.f);
     }
-    rays_ = std::make_unique<DeviceRays>(*p.rays);
+    rays_ = std::make_unique<DeviceRays>(*p.rays, UsesAlpha(p));
     scratch_ = std::make_unique<Scratch>(p.rays->size(), p.shape.ParamCount());
     held_ = e.Total();
     return e;

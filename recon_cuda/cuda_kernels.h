@@ -29,6 +29,7 @@ struct RaysView {
   const PinholeCamera<float>* cameras;  // [num_cameras]
   const RayPixel* pixels;               // [count]
   const uint8_t* colours;               // [count, 3]
+  const uint8_t* alphas;                // [count], or nullptr: no alpha residual (backend.h UsesAlpha)
   int64_t count;
 };
 

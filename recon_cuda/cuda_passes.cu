@@ -120,6 +120,10 @@ __device__ __forceinline__ RayAt MakeRay(const PassInput& in, int64_t i) {
 __device__ __forceinline__ void TargetOf(const PassInput& in, int64_t i, float target[3]) {
   for (int c = 0; c < 3; ++c) target[c] = ByteToColour(in.rays.colours[3 * i + c]);
 }
+// The CPU backend's AlphaOf: the alpha target, or -1 for the paper's auxiliary term.
+__device__ __forceinline__ float AlphaOf(const PassInput& in, int64_t i) {
+  return in.rays.alphas ? ByteToColour(in.rays.alphas[i]) : -1.f;
+}
 
 template <bool kDiag>
 __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, float* g, float* diag,
@@ -130,9 +134,10 @@ __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, flo
     const RayAt r = MakeRay(in, i);
     float target[3];
     TargetOf(in, i, target);
-    const RayOutput<float> fwd = Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance);
+    const RayOutput<float> fwd =
+        Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in, i));
     ScatterVisitor<kDiag> v{{fwd.residual[0], fwd.residual[1], fwd.residual[2], fwd.residual[3]}, {g}, {diag}, {}};
-    Backward(in.vol, r.ray, r.jit, in.lambda, fwd, v);
+    Backward(in.vol, r.ray, r.jit, fwd, v);
     v.Finish();
     mine = StatsOf(fwd);
   }
@@ -145,13 +150,15 @@ __global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const fl
   RayStats mine;
   if (i < in.rays.count) {
     const RayAt r = MakeRay(in, i);
-    // The partials depend on the forward's transmittances and colours, not on the target.
+    // The partials depend on the forward's transmittances and colours, not on the target (and
+    // on whether the ray has an alpha, not on its value).
     const float zero[3] = {0, 0, 0};
-    const RayOutput<float> fwd = Forward(in.vol, r.ray, r.jit, zero, in.lambda, in.stop_transmittance);
+    const RayOutput<float> fwd =
+        Forward(in.vol, r.ray, r.jit, zero, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in, i));
     JpVisitor jp{p, {0, 0, 0, 0}};
-    Backward(in.vol, r.ray, r.jit, in.lambda, fwd, jp);
+    Backward(in.vol, r.ray, r.jit, fwd, jp);
     ScatterVisitor<false> v{{jp.u[0], jp.u[1], jp.u[2], jp.u[3]}, {out}, {nullptr}, {}};
-    Backward(in.vol, r.ray, r.jit, in.lambda, fwd, v);
+    Backward(in.vol, r.ray, r.jit, fwd, v);
     v.Finish();
     mine.rays = 1;
     mine.samples = fwd.count;
@@ -169,7 +176,7 @@ __global__ void __launch_bounds__(kRayThreads) CostKernel(PassInput in, int64_t 
     const RayAt r = MakeRay(in, i);
     float target[3];
     TargetOf(in, i, target);
-    mine = StatsOf(Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance));
+    mine = StatsOf(Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in, i)));
   }
   WriteBlockStats(mine, partials);
 }

@@ -223,19 +223,44 @@ struct RayOutput {
   T t_box;        // transmittance through the box only
   T depth;        // optical depth through the box, sum sigma_i delta_i
   T shells[3];    // S, the shells' colour before the box's transmittance
-  T residual[4];  // H - C (3), then L = lambda (1 - 4 (T_box - 0.5)^2)
+  T residual[4];  // H - C (3), then L (AuxResidual)
+  T dl_dt;        // dL / dT_box
   int count;      // samples composited (the march may stop early, see Forward)
 };
+
+// T in a non-deduced context (so that a nullptr record argument does not block deduction).
+template <class T>
+struct Identity {
+  using type = T;
+};
+
+// The fourth residual L of a ray, a function of T_box only. Without a known alpha (alpha < 0):
+// the paper's auxiliary term L = lambda (1 - 4 (T_box - 0.5)^2), which pushes every ray's box
+// opacity to 0 or 1. With the photo's alpha at the pixel (alpha >= 0, RGBA photos): the box
+// opacity should be that alpha, L = lambda ((1 - T_box) - alpha); this tells empty space from
+// foreground where the colour cannot (white fog in front of a white background).
+template <class T>
+PERF_HD_INLINE void AuxResidual(T t_box, T lambda, T alpha, T* l, T* dl_dt) {
+  if (alpha >= 0) {
+    *l = lambda * ((1 - t_box) - alpha);
+    *dl_dt = -lambda;
+  } else {
+    const T q = t_box - T(0.5);
+    *l = lambda * (1 - 4 * q * q);
+    *dl_dt = -8 * lambda * q;
+  }
+}
 
 // Front to back (paper eq. 3-4): alpha_i = 1 - exp(-sigma_i delta_i), T_i = exp(-sum_{j<i}
 // sigma_j delta_j), H = sum_i T_i alpha_i c_i + T_box S. target: the pixel colour C [3].
 // stop: the march ends once T_i < stop (early ray termination; 0 marches the whole box). What is
 // left behind then weighs less than `stop`, and the derivatives are those of the truncated sum.
 // record: optional [MakeMarch(vol, ray).count] scratch that Backward can read instead of
-// recomputing.
+// recomputing. alpha: the photo's alpha at the pixel, or < 0 when unknown (AuxResidual).
 template <class T>
 PERF_HD RayOutput<T> Forward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitter& jit, const T* target,
-                             T lambda, T stop = T(0), SampleRecord<T>* record = nullptr) {
+                             T lambda, T stop = T(0), typename Identity<SampleRecord<T>>::type* record = nullptr,
+                             T alpha = T(-1)) {
   RayOutput<T> out;
   const March<T> march = MakeMarch(vol, ray);
   T depth = 0, trans = 1;
@@ -266,8 +291,7 @@ PERF_HD RayOutput<T> Forward(const VolumeView<T>& vol, const BoxRay<T>& ray, con
     out.h[c] += out.t_box * shells.s[c];
     out.residual[c] = out.h[c] - target[c];
   }
-  const T q = out.t_box - T(0.5);
-  out.residual[3] = lambda * (1 - 4 * q * q);
+  AuxResidual(out.t_box, lambda, alpha, &out.residual[3], &out.dl_dt);
   return out;
 }
 
@@ -305,8 +329,8 @@ struct ShellPartials {
 //   dH/dc_i     = T_i alpha_i                                      (only c_i's own channel)
 //   dH/dsigma_i = delta_i T_i (1 - alpha_i) c_i  [from T_i alpha_i c_i, d alpha_i = delta_i (1 - alpha_i)]
 //               - delta_i G_i                    [every T_j, j > i, and T_box carry exp(-sigma_i delta_i)]
-//   dT_box/dsigma_i = -delta_i T_box, dL/dT_box = -8 lambda (T_box - 0.5), so
-//   dL/dsigma_i = 8 lambda (T_box - 0.5) delta_i T_box.
+//   dT_box/dsigma_i = -delta_i T_box, so dL/dsigma_i = -dL/dT_box delta_i T_box (dL/dT_box from
+//   Forward: -8 lambda (T_box - 0.5) for the paper's term, -lambda for the alpha residual).
 // Algorithm 1 walks i = n-1..0 with V = D_n, V -= sigma_i delta_i giving D_i, and G starting at
 // the shells' T_box S (not 0, DESIGN.md), G += T_i alpha_i c_i after sample i.
 // Shells: S = sum_k P_k a_k e_k, P_k = prod_{m<k} (1 - a_m). With B_k = the shells' colour behind
@@ -317,7 +341,7 @@ struct ShellPartials {
 // at 1, so its opacity texels get no partial. Shells do not enter T_box, so dL/d(texel) = 0.
 // Values are linear in the parameters, so each partial is spread with the interpolation weights.
 template <class T, class Visitor>
-PERF_HD void Backward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitter& jit, T lambda,
+PERF_HD void Backward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitter& jit,
                       const RayOutput<T>& fwd, Visitor& visit, const SampleRecord<T>* record = nullptr) {
   const March<T> march = MakeMarch(vol, ray);
   const T tb = fwd.t_box;
@@ -338,7 +362,7 @@ PERF_HD void Backward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitt
 
   T g[3];
   for (int c = 0; c < 3; ++c) g[c] = tb * fwd.shells[c];
-  const T dl_per_delta = 8 * lambda * (tb - T(0.5)) * tb;
+  const T dl_per_delta = -fwd.dl_dt * tb;
   T v_depth = fwd.depth;
   for (int k = fwd.count - 1; k >= 0; --k) {
     MarchStep<T> st;
@@ -396,10 +420,10 @@ struct PerParamVisitor {
 };
 
 template <class T, class F>
-PERF_HD_INLINE void BackwardPerParam(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitter& jit, T lambda,
+PERF_HD_INLINE void BackwardPerParam(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitter& jit,
                                      const RayOutput<T>& fwd, F& f) {
   PerParamVisitor<T, F> v{f};
-  Backward(vol, ray, jit, lambda, fwd, v);
+  Backward(vol, ray, jit, fwd, v);
 }
 
 }  // namespace perf::recon

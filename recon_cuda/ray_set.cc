@@ -11,7 +11,7 @@ namespace perf::recon {
 
 int64_t RaySet::Bytes() const {
   return static_cast<int64_t>(cameras.size() * sizeof(PinholeCamera<float>) + pixels.size() * sizeof(RayPixel) +
-                              colours.size() * sizeof(float));
+                              (colours.size() + alphas.size()) * sizeof(float));
 }
 
 RaySet MakeRaySet(const std::vector<PosedImage>& images) {
@@ -24,8 +24,12 @@ RaySet MakeRaySet(const std::vector<PosedImage>& images) {
     }
     total += static_cast<int64_t>(im.image.width) * im.image.height;
   }
+  const bool alpha = !images.empty() && std::all_of(images.begin(), images.end(), [](const PosedImage& im) {
+    return im.alpha.width == im.image.width && im.alpha.height == im.image.height;
+  });
   rays.pixels.reserve(total);
   rays.colours.reserve(3 * total);
+  if (alpha) rays.alphas.reserve(total);
   constexpr int kTile = 8;
   for (size_t c = 0; c < images.size(); ++c) {
     const Image& img = images[c].image;
@@ -36,6 +40,7 @@ RaySet MakeRaySet(const std::vector<PosedImage>& images) {
           for (int x = tx; x < std::min(tx + kTile, img.width); ++x) {
             rays.pixels.push_back({static_cast<uint32_t>(c), static_cast<uint16_t>(x), static_cast<uint16_t>(y)});
             for (int ch = 0; ch < 3; ++ch) rays.colours.push_back(img.at(x, y, ch));
+            if (alpha) rays.alphas.push_back(images[c].alpha.at(x, y, 0));
           }
         }
       }

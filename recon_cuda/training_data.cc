@@ -38,7 +38,21 @@ std::vector<PosedImage> LoadImages(const Scene& scene, const std::filesystem::pa
                        StrCat("scene.json says camera ", cam.id, " is ", cam.width, "x", cam.height),
                        "the workspace images were changed after import; re-run perf import");
     }
-    out[i] = {im.name, ToPinhole(cam, im.world_from_cam), std::move(img)};
+    Image alpha;
+    if (!im.alpha_path.empty()) {
+      const std::filesystem::path apath = workspace / im.alpha_path;
+      Image a = ReadImage(apath);
+      if (a.width != cam.width || a.height != cam.height) {
+        throw InputError(apath.string(), "size", StrCat(a.width, "x", a.height),
+                         StrCat("the image ", im.path, " is ", cam.width, "x", cam.height),
+                         "the workspace alpha images were changed after import; re-run perf import");
+      }
+      alpha = Image(a.width, a.height, 1);
+      for (int y = 0; y < a.height; ++y) {
+        for (int x = 0; x < a.width; ++x) alpha.at(x, y, 0) = a.at(x, y, a.channels - 1);
+      }
+    }
+    out[i] = {im.name, ToPinhole(cam, im.world_from_cam), std::move(img), std::move(alpha)};
     const int d = ++done;
     if (progress) progress(d, static_cast<int>(chosen.size()));
   });
@@ -50,6 +64,7 @@ PosedImage Downscaled(const PosedImage& image, int factor) {
   PosedImage out = image;
   const int w = std::max(1, image.image.width / factor), h = std::max(1, image.image.height / factor);
   out.image = ResizeImage(image.image, w, h);
+  if (image.alpha.width > 0) out.alpha = ResizeImage(image.alpha, w, h);
   // The resized image covers the same field of view: scale by the exact per-axis ratio.
   const float sx = static_cast<float>(w) / image.image.width, sy = static_cast<float>(h) / image.image.height;
   out.camera.fx *= sx;

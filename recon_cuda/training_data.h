@@ -21,16 +21,18 @@ struct PosedImage {
   std::string name;
   PinholeCamera<float> camera;
   Image image;  // RGB float, as stored (sRGB-encoded values)
+  Image alpha;  // 1 channel in [0, 1]: the photo's alpha (scene.json alpha_path), or empty
 };
 
-// Every image of `split` in the workspace, read with OpenImageIO and converted to RGB. Throws
-// InputError / IoError naming the image when one is missing, unreadable or of the wrong size.
+// Every image of `split` in the workspace, read with OpenImageIO and converted to RGB, with its
+// alpha image when scene.json has one. Throws InputError / IoError naming the image when one is
+// missing, unreadable or of the wrong size.
 std::vector<PosedImage> LoadImages(const Scene& scene, const std::filesystem::path& workspace, Split split,
                                    const std::function<void(int done, int total)>& progress = {});
 
 PinholeCamera<float> ToPinhole(const SceneCamera& camera, const Eigen::Matrix<double, 3, 4>& world_from_cam);
 
-// The image downscaled by an integer factor (OpenImageIO filtered resize) with its intrinsics
+// The image (and its alpha) downscaled by an integer factor (OpenImageIO filtered resize) with its intrinsics
 // scaled to match: pixel edges map to pixel edges, so f and c both divide by the factor.
 PosedImage Downscaled(const PosedImage& image, int factor);
 
@@ -40,6 +42,7 @@ struct RaySet {
   std::vector<PinholeCamera<float>> cameras;
   std::vector<RayPixel> pixels;
   std::vector<float> colours;  // [size(), 3]
+  std::vector<float> alphas;   // [size()] when every image had an alpha image, else empty
   int64_t size() const { return static_cast<int64_t>(pixels.size()); }
   int64_t Bytes() const;
 };

@@ -129,6 +129,7 @@ TEST_F(ReconstructCli, BackgroundIsLearnedOrFixed) {
   EXPECT_LT(range.first, 0.9f);
   nlohmann::json summary = nlohmann::json::parse(std::ifstream(ws_ / "recon" / "recon.json"));
   EXPECT_EQ(summary["background"], "learned");
+  EXPECT_EQ(summary["opacity_residual"], "auxiliary");  // no alpha to fit
 
   // Fixed: every shell texel stays scene.json's background (white, opaque) through two levels.
   r = RunCommand(Perf("reconstruct " + ws_.string() + " --levels 2 --start-resolution 8 --iterations 2 "

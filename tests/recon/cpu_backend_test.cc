@@ -58,6 +58,39 @@ TEST(CpuBackendTest, LinearizeMatchesTheDenseJacobian) {
   }
 }
 
+// Rays with the photos' alpha: the fourth residual is lambda ((1 - T_box) - alpha) (ray_math.h
+// AuxResidual); Linearize and J^T J p against the dense Jacobian of that residual.
+TEST(CpuBackendTest, AlphaResidualMatchesTheDenseJacobian) {
+  TinyProblem p(4);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(0.f, 1.f);
+  for (int64_t i = 0; i < p.rays.size(); ++i) p.rays.alphas.push_back(i % 3 == 0 ? 0.f : u(rng));
+  auto b = Cpu(2);
+  b->SetLevel(p.Level(), kVectors);
+  ASSERT_TRUE(UsesAlpha(b->level()));
+  b->Upload(kX, p.x);
+  const uint32_t seed = 21;
+  const PassStats s = b->Linearize(kX, seed, kG, kD);
+  const DenseJacobian j(p, p.x, seed, 0.1);
+  EXPECT_NEAR(s.cost, j.Cost(), 1e-5 * j.Cost());
+  std::vector<float> g(p.shape.ParamCount()), d(p.shape.ParamCount()), pv(p.shape.ParamCount()), out(g.size());
+  b->Download(kG, g);
+  b->Download(kD, d);
+  ExpectClose(g, j.Jtr(), "J^T r");
+  ExpectClose(d, j.Diag(), "diag(J^T J)");
+  for (size_t i = 0; i < pv.size(); ++i) pv[i] = u(rng) - 0.5f;
+  b->Upload(kP, pv);
+  b->MultiplyJtJ(kP, kOut);
+  b->Download(kOut, out);
+  ExpectClose(out, j.Jtu(j.Jp(std::vector<double>(pv.begin(), pv.end()))), "J^T J p");
+  // With use_alpha off the same rays give the paper's residual: another cost.
+  LevelProblem paper = p.Level();
+  paper.residuals.use_alpha = false;
+  b->SetLevel(paper, kVectors);
+  b->Upload(kX, p.x);
+  EXPECT_GT(std::abs(b->Cost(kX, seed).cost - s.cost), 1e-4 * s.cost);
+}
+
 TEST(CpuBackendTest, DiagonalMergesVisitsOfTheSameCell) {
   // Squaring each visit on its own drops the cross terms between neighbouring samples that share
   // a cell (of either sign: sigma's partials change sign along a ray) and gives a visibly

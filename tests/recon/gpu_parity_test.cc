@@ -34,8 +34,10 @@ namespace {
 using test::TinyProblem;
 
 // Targets as 8-bit photos have them (the CUDA backend stores colours in 8 bits).
+// The device stores colours and alphas in 8 bits: quantised, both backends see the same values.
 void QuantiseColours(RaySet* rays) {
   for (float& c : rays->colours) c = std::round(std::clamp(c, 0.f, 1.f) * 255.f) / 255.f;
+  for (float& a : rays->alphas) a = std::round(std::clamp(a, 0.f, 1.f) * 255.f) / 255.f;
 }
 
 void ExpectClose(const std::vector<float>& gpu, const std::vector<float>& cpu, const char* what) {
@@ -99,6 +101,27 @@ TEST_F(GpuParityTest, LinearizeCostGradientAndDiagonal) {
   }
   // The cost is summed in a fixed order: the same on every run.
   EXPECT_EQ(gpu->Linearize(kX, 77, kG, kD).cost, gpu->Linearize(kX, 77, kG, kD).cost);
+}
+
+TEST_F(GpuParityTest, AlphaResidual) {
+  TinyProblem p(9, 8, 4, 6, 24, 18);
+  std::mt19937 rng(8);
+  std::uniform_real_distribution<float> u(0.f, 1.f);
+  for (int64_t i = 0; i < p.rays.size(); ++i) p.rays.alphas.push_back(i % 4 == 0 ? 0.f : u(rng));
+  QuantiseColours(&p.rays);
+  SetLevel(p.Level(), p.x);
+  const PassStats c = cpu->Linearize(kX, 5, kG, kD);
+  const PassStats g = gpu->Linearize(kX, 5, kG, kD);
+  ExpectStatsClose(g, c, "linearize with alpha");
+  ExpectClose(Get(gpu.get(), kG), Get(cpu.get(), kG), "J^T r with alpha");
+  ExpectClose(Get(gpu.get(), kD), Get(cpu.get(), kD), "diag with alpha");
+  std::vector<float> pv(p.shape.ParamCount());
+  for (float& v : pv) v = u(rng) - 0.5f;
+  for (Backend* b : {cpu.get(), gpu.get()}) b->Upload(kP, pv);
+  cpu->MultiplyJtJ(kP, kOut);
+  gpu->MultiplyJtJ(kP, kOut);
+  ExpectClose(Get(gpu.get(), kOut), Get(cpu.get(), kOut), "J^T J p with alpha");
+  ExpectStatsClose(gpu->Cost(kX, 5), cpu->Cost(kX, 5), "cost with alpha");
 }
 
 TEST_F(GpuParityTest, JtJpAtTheLinearisationPoint) {

@@ -81,7 +81,11 @@ struct DenseRow {
   }
 };
 
-TEST(RayMathTest, EveryPartialMatchesCentralDifferences) {
+// alpha < 0: the paper's auxiliary residual; alpha >= 0: the alpha residual (AuxResidual).
+class EveryPartial : public ::testing::TestWithParam<double> {};
+
+TEST_P(EveryPartial, MatchesCentralDifferences) {
+  const double alpha = GetParam();
   std::mt19937 rng(7);
   TestScene s(rng);
   const double target[3] = {0.2, 0.5, 0.7};
@@ -93,15 +97,15 @@ TEST(RayMathTest, EveryPartialMatchesCentralDifferences) {
   int nonzero[6] = {};  // grid colour, grid sigma, shell colour, shell opacity, dL/dsigma, dH/d(box) on miss
   for (size_t r = 0; r < rays.size(); ++r) {
     const Jitter jit{1234u, static_cast<uint32_t>(r), true, true};
-    const RayOutput<double> out = Forward(s.vol, rays[r], jit, target, lambda);
+    const RayOutput<double> out = Forward(s.vol, rays[r], jit, target, lambda, 0.0, nullptr, alpha);
     DenseRow row(s.x.size());
-    BackwardPerParam(s.vol, rays[r], jit, lambda, out, row);
+    BackwardPerParam(s.vol, rays[r], jit, out, row);
     for (size_t p = 0; p < s.x.size(); ++p) {
       const double keep = s.x[p];
       s.x[p] = keep + h;
-      const RayOutput<double> plus = Forward(s.vol, rays[r], jit, target, lambda);
+      const RayOutput<double> plus = Forward(s.vol, rays[r], jit, target, lambda, 0.0, nullptr, alpha);
       s.x[p] = keep - h;
-      const RayOutput<double> minus = Forward(s.vol, rays[r], jit, target, lambda);
+      const RayOutput<double> minus = Forward(s.vol, rays[r], jit, target, lambda, 0.0, nullptr, alpha);
       s.x[p] = keep;
       const bool grid = static_cast<int64_t>(p) < GridParamCount(s.vol.n);
       for (int c = 0; c < 4; ++c) {
@@ -123,6 +127,17 @@ TEST(RayMathTest, EveryPartialMatchesCentralDifferences) {
   EXPECT_GT(nonzero[3], 10);
   EXPECT_GT(nonzero[4], 20);
   EXPECT_EQ(nonzero[5], 0);
+}
+INSTANTIATE_TEST_SUITE_P(OpacityResidual, EveryPartial, ::testing::Values(-1.0, 0.0, 0.35, 1.0));
+
+TEST(RayMathTest, AlphaResidualIsTheOpacityError) {
+  double l, dl;
+  AuxResidual(0.25, 0.1, 0.6, &l, &dl);  // box opacity 0.75, alpha 0.6
+  EXPECT_NEAR(l, 0.1 * 0.15, 1e-15);
+  EXPECT_EQ(dl, -0.1);
+  AuxResidual(0.25, 0.1, -1.0, &l, &dl);  // no alpha: lambda (1 - 4 (T - 0.5)^2)
+  EXPECT_NEAR(l, 0.1 * 0.75, 1e-15);
+  EXPECT_NEAR(dl, 0.2, 1e-15);
 }
 
 TEST(RayMathTest, SlabTestCases) {

@@ -104,7 +104,9 @@ struct DenseJacobian {
       const Jitter jit{seed, static_cast<uint32_t>(i), jitter, pixel_jitter};
       const BoxRay<double> ray = PixelBoxRay(cam, box, vol.n, px.x, px.y, jit);
       const double target[3] = {p.rays.colours[3 * i], p.rays.colours[3 * i + 1], p.rays.colours[3 * i + 2]};
-      const RayOutput<double> out = Forward(vol, ray, jit, target, lambda);
+      // The rays' alpha when they carry one (the backends' default use_alpha), else the paper's term.
+      const double alpha = p.rays.alphas.empty() ? -1.0 : p.rays.alphas[i];
+      const RayOutput<double> out = Forward(vol, ray, jit, target, lambda, 0.0, nullptr, alpha);
       std::vector<std::vector<double>> j(4, std::vector<double>(x.size(), 0.0));
       auto f = [&](int64_t idx, double a, double b, double c, double d) {
         j[0][idx] += a;
@@ -116,7 +118,7 @@ struct DenseJacobian {
         f(idx, a, b, c, d);
         naive_diag_terms.push_back({idx, a * a + b * b + c * c + d * d});
       };
-      BackwardPerParam(vol, ray, jit, lambda, out, g);
+      BackwardPerParam(vol, ray, jit, out, g);
       for (int r = 0; r < 4; ++r) {
         rows.push_back(std::move(j[r]));
         residuals.push_back(out.residual[r]);
