@@ -1,8 +1,10 @@
 // Prepares the GPU benchmark's data from a workspace made by `perf import` (here, where the
 // importer's libraries are): bench.json with every view's pinhole camera, split and size, the
 // box and shells, and a copy of the workspace's images (RGB PNGs, already composited over the
-// scene's background by the importer). On the GPU machine, bench/decode_images.py turns the PNGs
-// into images.u8, which perf_bench_gpu reads (no image library needed there).
+// scene's background by the importer), plus the alpha images when every photo had one (then
+// perf reconstruct fixes the background and fits the alpha; the benchmark does the same). On the
+// GPU machine, bench/decode_images.py turns the PNGs into images.u8 (and alpha.u8), which
+// perf_bench_gpu reads (no image library needed there).
 //
 //   perf_bench_prep --workspace WS --out DIR [--write-u8]
 //
@@ -40,6 +42,8 @@ int main(int argc, char** argv) {
     fs::create_directories(fs::path(out) / "images");
     nlohmann::json views = nlohmann::json::array();
     int train = 0, test = 0;
+    const bool alpha = std::all_of(scene.images.begin(), scene.images.end(),
+                                   [](const SceneImage& im) { return !im.alpha_path.empty(); });
     for (const SceneImage& im : scene.images) {
       const SceneCamera& cam = scene.camera(im.camera_id);
       const PinholeCamera<float> pin = ToPinhole(cam, im.world_from_cam);
@@ -50,6 +54,12 @@ int main(int argc, char** argv) {
                     fs::copy_options::overwrite_existing);
       const bool is_train = im.split == Split::kTrain;
       (is_train ? train : test) += 1;
+      if (alpha) {
+        std::string aflat = im.alpha_path;
+        for (char& c : aflat) c = c == '/' ? '_' : c;
+        fs::copy_file(fs::path(workspace) / im.alpha_path, fs::path(out) / "images" / ("alpha_" + aflat),
+                      fs::copy_options::overwrite_existing);
+      }
       views.push_back({{"name", im.name},
                        {"split", is_train ? "train" : "test"},
                        {"width", cam.width},
@@ -60,12 +70,18 @@ int main(int argc, char** argv) {
                        {"cy", pin.cy},
                        {"world_from_cam", std::vector<float>(pin.world_from_cam, pin.world_from_cam + 12)},
                        {"image", "images/" + flat}});
+      if (alpha) {
+        std::string aflat = im.alpha_path;
+        for (char& c : aflat) c = c == '/' ? '_' : c;
+        views.back()["alpha"] = "images/alpha_" + aflat;
+      }
     }
     const nlohmann::json j{
         {"format", "perf-bench-data"},
         {"version", 1},
         {"source", fs::absolute(workspace).string()},
         {"background", {scene.background.x(), scene.background.y(), scene.background.z()}},
+        {"alpha", alpha},
         {"placement",
          {{"box_center", std::vector<double>(p.box_center, p.box_center + 3)},
           {"box_rotation", std::vector<double>(p.box_rotation, p.box_rotation + 9)},
@@ -86,6 +102,18 @@ int main(int argc, char** argv) {
         u8.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
       }
       if (!u8) throw IoError((fs::path(out) / "images.u8").string(), "cannot write");
+      if (alpha) {
+        std::ofstream a8(fs::path(out) / "alpha.u8", std::ios::binary);
+        for (const SceneImage& im : scene.images) {
+          const Image a = ReadImage(fs::path(workspace) / im.alpha_path);
+          std::vector<uint8_t> bytes(static_cast<size_t>(a.width) * a.height);
+          for (size_t i = 0; i < bytes.size(); ++i) {
+            bytes[i] = static_cast<uint8_t>(std::clamp(a.pixels[i * a.channels + a.channels - 1], 0.f, 1.f) * 255.f + 0.5f);
+          }
+          a8.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+        }
+        if (!a8) throw IoError((fs::path(out) / "alpha.u8").string(), "cannot write");
+      }
     }
     std::printf("%s: %d training and %d held-out views; run bench/decode_images.py %s next\n",
                 (fs::path(out) / "bench.json").c_str(), train, test, out.c_str());

@@ -43,13 +43,19 @@ struct View {
   bool train = true;
   PinholeCamera<float> camera{};
   int width = 0, height = 0;
-  const uint8_t* rgb = nullptr;  // [height, width, 3] in Data::pixels
+  const uint8_t* rgb = nullptr;    // [height, width, 3] in Data::pixels
+  const uint8_t* alpha = nullptr;  // [height, width] in Data::alphas, or nullptr
 };
 
+// With alpha (every photo had one), the benchmark runs as perf reconstruct does by default:
+// shells fixed at the background, the opacity residual fitting the alpha.
 struct Data {
   VolumeGeometry geometry;
+  float background[3] = {1, 1, 1};
+  bool alpha = false;
   std::vector<View> views;
   std::vector<uint8_t> pixels;  // images.u8
+  std::vector<uint8_t> alphas;  // alpha.u8
 };
 
 Data Load(const fs::path& dir) {
@@ -68,6 +74,8 @@ Data Load(const fs::path& dir) {
   for (int i = 0; i < 9; ++i) pl.box_rotation[i] = p.at("box_rotation").at(i);
   pl.shell_radii = p.at("shell_radii").get<std::vector<double>>();
   d.geometry = VolumeGeometry::From(pl, jpath.string());
+  for (int c = 0; c < 3; ++c) d.background[c] = j.at("background").at(c);
+  d.alpha = j.value("alpha", false);
   int64_t bytes = 0;
   for (const json& v : j.at("views")) {
     View w;
@@ -97,6 +105,23 @@ Data Load(const fs::path& dir) {
     v.rgb = d.pixels.data() + offset;
     offset += int64_t{3} * v.width * v.height;
   }
+  if (d.alpha) {
+    const fs::path apath = dir / "alpha.u8";
+    std::ifstream af(apath, std::ios::binary | std::ios::ate);
+    if (!af) throw IoError(apath.string(), "cannot read", "run python3 bench/decode_images.py on the data folder");
+    if (static_cast<int64_t>(af.tellg()) != bytes / 3) {
+      throw IoError(apath.string(), StrCat(af.tellg(), " bytes, bench.json's views need ", bytes / 3),
+                    "re-run bench/decode_images.py");
+    }
+    d.alphas.resize(bytes / 3);
+    af.seekg(0);
+    af.read(reinterpret_cast<char*>(d.alphas.data()), bytes / 3);
+    offset = 0;
+    for (View& v : d.views) {
+      v.alpha = d.alphas.data() + offset;
+      offset += int64_t{v.width} * v.height;
+    }
+  }
   return d;
 }
 
@@ -116,6 +141,17 @@ PosedImage ToPosed(const View& v, int f) {
         for (int dy = 0; dy < f; ++dy)
           for (int dx = 0; dx < f; ++dx) sum += v.rgb[(static_cast<int64_t>(y * f + dy) * v.width + x * f + dx) * 3 + c];
         p.image.at(x, y, c) = static_cast<float>(sum) / (255.f * f * f);
+      }
+    }
+  }
+  if (v.alpha) {
+    p.alpha = Image(w, h, 1);
+    for (int y = 0; y < h; ++y) {
+      for (int x = 0; x < w; ++x) {
+        int sum = 0;
+        for (int dy = 0; dy < f; ++dy)
+          for (int dx = 0; dx < f; ++dx) sum += v.alpha[static_cast<int64_t>(y * f + dy) * v.width + x * f + dx];
+        p.alpha.at(x, y, 0) = static_cast<float>(sum) / (255.f * f * f);
       }
     }
   }
@@ -176,13 +212,20 @@ Run RunHierarchy(Backend* backend, const Data& d, SolverType type, const Setting
     const auto t_level = WallClock::now();
     double excluded = 0;  // held-out evaluation within this level
     const VolumeShape shape{s.start << level, s.start << level, num_shells};
-    if (x.empty()) x = InitialParams(shape, d.geometry, InitOptions{s.seed});
+    if (x.empty()) {
+      InitOptions init{s.seed};
+      if (d.alpha) {  // reconstruct.cc: a fixed background starts at the background colour, opaque
+        for (int c = 0; c < 3; ++c) init.shell_colour[c] = d.background[c];
+        init.opaque_shells = true;
+      }
+      x = InitialParams(shape, d.geometry, init);
+    }
     const int factor = PyramidFactor(train_cameras, d.geometry, shape.n, 1 << (s.levels - 1 - level));
     std::vector<PosedImage> images;
     for (const View* v : train) images.push_back(ToPosed(*v, factor));
     const RaySet rays = MakeRaySet(images);
     images.clear();
-    const MemoryEstimate mem = backend->SetLevel({shape, d.geometry, &rays, {}}, RequiredVectors(type));
+    const MemoryEstimate mem = backend->SetLevel({shape, d.geometry, &rays, {}, d.alpha}, RequiredVectors(type));
     run.peak_memory = std::max(run.peak_memory, CudaMemoryInUse());
     SolverOptions so = s.solver;
     so.type = type;
@@ -329,8 +372,11 @@ int main(int argc, char** argv) {
         }
         const RaySet rays = MakeRaySet(images);
         for (float c : rays.colours) sum += c;
-        std::printf("level %d: %d^3, images / %d, %lld rays, mean colour %.4f\n", level, n, f,
-                    static_cast<long long>(rays.size()), sum / std::max<size_t>(1, rays.colours.size()));
+        double alpha_sum = 0;
+        for (float a : rays.alphas) alpha_sum += a;
+        std::printf("level %d: %d^3, images / %d, %lld rays, mean colour %.4f, mean alpha %s\n", level, n, f,
+                    static_cast<long long>(rays.size()), sum / std::max<size_t>(1, rays.colours.size()),
+                    rays.alphas.empty() ? "(none)" : StrCat(alpha_sum / rays.alphas.size()).c_str());
       }
       return 0;
     }

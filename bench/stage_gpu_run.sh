@@ -4,7 +4,7 @@
 #   bin/perf_bench_gpu      static CUDA runtime and libstdc++; needs glibc >= 2.35 only
 #   bin/gpu_parity_test     plus bin/libtbb.so.12 (the CPU backend it compares against)
 #   lego/bench.json         cameras, split, box and shells (perf_bench_prep)
-#   lego/images/*.png       the workspace's RGB PNGs (~37 MB; decoded there by decode_images.py)
+#   lego/images/*.png       the workspace's RGB and alpha PNGs (~39 MB; decoded there by decode_images.py)
 #   COMMIT                  the commit the binaries were built from
 # Usage: bench/stage_gpu_run.sh [BUILD_DIR]   (default build-cuda; LEGO=path/to/lego to override)
 set -euo pipefail
