@@ -117,6 +117,9 @@ void ReconstructOptions::Check() const {
   if (!(residuals.stop_transmittance >= 0 && residuals.stop_transmittance < 1)) {
     Fail("--stop-transmittance", StrCat(residuals.stop_transmittance), "must be in [0, 1)");
   }
+  if (!(init.box_opacity >= 0 && init.box_opacity < 1)) {
+    Fail("--init-opacity", StrCat(init.box_opacity), "must be in [0, 1)", "0.99 is the default; 0.05 a nearly clear start");
+  }
   if (background != "auto" && background != "fixed" && background != "learn") {
     Fail("--background", background, "must be auto, fixed or learn");
   }

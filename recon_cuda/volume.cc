@@ -54,7 +54,7 @@ std::vector<float> InitialParams(const VolumeShape& shape, const VolumeGeometry&
   std::mt19937 rng(options.seed);
   std::uniform_real_distribution<float> unit(0.f, 1.f);
   const double side = std::min({geometry.box.size.x, geometry.box.size.y, geometry.box.size.z});
-  const double sigma_mean = -std::log(1.0 - std::clamp(options.box_opacity, 0.0, 0.99)) / side;
+  const double sigma_mean = -std::log(1.0 - std::clamp(options.box_opacity, 0.0, 1.0 - 1e-12)) / side;
   for (int64_t i = 0; i < shape.ParamCount(); ++i) {
     switch (KindOf(shape, i)) {
       case ParamKind::kGridDensity: x[i] = static_cast<float>(2 * sigma_mean) * unit(rng); break;

@@ -171,6 +171,9 @@ TEST_F(ReconstructCli, BadInputsAreNamed) {
   r = RunCommand(Perf("reconstruct " + ws_.string() + " --levels 9"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("--levels"), std::string::npos) << r.output;
+  r = RunCommand(Perf("reconstruct " + ws_.string() + " --init-opacity 1"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("--init-opacity"), std::string::npos) << r.output;
   r = RunCommand(Perf("render " + ws_.string() + " --view nosuch.png"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
 }
