@@ -180,6 +180,13 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     }
     start = last + 1;
     x = Resample(c.shape, c.params, shape_of(start));
+    if (result.fixed_background) {
+      // Constants of this run, whatever an earlier run (perhaps with learned shells) left there.
+      const VolumeShape s = shape_of(start);
+      for (int64_t i = s.GridParamCount(); i < s.ParamCount(); ++i) {
+        x[i] = KindOf(s, i) == ParamKind::kShellOpacity ? 1.f : static_cast<float>(scene.background[i % 4]);
+      }
+    }
     say(StrCat("resuming after level ", last, " (", path.string(), ")"));
   }
 

@@ -144,6 +144,17 @@ TEST_F(ReconstructCli, BackgroundIsLearnedOrFixed) {
   summary = nlohmann::json::parse(std::ifstream(ws_ / "recon" / "recon.json"));
   EXPECT_EQ(summary["background"], "fixed");
 
+  // Resuming a learned-shell level with a fixed background resets the shells to it.
+  r = RunCommand(Perf("reconstruct -q " + ws_.string() + " --levels 1 --start-resolution 8 --iterations 2"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  ASSERT_LT(ShellRange(ws_ / "recon" / "level_0.perfvol").first, 0.9f);
+  r = RunCommand(Perf("reconstruct -q " + ws_.string() + " --levels 2 --start-resolution 8 --iterations 2 --resume "
+                      "--background fixed"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  range = ShellRange(ws_ / "recon" / "level_1.perfvol");
+  EXPECT_EQ(range.first, 1.f);
+  EXPECT_EQ(range.second, 1.f);
+
   r = RunCommand(Perf("reconstruct " + ws_.string() + " --background sky"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("--background"), std::string::npos) << r.output;
