@@ -49,7 +49,7 @@ void AddReconstructCommand(CLI::App& app) {
   cmd->add_flag("--no-pyramid", args->no_pyramid, "Fit full-resolution photos at every level");
   cmd->add_option("--max-cg-iterations", o.solver.max_cg_iterations, "PCG iterations per Gauss-Newton step at most")
       ->capture_default_str();
-  cmd->add_option("--cg-exit-ratio", o.solver.cg_exit_ratio, "PCG leaves when |r|^2 falls by less than this factor")
+  cmd->add_option("--cg-exit-ratio", o.solver.cg_exit_ratio, "PCG leaves when |r|^2 falls by less than this factor (paper: 0.85; default inf: never)")
       ->capture_default_str();
   cmd->add_option("--damping", o.solver.damping, "Levenberg-Marquardt damping of the diagonal (0: Gauss-Newton)")
       ->capture_default_str();
