@@ -6,10 +6,10 @@
 // Gauss-Newton iteration:
 //   1. Linearize at x: cost, g = J^T r, D = diag(J^T J), one jitter seed for the whole iteration;
 //   2. PCG (paper Algorithm 2) on (J^T J + mu D) d = -g from d = 0, Jacobi preconditioner D,
-//      leaving after max_cg_iterations or, with the paper's exit (cg_exit_ratio), when R / R_prev >
-//      the ratio (R = |r|^2); restricted to the
-//      free parameters: fixed shells and (hold_at_bounds) those at a bound that g points out of
-//      keep d = 0 (param_ops.h HeldParameter);
+//      leaving after max_cg_iterations or, with the paper's exit (cg_exit_ratio), when
+//      R / R_prev exceeds the ratio (R = |r|^2); restricted to the free parameters: fixed shells
+//      and (hold_at_bounds) those at a bound that g points out of keep d = 0 (param_ops.h
+//      HeldParameter);
 //   3. backtracking line search (paper Algorithm 3) on x(gamma) = P(x + gamma d), P the
 //      projection to the valid range: gamma = 1, 0.7, 0.49, ... while the cost keeps falling;
 //   4. x = x(gamma) if that lowers the cost, else the step is rejected.
