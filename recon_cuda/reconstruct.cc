@@ -209,13 +209,12 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   say(StrCat("backend: ", result.backend, "; ", train.size(), " training and ", test.size(), " held-out views; ",
              levels, " levels from ", o.start_resolution, "^3"));
   const bool alpha_known = std::all_of(train.begin(), train.end(), [](const PosedImage& im) { return im.alpha.width > 0; });
-  const char* opacity_residual = o.residuals.lambda <= 0                          ? "off"
-                                 : alpha_known && o.residuals.use_alpha ? "alpha"
-                                                                          : "auxiliary";
+  const std::string opacity_residual =
+      o.residuals.lambda <= 0 ? "off" : (alpha_known && o.residuals.use_alpha ? "alpha" : "auxiliary");
   say(StrCat("opacity residual (lambda ", o.residuals.lambda, "): ",
-             std::string(opacity_residual) == "alpha"
-                 ? "the box opacity fits the photos' alpha"
-                 : (std::string(opacity_residual) == "off" ? "off" : "the paper's auxiliary term (0 or 1)")));
+             opacity_residual == "alpha" ? "the box opacity fits the photos' alpha"
+             : opacity_residual == "off" ? "off"
+                                         : "the paper's auxiliary term (0 or 1)"));
   say(result.fixed_background
           ? StrCat("background: fixed at (", scene.background[0], ", ", scene.background[1], ", ", scene.background[2],
                    ")", o.background == "auto" ? ", the colour every photo's alpha was composited over" : "")
