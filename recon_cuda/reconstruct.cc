@@ -367,6 +367,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                      {"solver", SolverName(o.solver.type)},
                      {"background", result.fixed_background ? "fixed" : "learned"},
                      {"opacity_residual", opacity_residual},
+                     {"init_opacity", o.init.box_opacity},
                      {"levels", levels},
                      {"start_resolution", o.start_resolution},
                      {"iterations_per_level", o.iterations},

@@ -160,6 +160,20 @@ TEST_F(ReconstructCli, BackgroundIsLearnedOrFixed) {
   EXPECT_NE(r.output.find("--background"), std::string::npos) << r.output;
 }
 
+// Each solver starts from its own measured best start opacity unless one is given.
+TEST_F(ReconstructCli, StartOpacityDefaultsPerSolver) {
+  const auto start_of = [&](const std::string& flags) {
+    const auto r = RunCommand(Perf("reconstruct -q " + ws_.string() + " --levels 1 --start-resolution 8 --iterations 1 " +
+                                   flags));
+    EXPECT_EQ(r.exit_code, 0) << r.output;
+    return nlohmann::json::parse(std::ifstream(ws_ / "recon" / "recon.json"))["init_opacity"].get<double>();
+  };
+  EXPECT_DOUBLE_EQ(start_of(""), 0.99);
+  EXPECT_DOUBLE_EQ(start_of("--solver adam"), 0.1);
+  EXPECT_DOUBLE_EQ(start_of("--solver adam --init-opacity 0.5"), 0.5);
+  EXPECT_DOUBLE_EQ(start_of("--init-opacity 0.3"), 0.3);
+}
+
 TEST_F(ReconstructCli, BadInputsAreNamed) {
   // A damaged checkpoint is refused on resume, naming the file; nothing else is written.
   auto r = RunCommand(Perf("reconstruct -q " + ws_.string() + " --levels 1 --start-resolution 8 --iterations 1"));
