@@ -14,6 +14,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <nlohmann/json.hpp>
 
 #include "common/atomic_file.h"
@@ -42,24 +43,20 @@ int main(int argc, char** argv) {
     fs::create_directories(fs::path(out) / "images");
     nlohmann::json views = nlohmann::json::array();
     int train = 0, test = 0;
-    const bool alpha = std::all_of(scene.images.begin(), scene.images.end(),
-                                   [](const SceneImage& im) { return !im.alpha_path.empty(); });
+    const bool alpha = EveryImageHasAlpha(scene);
+    // Copies a workspace file into images/ under a flat name (the relative path with '/' as '_',
+    // after `prefix`) and returns its path relative to `out`.
+    const auto copy_flat = [&](const std::string& relative, const std::string& prefix) {
+      std::string flat = prefix + relative;
+      for (char& c : flat) c = c == '/' ? '_' : c;
+      fs::copy_file(fs::path(workspace) / relative, fs::path(out) / "images" / flat, fs::copy_options::overwrite_existing);
+      return "images/" + flat;
+    };
     for (const SceneImage& im : scene.images) {
       const SceneCamera& cam = scene.camera(im.camera_id);
       const PinholeCamera<float> pin = ToPinhole(cam, im.world_from_cam);
-      // A flat name: the workspace's relative path with '/' as '_'.
-      std::string flat = im.path;
-      for (char& c : flat) c = c == '/' ? '_' : c;
-      fs::copy_file(fs::path(workspace) / im.path, fs::path(out) / "images" / flat,
-                    fs::copy_options::overwrite_existing);
       const bool is_train = im.split == Split::kTrain;
       (is_train ? train : test) += 1;
-      if (alpha) {
-        std::string aflat = im.alpha_path;
-        for (char& c : aflat) c = c == '/' ? '_' : c;
-        fs::copy_file(fs::path(workspace) / im.alpha_path, fs::path(out) / "images" / ("alpha_" + aflat),
-                      fs::copy_options::overwrite_existing);
-      }
       views.push_back({{"name", im.name},
                        {"split", is_train ? "train" : "test"},
                        {"width", cam.width},
@@ -69,12 +66,8 @@ int main(int argc, char** argv) {
                        {"cx", pin.cx},
                        {"cy", pin.cy},
                        {"world_from_cam", std::vector<float>(pin.world_from_cam, pin.world_from_cam + 12)},
-                       {"image", "images/" + flat}});
-      if (alpha) {
-        std::string aflat = im.alpha_path;
-        for (char& c : aflat) c = c == '/' ? '_' : c;
-        views.back()["alpha"] = "images/alpha_" + aflat;
-      }
+                       {"image", copy_flat(im.path, "")}});
+      if (alpha) views.back()["alpha"] = copy_flat(im.alpha_path, "alpha_");
     }
     const nlohmann::json j{
         {"format", "perf-bench-data"},
@@ -91,28 +84,25 @@ int main(int argc, char** argv) {
         {"views", views}};
     WriteFileAtomically(fs::path(out) / "bench.json", j.dump(1) + "\n");
     if (write_u8) {
-      std::ofstream u8(fs::path(out) / "images.u8", std::ios::binary);
-      const Eigen::Vector3d& bg = scene.background;
-      for (const SceneImage& im : scene.images) {
-        const Image rgb = ToRgb(ReadImage(fs::path(workspace) / im.path), {bg.x(), bg.y(), bg.z()});
-        std::vector<uint8_t> bytes(rgb.pixels.size());
-        for (size_t i = 0; i < bytes.size(); ++i) {
-          bytes[i] = static_cast<uint8_t>(std::clamp(rgb.pixels[i], 0.f, 1.f) * 255.f + 0.5f);
-        }
-        u8.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
-      }
-      if (!u8) throw IoError((fs::path(out) / "images.u8").string(), "cannot write");
-      if (alpha) {
-        std::ofstream a8(fs::path(out) / "alpha.u8", std::ios::binary);
+      // Every image's pixels from `load`, rounded to 8 bits, one after the other into out/name.
+      const auto write_u8_file = [&](const char* name, const std::function<Image(const SceneImage&)>& load) {
+        std::ofstream f(fs::path(out) / name, std::ios::binary);
         for (const SceneImage& im : scene.images) {
-          const Image a = ReadImage(fs::path(workspace) / im.alpha_path);
-          std::vector<uint8_t> bytes(static_cast<size_t>(a.width) * a.height);
+          const Image image = load(im);
+          std::vector<uint8_t> bytes(image.pixels.size());
           for (size_t i = 0; i < bytes.size(); ++i) {
-            bytes[i] = static_cast<uint8_t>(std::clamp(a.pixels[i * a.channels + a.channels - 1], 0.f, 1.f) * 255.f + 0.5f);
+            bytes[i] = static_cast<uint8_t>(std::clamp(image.pixels[i], 0.f, 1.f) * 255.f + 0.5f);
           }
-          a8.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+          f.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
         }
-        if (!a8) throw IoError((fs::path(out) / "alpha.u8").string(), "cannot write");
+        if (!f) throw IoError((fs::path(out) / name).string(), "cannot write");
+      };
+      const Eigen::Vector3d& bg = scene.background;
+      write_u8_file("images.u8", [&](const SceneImage& im) {
+        return ToRgb(ReadImage(fs::path(workspace) / im.path), {bg.x(), bg.y(), bg.z()});
+      });
+      if (alpha) {
+        write_u8_file("alpha.u8", [&](const SceneImage& im) { return MaskChannel(ReadImage(fs::path(workspace) / im.alpha_path)); });
       }
     }
     std::printf("%s: %d training and %d held-out views; run bench/decode_images.py %s next\n",

@@ -28,14 +28,6 @@ void Progress(const EvalOptions& o, const std::string& step, int done, int total
   if (o.progress) o.progress(step, done, total);
 }
 
-// The true mask as one channel: the alpha of an image with alpha, else its first channel.
-Image MaskChannel(const Image& im) {
-  const int c = (im.channels == 2 || im.channels == 4) ? im.channels - 1 : 0;
-  Image out(im.width, im.height, 1);
-  for (size_t p = 0; p < out.pixels.size(); ++p) out.pixels[p] = im.pixels[p * im.channels + c];
-  return out;
-}
-
 // DIR/<name>.<ext> (the photo's name without extension) or DIR/<photo file name>.png (COLMAP's
 // mask convention); empty if neither exists.
 fs::path FindTrueMask(const fs::path& dir, const SceneImage& im) {

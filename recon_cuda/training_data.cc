@@ -41,15 +41,11 @@ std::vector<PosedImage> LoadImages(const Scene& scene, const std::filesystem::pa
     Image alpha;
     if (!im.alpha_path.empty()) {
       const std::filesystem::path apath = workspace / im.alpha_path;
-      Image a = ReadImage(apath);
-      if (a.width != cam.width || a.height != cam.height) {
-        throw InputError(apath.string(), "size", StrCat(a.width, "x", a.height),
+      alpha = MaskChannel(ReadImage(apath));
+      if (alpha.width != cam.width || alpha.height != cam.height) {
+        throw InputError(apath.string(), "size", StrCat(alpha.width, "x", alpha.height),
                          StrCat("the image ", im.path, " is ", cam.width, "x", cam.height),
                          "the workspace alpha images were changed after import; re-run perf import");
-      }
-      alpha = Image(a.width, a.height, 1);
-      for (int y = 0; y < a.height; ++y) {
-        for (int x = 0; x < a.width; ++x) alpha.at(x, y, 0) = a.at(x, y, a.channels - 1);
       }
     }
     out[i] = {im.name, ToPinhole(cam, im.world_from_cam), std::move(img), std::move(alpha)};

@@ -116,6 +116,13 @@ Image ResizeImage(const Image& image, int width, int height) {
   return out;
 }
 
+Image MaskChannel(const Image& in) {
+  const int c = (in.channels == 2 || in.channels == 4) ? in.channels - 1 : 0;
+  Image out(in.width, in.height, 1);
+  for (size_t p = 0; p < out.pixels.size(); ++p) out.pixels[p] = in.pixels[p * in.channels + c];
+  return out;
+}
+
 Image ToRgb(const Image& in, const std::array<double, 3>& background, Image* alpha) {
   const bool has_alpha = in.channels == 2 || in.channels == 4;
   const int colour = has_alpha ? in.channels - 1 : in.channels;

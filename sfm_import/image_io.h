@@ -35,6 +35,10 @@ Image ResizeImage(const Image& image, int width, int height);
 // default, so the composite is C + (1 - a) bg.
 Image ToRgb(const Image& in, const std::array<double, 3>& background, Image* alpha = nullptr);
 
+// A mask or alpha image as one channel: the alpha of an image with alpha (grey + alpha, RGBA),
+// else its first channel (a grey mask, or the red of an RGB one).
+Image MaskChannel(const Image& in);
+
 // File extensions (lower case, with dot) recognised as images when scanning folders.
 bool HasImageExtension(const std::filesystem::path& path);
 

@@ -1,6 +1,7 @@
 #include "sfm_import/scene.h"
 
 #include <Eigen/LU>
+#include <algorithm>
 #include <cmath>
 #include <nlohmann/json.hpp>
 
@@ -90,6 +91,11 @@ const SceneCamera& Scene::camera(int id) const {
   }
   PERF_CHECK_MSG(false, "no camera with id ", id);
   throw;  // unreachable
+}
+
+bool EveryImageHasAlpha(const Scene& scene) {
+  return !scene.images.empty() && std::all_of(scene.images.begin(), scene.images.end(),
+                                              [](const SceneImage& im) { return !im.alpha_path.empty(); });
 }
 
 std::string SceneToJson(const Scene& scene) {

@@ -78,6 +78,10 @@ struct Scene {
   const SceneCamera& camera(int id) const;  // throws InternalError if missing
 };
 
+// Whether every image has an alpha image (its photo was RGBA, composited over `background` on
+// import); false for a scene without images.
+bool EveryImageHasAlpha(const Scene& scene);
+
 // Serialises to JSON text (pretty, full precision).
 std::string SceneToJson(const Scene& scene);
 // Parses and validates (version, references, finite values); `name` is used in messages.
