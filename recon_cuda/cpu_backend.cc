@@ -134,6 +134,7 @@ class CpuBackend final : public Backend {
     blocks_.clear();
     scratch_.clear();
     level_ = p;
+    alphas_ = UsesAlpha(p) ? p.rays->alphas.data() : nullptr;
     const MemoryEstimate e = EstimateMemory(p, num_vectors);
     const int64_t needed = e.vectors + e.scratch + e.rays;
     if (e.available > 0 && needed > e.available) {
@@ -436,7 +437,7 @@ class CpuBackend final : public Backend {
   }
 
   // Ray i's alpha target (AuxResidual), or -1: the paper's auxiliary term.
-  float AlphaOf(int64_t i) const { return UsesAlpha(level_) ? level_.rays->alphas[i] : -1.f; }
+  float AlphaOf(int64_t i) const { return alphas_ ? alphas_[i] : -1.f; }
   // Ray i's jitter in the iteration of `seed` (every pass of the iteration sees the same).
   Jitter JitterOf(int64_t i, uint32_t seed) const {
     return {seed, static_cast<uint32_t>(i), level_.residuals.jitter, level_.residuals.pixel_jitter};
@@ -585,6 +586,7 @@ class CpuBackend final : public Backend {
   tbb::enumerable_thread_specific<Scratch> scratch_;
   bool cache_ = false, linearized_ = false, recorded_ = false;
   int max_samples_ = 0;
+  const float* alphas_ = nullptr;  // the level's alpha targets (UsesAlpha), else nullptr
   VecId lin_x_ = kNoVector;
   uint32_t lin_seed_ = 0;
   uint64_t pass_ = 0;

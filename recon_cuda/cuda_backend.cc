@@ -20,10 +20,18 @@ static_assert(sizeof(RayPixel) == 8, "RayPixel is copied to the device as is");
 
 std::string Mib(int64_t bytes) { return StrCat((bytes + (1 << 20) - 1) >> 20, " MiB"); }
 
-// Device bytes of the training rays: cameras, pixels and 8-bit colours (and alphas when there are).
-int64_t RayBytes(const RaySet& rays) {
-  return static_cast<int64_t>(rays.cameras.size() * sizeof(PinholeCamera<float>)) +
-         rays.size() * static_cast<int64_t>(sizeof(RayPixel) + 3 + (rays.alphas.empty() ? 0 : 1));
+// Device bytes of the level's training rays: cameras, pixels, 8-bit colours and, when the level
+// fits the alpha (UsesAlpha), 8-bit alphas.
+int64_t RayBytes(const LevelProblem& p) {
+  return static_cast<int64_t>(p.rays->cameras.size() * sizeof(PinholeCamera<float>)) +
+         p.rays->size() * static_cast<int64_t>(sizeof(RayPixel) + 3 + (UsesAlpha(p) ? 1 : 0));
+}
+
+// Values in [0, 1] as the device stores them (cuda::ColourToByte).
+std::vector<uint8_t> ToBytes(const std::vector<float>& values) {
+  std::vector<uint8_t> bytes(values.size());
+  for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = cuda::ColourToByte(values[i]);
+  return bytes;
 }
 
 // The level's rays on the device (one owner: the backend, for one level).
@@ -41,14 +49,8 @@ struct DeviceRays {
     PERF_CHECK(static_cast<int64_t>(rays.colours.size()) == 3 * rays.size());
     cameras.CopyFromHost(rays.cameras);
     pixels.CopyFromHost(rays.pixels);
-    std::vector<uint8_t> bytes(rays.colours.size());
-    for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = cuda::ColourToByte(rays.colours[i]);
-    colours.CopyFromHost(bytes);
-    if (use_alpha) {
-      bytes.resize(rays.alphas.size());
-      for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = cuda::ColourToByte(rays.alphas[i]);
-      alphas.CopyFromHost(bytes);
-    }
+    colours.CopyFromHost(ToBytes(rays.colours));
+    if (use_alpha) alphas.CopyFromHost(ToBytes(rays.alphas));
   }
   cuda::RaysView View() const {
     return {cameras.data(), pixels.data(), colours.data(), alphas.size() > 0 ? alphas.data() : nullptr, pixels.size()};
@@ -98,7 +100,7 @@ class CudaBackend final : public Backend {
     const int64_t params = p.shape.ParamCount();
     const int64_t rays = p.rays ? p.rays->size() : 0;
     e.vectors = int64_t{num_vectors} * params * 4;
-    e.rays = p.rays ? RayBytes(*p.rays) : 0;
+    e.rays = p.rays ? RayBytes(p) : 0;
     e.scratch = Scratch::Bytes(rays, params);
     e.jacobian_cache = 0;  // never cached: MultiplyJtJ recomputes (cuda_passes.cu)
     e.available = Available();
