@@ -214,12 +214,9 @@ Run RunHierarchy(Backend* backend, const Data& d, SolverType type, const Setting
     const VolumeShape shape{s.start << level, s.start << level, num_shells};
     if (x.empty()) {
       InitOptions init{s.seed};
-      if (type == SolverType::kAdam) init.box_opacity = 0.1;  // as perf reconstruct --solver adam
-      if (d.alpha) {  // reconstruct.cc: a fixed background starts at the background colour, opaque
-        for (int c = 0; c < 3; ++c) init.shell_colour[c] = d.background[c];
-        init.opaque_shells = true;
-      }
+      if (type == SolverType::kAdam) init.box_opacity = kAdamBoxOpacity;
       x = InitialParams(shape, d.geometry, init);
+      if (d.alpha) SetBackgroundShells(shape, d.background, x);
     }
     const int factor = PyramidFactor(train_cameras, d.geometry, shape.n, 1 << (s.levels - 1 - level));
     std::vector<PosedImage> images;

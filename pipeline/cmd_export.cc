@@ -50,8 +50,7 @@ void AddExportCommand(CLI::App& app) {
   cmd->add_flag("--no-volume", args->no_volume, "Skip volume.vdb");
   cmd->add_flag("--no-mesh", args->no_mesh, "Skip the mesh");
   cmd->add_flag("--no-renders", args->no_renders, "Skip the renders");
-  cmd->add_option("--device", o.device, "cpu, cuda or auto")->capture_default_str();
-  cmd->add_option("-j,--threads", o.threads, "CPU worker threads (0: all cores)")->capture_default_str();
+  AddDeviceOptions(cmd, &o.device, &o.threads);
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
   cmd->callback([args]() {
     exporter::ExportOptions& o = args->o;
@@ -104,8 +103,7 @@ void AddEvalCommand(CLI::App& app) {
   cmd->add_option("--mask-threshold", o.mask_threshold, "Binary mask where the box opacity reaches this")->capture_default_str();
   cmd->add_option("--min-box-opacity", o.min_box_opacity, "Renders: the paper's floater rule (0: off)")->capture_default_str();
   cmd->add_flag("--no-html", args->no_html, "Write report.json only");
-  cmd->add_option("--device", o.device, "cpu, cuda or auto")->capture_default_str();
-  cmd->add_option("-j,--threads", o.threads, "CPU worker threads (0: all cores)")->capture_default_str();
+  AddDeviceOptions(cmd, &o.device, &o.threads);
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
   cmd->callback([args]() {
     exporter::EvalOptions& o = args->o;

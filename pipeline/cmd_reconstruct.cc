@@ -24,8 +24,7 @@ void AddReconstructCommand(CLI::App& app) {
       "Fit the voxel grid and environment shells to a workspace made by perf import: hierarchical "
       "Gauss-Newton with preconditioned CG, coarse to fine, checkpointed after every level.");
   cmd->add_option("workspace", args->workspace, "Workspace folder (made by perf import)")->required();
-  cmd->add_option("--device", o.device, "cpu, cuda or auto")->capture_default_str();
-  cmd->add_option("-j,--threads", o.threads, "CPU worker threads (0: all cores)")->capture_default_str();
+  AddDeviceOptions(cmd, &o.device, &o.threads);
   cmd->add_option("--levels", o.levels, "Hierarchy levels, each doubling the resolution (0: 2 on CPU, 4 on GPU)")
       ->capture_default_str();
   cmd->add_option("--start-resolution", o.start_resolution, "Grid cells per axis (and texels per face side) at level 1")
@@ -62,9 +61,6 @@ void AddReconstructCommand(CLI::App& app) {
   cmd->add_option("--lr-colour", o.solver.adam.lr_colour, "Adam learning rate of colours and shell opacities")
       ->capture_default_str();
   cmd->add_option("--lr-density", o.solver.adam.lr_density, "Adam learning rate of densities")->capture_default_str();
-  // Each solver's best measured start (lego 50x50, 60 + 60 Adam steps: 0.03 25.41, 0.1 25.87 dB,
-  // 0.3 25.56, 0.99 25.32; Gauss-Newton: recon_cuda/volume.h InitOptions), so that the baseline
-  // is compared at its best.
   cmd->add_option("--init-opacity", o.init.box_opacity,
                   "Opacity of the box across its shortest side at the start (default: 0.99 for gn, 0.1 for adam)");
   cmd->add_flag("--init-shells-mean", o.init_shells_from_photos, "Shells start at the photos' mean colour (else random)");
@@ -85,7 +81,7 @@ void AddReconstructCommand(CLI::App& app) {
   cmd->callback([args, cmd]() {
     recon::ReconstructOptions& o = args->o;
     o.workspace = args->workspace;
-    if (args->solver == "adam" && cmd->count("--init-opacity") == 0) o.init.box_opacity = 0.1;
+    if (args->solver == "adam" && cmd->count("--init-opacity") == 0) o.init.box_opacity = recon::kAdamBoxOpacity;
     if (args->solver == "gn") {
       o.solver.type = recon::SolverType::kGaussNewton;
     } else if (args->solver == "adam") {
@@ -124,8 +120,7 @@ void AddRenderCommand(CLI::App& app) {
   cmd->add_option("--min-box-opacity", o.min_box_opacity,
                   "Rays whose box opacity is below this see only the shells (paper: 0.7; 0: off)")->capture_default_str();
   cmd->add_flag("--opacity", o.write_opacity, "Also write <name>_opacity.png, the box opacity 1 - T (16-bit)");
-  cmd->add_option("--device", o.device, "cpu, cuda or auto")->capture_default_str();
-  cmd->add_option("-j,--threads", o.threads, "CPU worker threads (0: all cores)")->capture_default_str();
+  AddDeviceOptions(cmd, &o.device, &o.threads);
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
   cmd->callback([args]() {
     recon::RenderViewsOptions& o = args->o;

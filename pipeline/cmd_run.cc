@@ -42,8 +42,7 @@ void AddRunCommand(CLI::App& app) {
   cmd->add_option("--max-size", o.max_size, "Override the preset: longest image side in pixels");
   cmd->add_option("--levels", o.levels, "Override the preset: hierarchy levels");
   cmd->add_option("--iterations", o.iterations, "Override the preset: Gauss-Newton iterations per level");
-  cmd->add_option("--device", o.device, "cpu, cuda or auto")->capture_default_str();
-  cmd->add_option("-j,--threads", o.threads, "CPU worker threads (0: all cores)")->capture_default_str();
+  AddDeviceOptions(cmd, &o.device, &o.threads);
   cmd->add_flag("--force", o.force, "Re-run every stage even when its outputs are up to date");
   cmd->add_option("--log-level", args->log_level, "info (progress and summary) or quiet (errors only)")
       ->capture_default_str();

@@ -2,6 +2,8 @@
 // errors propagate as perf::Error and are turned into messages and exit codes by main().
 #pragma once
 
+#include <string>
+
 namespace CLI {
 class App;
 }
@@ -15,5 +17,8 @@ void AddRenderCommand(CLI::App& app);
 void AddExportCommand(CLI::App& app);
 void AddEvalCommand(CLI::App& app);
 void AddRunCommand(CLI::App& app);
+
+// --device and -j,--threads: the same for every command that runs a backend.
+void AddDeviceOptions(CLI::App* cmd, std::string* device, int* threads);
 
 }  // namespace perf

@@ -10,6 +10,7 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
+#include "common/json_log.h"
 #include "common/stopwatch.h"
 #include "export/evaluate.h"
 #include "export/export.h"
@@ -47,23 +48,22 @@ bool NewerThan(const fs::path& output, fs::file_time_type input) {
   return fs::exists(output) && ModTime(output) >= input;
 }
 
-// JSON lines for scripts: one object per stage event, flushed as written.
-class JsonLog {
+// --log-json: one JSON line per stage event (and reconstruct iteration), stamped with the time;
+// nothing without a path.
+class StageLog {
  public:
-  explicit JsonLog(const fs::path& path) {
+  explicit StageLog(const fs::path& path) {
     if (path.empty()) return;
     if (path.has_parent_path()) EnsureWritableDirectory(path.parent_path());
-    out_.open(path, std::ios::app);
-    if (!out_) throw IoError(path.string(), "cannot open the log for writing", "check the folder is writable");
+    log_ = JsonLog(path, true, "--log-json log");
   }
   void Write(nlohmann::json j) {
-    if (!out_.is_open()) return;
     j["time"] = std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
-    out_ << j.dump() << "\n" << std::flush;
+    log_.Write(j);
   }
 
  private:
-  std::ofstream out_;
+  JsonLog log_;
 };
 
 class Runner {
@@ -251,7 +251,7 @@ class Runner {
 
   const RunOptions& o_;
   RunResult* r_;
-  JsonLog log_;
+  StageLog log_;
   PresetSettings preset_;
 };
 

@@ -8,6 +8,7 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
+#include "common/json_log.h"
 #include "common/stopwatch.h"
 #include "recon_cuda/checkpoint.h"
 #include "recon_cuda/evaluation.h"
@@ -22,24 +23,6 @@ using nlohmann::json;
 void Fail(const char* option, const std::string& value, const std::string& problem, const std::string& hint = {}) {
   throw InputError("command line", option, value, problem, hint);
 }
-
-// Appends JSON lines; each line is flushed so a killed run keeps every finished iteration.
-class JsonLog {
- public:
-  JsonLog(const fs::path& path, bool append) : path_(path) {
-    out_.open(path, append ? std::ios::app : std::ios::trunc);
-    if (!out_) throw IoError(path.string(), "cannot write the reconstruction log", "check that the workspace is writable");
-  }
-  void Write(const json& j) {
-    out_ << j.dump() << '\n';
-    out_.flush();
-    if (!out_) throw IoError(path_.string(), "cannot write the reconstruction log", "check the free disk space");
-  }
-
- private:
-  fs::path path_;
-  std::ofstream out_;
-};
 
 std::string FormatBytes(int64_t b) {
   std::ostringstream s;
@@ -130,9 +113,7 @@ void ReconstructOptions::Check() const {
 }
 
 bool FixedBackground(const std::string& background, const Scene& scene) {
-  if (background != "auto") return background == "fixed";
-  return !scene.images.empty() &&
-         std::all_of(scene.images.begin(), scene.images.end(), [](const SceneImage& im) { return !im.alpha_path.empty(); });
+  return background == "auto" ? EveryImageHasAlpha(scene) : background == "fixed";
 }
 
 ReconstructResult Reconstruct(const ReconstructOptions& o) {
@@ -154,6 +135,8 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   result.backend = backend->Describe();
   const int levels = o.levels > 0 ? o.levels : DefaultLevels(result.backend);
   result.fixed_background = FixedBackground(o.background, scene);
+  const float background[3] = {static_cast<float>(scene.background.x()), static_cast<float>(scene.background.y()),
+                               static_cast<float>(scene.background.z())};
   const int num_shells = geometry.num_shells();
   const auto shape_of = [&](int level) {
     return VolumeShape{o.start_resolution << level, o.start_resolution << level, num_shells};
@@ -180,13 +163,8 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     }
     start = last + 1;
     x = Resample(c.shape, c.params, shape_of(start));
-    if (result.fixed_background) {
-      // Constants of this run, whatever an earlier run (perhaps with learned shells) left there.
-      const VolumeShape s = shape_of(start);
-      for (int64_t i = s.GridParamCount(); i < s.ParamCount(); ++i) {
-        x[i] = KindOf(s, i) == ParamKind::kShellOpacity ? 1.f : static_cast<float>(scene.background[i % 4]);
-      }
-    }
+    // Constants of this run, whatever an earlier run (perhaps with learned shells) left there.
+    if (result.fixed_background) SetBackgroundShells(shape_of(start), background, x);
     say(StrCat("resuming after level ", last, " (", path.string(), ")"));
   }
 
@@ -201,7 +179,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     // A fresh start: checkpoints of an earlier run would be mistaken for this one's.
     for (int l = 0; l <= std::max(last, 16); ++l) fs::remove(CheckpointPath(o.workspace, l));
   }
-  JsonLog log(o.workspace / "recon" / "log.jsonl", start > 0);
+  JsonLog log(o.workspace / "recon" / "log.jsonl", start > 0, "reconstruction log");
   if (start > 0) log.Write({{"event", "resume"}, {"level", start}});
   std::vector<PinholeCamera<float>> train_cameras;
   for (const PosedImage& im : train) train_cameras.push_back(im.camera);
@@ -238,11 +216,8 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
         }
         for (int c = 0; c < 3; ++c) init.shell_colour[c] = count > 0 ? static_cast<float>(sum[c] / count) : -1.f;
       }
-      if (result.fixed_background) {
-        for (int c = 0; c < 3; ++c) init.shell_colour[c] = static_cast<float>(scene.background[c]);
-        init.opaque_shells = true;
-      }
       x = InitialParams(shape, geometry, init);
+      if (result.fixed_background) SetBackgroundShells(shape, background, x);
     }
     LevelReport lr;
     lr.level = level;

@@ -58,9 +58,7 @@ std::vector<float> InitialParams(const VolumeShape& shape, const VolumeGeometry&
   for (int64_t i = 0; i < shape.ParamCount(); ++i) {
     switch (KindOf(shape, i)) {
       case ParamKind::kGridDensity: x[i] = static_cast<float>(2 * sigma_mean) * unit(rng); break;
-      case ParamKind::kShellOpacity:
-        x[i] = options.opaque_shells ? 1.f : static_cast<float>(2 * options.shell_opacity) * unit(rng);
-        break;
+      case ParamKind::kShellOpacity: x[i] = static_cast<float>(2 * options.shell_opacity) * unit(rng); break;
       case ParamKind::kShellColour: {
         const float c = options.shell_colour[i % 4];
         x[i] = c >= 0 ? c : unit(rng);
@@ -71,6 +69,12 @@ std::vector<float> InitialParams(const VolumeShape& shape, const VolumeGeometry&
   }
   ProjectToValidRange(shape, x);
   return x;
+}
+
+void SetBackgroundShells(const VolumeShape& shape, const float colour[3], std::span<float> params) {
+  for (int64_t i = shape.GridParamCount(); i < shape.ParamCount(); ++i) {
+    params[i] = KindOf(shape, i) == ParamKind::kShellOpacity ? 1.f : colour[i % 4];
+  }
 }
 
 namespace {

@@ -73,12 +73,20 @@ struct InitOptions {
   double shell_opacity = 0.1;  // mean opacity of the inner shells' texels, uniform in [0, 2 a]
   // Shell texel colours: this colour (e.g. the photos' mean) when set (>= 0), else random.
   float shell_colour[3] = {-1, -1, -1};
-  bool opaque_shells = false;  // every shell texel starts opaque (a fixed background)
 };
+
+// The Adam baseline's start opacity (perf reconstruct --solver adam and the GPU benchmark, unless
+// one is given): its best measured, so that the baseline is compared at its best. Lego 50x50,
+// 60 + 60 Adam steps: 0.03 25.41, 0.1 25.87, 0.3 25.56, 0.99 25.32 dB.
+inline constexpr double kAdamBoxOpacity = 0.1;
 
 // Random colours in [0, 1], low densities and shell opacities (the outermost shell's opacity is
 // ignored by the ray math: it is always opaque).
 std::vector<float> InitialParams(const VolumeShape& shape, const VolumeGeometry& geometry, const InitOptions& options);
+
+// A fixed background (LevelProblem::fixed_shells): every shell texel opaque in `colour`; the
+// grid is left as it is.
+void SetBackgroundShells(const VolumeShape& shape, const float colour[3], std::span<float> params);
 
 // Fills the `to` level from the `from` level (paper "Hierarchical formulation"): every new cell
 // centre (texel centre) takes the trilinear (bilinear, per face) interpolation of the old

@@ -17,12 +17,6 @@ namespace {
 using test::DenseJacobian;
 using test::TinyProblem;
 
-std::unique_ptr<Backend> Cpu() {
-  CpuBackendOptions o;
-  o.threads = 2;
-  return MakeCpuBackend(o);
-}
-
 // The tiny problem with every 5th parameter at its lower bound and every 7th colour or opacity
 // at 1, so that some are held and some are free at a bound.
 TinyProblem AtBounds(uint32_t seed) {
@@ -47,7 +41,7 @@ TEST(HoldParametersTest, MarksBoundsAndFixedShells) {
   const int64_t n = p.shape.ParamCount();
   std::vector<float> g(n);
   for (int64_t i = 0; i < n; ++i) g[i] = (i % 2 ? 1.f : -1.f) * (0.5f + static_cast<float>(i % 3));
-  auto b = Cpu();
+  auto b = MakeCpuBackend({});
   for (const bool fixed_shells : {false, true}) {
     for (const bool bounds : {false, true}) {
       b->SetLevel(Fixed(p, fixed_shells), 3);
@@ -86,7 +80,7 @@ TEST(SolverBoundsTest, StepSolvesTheFreeParametersSystem) {
   const std::vector<double> g = j.Jtr();
   for (const bool hold : {true, false}) {
     SCOPED_TRACE(hold ? "hold at bounds" : "plain projected GN");
-    auto b = Cpu();
+    auto b = MakeCpuBackend({});
     b->SetLevel(Fixed(p), RequiredVectors(SolverType::kGaussNewton));
     SolverOptions o;
     o.max_iterations = 1;
@@ -146,7 +140,7 @@ TEST(SolverBoundsTest, FixedShellsStayPut) {
   const int64_t grid = p.shape.GridParamCount();
   for (const SolverType type : {SolverType::kGaussNewton, SolverType::kAdam}) {
     SCOPED_TRACE(SolverName(type));
-    auto b = Cpu();
+    auto b = MakeCpuBackend({});
     b->SetLevel(Fixed(p, true), RequiredVectors(type));
     SolverOptions o;
     o.type = type;

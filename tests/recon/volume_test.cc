@@ -111,8 +111,10 @@ TEST(VolumeTest, InitialParamsAreRandomValidAndFaint) {
     }
   }
   // A fixed background: every texel opaque in that colour; the grid as before.
-  o.opaque_shells = true;
-  const std::vector<float> z = InitialParams(s, g, o);
+  InitOptions random_shells = o;
+  for (float& c : random_shells.shell_colour) c = -1;
+  std::vector<float> z = InitialParams(s, g, random_shells);
+  SetBackgroundShells(s, o.shell_colour, z);
   for (int64_t i = 0; i < s.ParamCount(); ++i) {
     const ParamKind k = KindOf(s, i);
     if (k == ParamKind::kShellOpacity) {
