@@ -27,6 +27,7 @@
 #include "common/stopwatch.h"
 #include "recon_cuda/cuda_backend.h"
 #include "recon_cuda/evaluation.h"
+#include "recon_cuda/render_rule.h"
 #include "recon_cuda/solver.h"
 #include "recon_cuda/training_data.h"
 #include "recon_cuda/volume.h"
@@ -166,7 +167,7 @@ PosedImage ToPosed(const View& v, int f) {
 struct Settings {
   int levels = 4, start = 32, gn_iterations = 10, adam_steps = 200, adam_eval_every = 20;
   uint32_t seed = 1;
-  float min_box_opacity = 0.7f;
+  float min_box_opacity = kDefaultMinBoxOpacity;
   SolverOptions solver;  // GN settings and Adam's learning rates
 };
 
@@ -214,7 +215,6 @@ Run RunHierarchy(Backend* backend, const Data& d, SolverType type, const Setting
     const VolumeShape shape{s.start << level, s.start << level, num_shells};
     if (x.empty()) {
       InitOptions init{s.seed};
-      if (type == SolverType::kAdam) init.box_opacity = kAdamBoxOpacity;
       x = InitialParams(shape, d.geometry, init);
       if (d.alpha) SetBackgroundShells(shape, d.background, x);
     }

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "export/metrics.h"
+#include "recon_cuda/render_rule.h"
 
 namespace perf::exporter {
 
@@ -21,7 +22,7 @@ struct EvalOptions {
   std::filesystem::path checkpoint;  // empty: the last level in WORKSPACE/recon
   std::filesystem::path gt_masks;    // optional folder of true masks, in the photos' frame
   double mask_threshold = 0.7;
-  float min_box_opacity = 0.7f;
+  float min_box_opacity = recon::kDefaultMinBoxOpacity;  // renders: the render rule (render_rule.h)
   bool html = true;
   std::string device = "auto";
   int threads = 0;

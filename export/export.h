@@ -21,6 +21,7 @@
 #include "export/mesh_export.h"
 #include "export/orbit.h"
 #include "export/vdb_export.h"
+#include "recon_cuda/render_rule.h"
 
 namespace perf::exporter {
 
@@ -36,7 +37,7 @@ struct ExportOptions {
   VdbOptions vdb;
   MeshOptions mesh_options;
   OrbitOptions orbit;           // frames = 0: no orbit
-  float min_box_opacity = 0.7f; // renders: the paper's rule
+  float min_box_opacity = recon::kDefaultMinBoxOpacity; // renders: the render rule (render_rule.h)
   std::string device = "auto";
   int threads = 0;
   // Called as work proceeds: step ("masks", "volume", "mesh", "renders"), done, total.

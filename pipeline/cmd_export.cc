@@ -44,7 +44,7 @@ void AddExportCommand(CLI::App& app) {
   cmd->add_option("--orbit-frames", o.orbit.frames, "Orbit renders (0: none)")->capture_default_str();
   cmd->add_option("--orbit-elevation", o.orbit.elevation_degrees, "Orbit height above the box's horizon, degrees")
       ->capture_default_str();
-  cmd->add_option("--min-box-opacity", o.min_box_opacity, "Renders: the paper's floater rule (0: off)")->capture_default_str();
+  AddMinBoxOpacityOption(cmd, &o.min_box_opacity, "Renders");
   cmd->add_flag("--no-masks", args->no_masks, "Skip the masks");
   cmd->add_flag("--no-foreground", args->no_foreground, "Skip the cut-outs (they need the original photos)");
   cmd->add_flag("--no-volume", args->no_volume, "Skip volume.vdb");
@@ -101,7 +101,7 @@ void AddEvalCommand(CLI::App& app) {
   cmd->add_option("--checkpoint", args->checkpoint, "Checkpoint to score (default: the last level in WORKSPACE/recon)");
   cmd->add_option("--gt-masks", args->gt_masks, "Folder of true foreground masks, one per photo, named like the photos");
   cmd->add_option("--mask-threshold", o.mask_threshold, "Binary mask where the box opacity reaches this")->capture_default_str();
-  cmd->add_option("--min-box-opacity", o.min_box_opacity, "Renders: the paper's floater rule (0: off)")->capture_default_str();
+  AddMinBoxOpacityOption(cmd, &o.min_box_opacity, "Renders");
   cmd->add_flag("--no-html", args->no_html, "Write report.json only");
   AddDeviceOptions(cmd, &o.device, &o.threads);
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");

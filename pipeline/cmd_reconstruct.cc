@@ -40,8 +40,13 @@ void AddReconstructCommand(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--eval-every", o.eval_every, "Log the held-out PSNR every K iterations (0: at the end of each level)")
       ->capture_default_str();
-  cmd->add_option("--lambda", o.residuals.lambda, "Weight of the auxiliary opacity residual")->capture_default_str();
-  cmd->add_flag("--no-aux", args->no_aux, "Switch the auxiliary opacity residual off");
+  cmd->add_option("--lambda", o.residuals.lambda, "Weight of the paper's auxiliary opacity residual")
+      ->capture_default_str();
+  cmd->add_option("--alpha-weight", o.residuals.alpha_weight,
+                  "Weight of the opacity residual that fits the photos' alpha (used instead of --lambda's term "
+                  "where every photo had alpha)")
+      ->capture_default_str();
+  cmd->add_flag("--no-aux", args->no_aux, "Switch the opacity residual off (either kind)");
   cmd->add_option("--stop-transmittance", o.residuals.stop_transmittance,
                   "End a ray's march once its transmittance is below this (0: march the whole box)")
       ->capture_default_str();
@@ -62,7 +67,7 @@ void AddReconstructCommand(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--lr-density", o.solver.adam.lr_density, "Adam learning rate of densities")->capture_default_str();
   cmd->add_option("--init-opacity", o.init.box_opacity,
-                  "Opacity of the box across its shortest side at the start (default: 0.99 for gn, 0.1 for adam)");
+                  "Opacity of the box across its shortest side at the start")->capture_default_str();
   cmd->add_flag("--init-shells-mean", o.init_shells_from_photos, "Shells start at the photos' mean colour (else random)");
   cmd->add_option("--background", o.background,
                   "Shells: learn them, or keep them fixed at scene.json's background colour (auto: fixed when "
@@ -75,13 +80,11 @@ void AddReconstructCommand(CLI::App& app) {
                 "Move every training ray to a random point of its pixel each iteration (default: pixel centres)");
   cmd->add_flag("--no-hold-at-bounds", args->no_hold,
                 "Let CG move parameters at a bound of their range that the gradient pushes out (plain projected GN)");
-  cmd->add_option("--min-box-opacity", o.min_box_opacity,
-                  "Render rule: rays whose box opacity is below this see only the shells")->capture_default_str();
+  AddMinBoxOpacityOption(cmd, &o.min_box_opacity, "Previews and held-out PSNR");
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
-  cmd->callback([args, cmd]() {
+  cmd->callback([args]() {
     recon::ReconstructOptions& o = args->o;
     o.workspace = args->workspace;
-    if (args->solver == "adam" && cmd->count("--init-opacity") == 0) o.init.box_opacity = recon::kAdamBoxOpacity;
     if (args->solver == "gn") {
       o.solver.type = recon::SolverType::kGaussNewton;
     } else if (args->solver == "adam") {
@@ -90,7 +93,7 @@ void AddReconstructCommand(CLI::App& app) {
       throw InputError("command line", "--solver", args->solver, "unknown solver", "use gn or adam");
     }
     o.solver.adam.lr_opacity = o.solver.adam.lr_colour;
-    if (args->no_aux) o.residuals.lambda = 0;
+    if (args->no_aux) o.residuals.lambda = o.residuals.alpha_weight = 0;
     if (args->no_pyramid) o.pyramid = false;
     if (args->no_hold) o.solver.hold_at_bounds = false;
     if (args->no_alpha) o.residuals.use_alpha = false;
@@ -117,8 +120,7 @@ void AddRenderCommand(CLI::App& app) {
   cmd->add_option("--view", o.names, "Only this image (a scene.json name); repeatable");
   cmd->add_option("--checkpoint", args->checkpoint, "Checkpoint to render (default: the last level in WORKSPACE/recon)");
   cmd->add_option("-o,--out", args->out, "Output folder (default: WORKSPACE/renders)");
-  cmd->add_option("--min-box-opacity", o.min_box_opacity,
-                  "Rays whose box opacity is below this see only the shells (paper: 0.7; 0: off)")->capture_default_str();
+  AddMinBoxOpacityOption(cmd, &o.min_box_opacity, "Renders");
   cmd->add_flag("--opacity", o.write_opacity, "Also write <name>_opacity.png, the box opacity 1 - T (16-bit)");
   AddDeviceOptions(cmd, &o.device, &o.threads);
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");

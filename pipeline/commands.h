@@ -21,4 +21,7 @@ void AddRunCommand(CLI::App& app);
 // --device and -j,--threads: the same for every command that runs a backend.
 void AddDeviceOptions(CLI::App* cmd, std::string* device, int* threads);
 
+// --min-box-opacity: the render rule (recon_cuda/render_rule.h) for what `use` names.
+void AddMinBoxOpacityOption(CLI::App* cmd, float* min_box_opacity, const std::string& use);
+
 }  // namespace perf

@@ -25,7 +25,8 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // --help and --version are ParseErrors that exit 0; every other one is bad input.
+    return app.exit(e) == 0 ? 0 : 2;
   } catch (const perf::InputError& e) {
     std::cerr << "error: " << e.what() << "\n";
     return 2;

@@ -135,6 +135,7 @@ class CpuBackend final : public Backend {
     scratch_.clear();
     level_ = p;
     alphas_ = UsesAlpha(p) ? p.rays->alphas.data() : nullptr;
+    weight_ = OpacityResidualWeight(p);
     const MemoryEstimate e = EstimateMemory(p, num_vectors);
     const int64_t needed = e.vectors + e.scratch + e.rays;
     if (e.available > 0 && needed > e.available) {
@@ -354,7 +355,7 @@ class CpuBackend final : public Backend {
       for (; i < end; i += subset.stride) {
         const RayOutput<float> fwd =
             Forward(vol, RayOf(i, seed), JitterOf(i, seed), &level_.rays->colours[3 * i],
-                    level_.residuals.lambda, level_.residuals.stop_transmittance, nullptr, AlphaOf(i));
+                    weight_, level_.residuals.stop_transmittance, nullptr, AlphaOf(i));
         bs.Add(fwd);
       }
       return bs;
@@ -416,11 +417,10 @@ class CpuBackend final : public Backend {
   BlockStats LinearizeBlock(const VolumeView<float>& vol, uint32_t seed, int64_t begin, int64_t end, Scratch& s,
                             BlockJ* out) const {
     BlockStats bs;
-    const float lambda = level_.residuals.lambda;
     for (int64_t i = begin; i < end; ++i) {
       const BoxRay<float> ray = RayOf(i, seed);
       const Jitter jit = JitterOf(i, seed);
-      const RayOutput<float> fwd = Forward(vol, ray, jit, &level_.rays->colours[3 * i], lambda,
+      const RayOutput<float> fwd = Forward(vol, ray, jit, &level_.rays->colours[3 * i], weight_,
                                            level_.residuals.stop_transmittance, s.record.data(), AlphaOf(i));
       LinearizeVisitor<kDiag> v{{fwd.residual[0], fwd.residual[1], fwd.residual[2], fwd.residual[3]},
                                 AddSink{s.acc[0].data()},
@@ -459,7 +459,7 @@ class CpuBackend final : public Backend {
   void RecomputeRow(const VolumeView<float>& vol, const BoxRay<float>& ray, int64_t i, Scratch& s) const {
     const Jitter jit = JitterOf(i, lin_seed_);
     ClearBlock(&s.row, 1);
-    const RayOutput<float> fwd = Forward(vol, ray, jit, &level_.rays->colours[3 * i], level_.residuals.lambda,
+    const RayOutput<float> fwd = Forward(vol, ray, jit, &level_.rays->colours[3 * i], weight_,
                                          level_.residuals.stop_transmittance, s.record.data(), AlphaOf(i));
     RecordOnly visitor{&s.row};
     Backward(vol, ray, jit, fwd, visitor, s.record.data());
@@ -587,6 +587,7 @@ class CpuBackend final : public Backend {
   bool cache_ = false, linearized_ = false, recorded_ = false;
   int max_samples_ = 0;
   const float* alphas_ = nullptr;  // the level's alpha targets (UsesAlpha), else nullptr
+  float weight_ = 0;               // OpacityResidualWeight
   VecId lin_x_ = kNoVector;
   uint32_t lin_seed_ = 0;
   uint64_t pass_ = 0;

@@ -235,7 +235,7 @@ class CudaBackend final : public Backend {
     return {MakeView(level_.shape, level_.geometry, ptr(x)),
             level_.geometry.box,
             rays_->View(),
-            level_.residuals.lambda,
+            OpacityResidualWeight(level_),
             level_.residuals.stop_transmittance,
             level_.residuals.jitter,
             level_.residuals.pixel_jitter,

@@ -97,6 +97,7 @@ void ReconstructOptions::Check() const {
   if (preview_every < 0) Fail("--preview-every", std::to_string(preview_every), "must be >= 0");
   if (eval_every < 0) Fail("--eval-every", std::to_string(eval_every), "must be >= 0");
   if (!(residuals.lambda >= 0)) Fail("--lambda", StrCat(residuals.lambda), "must be >= 0");
+  if (!(residuals.alpha_weight >= 0)) Fail("--alpha-weight", StrCat(residuals.alpha_weight), "must be >= 0");
   if (!(residuals.stop_transmittance >= 0 && residuals.stop_transmittance < 1)) {
     Fail("--stop-transmittance", StrCat(residuals.stop_transmittance), "must be in [0, 1)");
   }
@@ -187,9 +188,10 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   say(StrCat("backend: ", result.backend, "; ", train.size(), " training and ", test.size(), " held-out views; ",
              levels, " levels from ", o.start_resolution, "^3"));
   const bool alpha_known = std::all_of(train.begin(), train.end(), [](const PosedImage& im) { return im.alpha.width > 0; });
-  const std::string opacity_residual =
-      o.residuals.lambda <= 0 ? "off" : (alpha_known && o.residuals.use_alpha ? "alpha" : "auxiliary");
-  say(StrCat("opacity residual (lambda ", o.residuals.lambda, "): ",
+  const bool fits_alpha = alpha_known && o.residuals.use_alpha;
+  const float opacity_weight = fits_alpha ? o.residuals.alpha_weight : o.residuals.lambda;
+  const std::string opacity_residual = opacity_weight <= 0 ? "off" : (fits_alpha ? "alpha" : "auxiliary");
+  say(StrCat("opacity residual (weight ", opacity_weight, "): ",
              opacity_residual == "alpha" ? "the box opacity fits the photos' alpha"
              : opacity_residual == "off" ? "off"
                                          : "the paper's auxiliary term (0 or 1)"));
@@ -342,7 +344,9 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                      {"solver", SolverName(o.solver.type)},
                      {"background", result.fixed_background ? "fixed" : "learned"},
                      {"opacity_residual", opacity_residual},
+                     {"opacity_residual_weight", opacity_weight},
                      {"init_opacity", o.init.box_opacity},
+                     {"min_box_opacity", o.min_box_opacity},  // the render rule of test_psnr
                      {"levels", levels},
                      {"start_resolution", o.start_resolution},
                      {"iterations_per_level", o.iterations},

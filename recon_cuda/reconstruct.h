@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "recon_cuda/solver.h"
+#include "recon_cuda/render_rule.h"
 
 namespace perf {
 struct Scene;
@@ -52,7 +53,7 @@ struct ReconstructOptions {
   bool resume = false;          // continue after the last checkpoint instead of starting over
   int preview_every = 0;        // write a held-out preview every K iterations (0: never)
   int eval_every = 0;           // held-out PSNR every K iterations (0: at the end of each level)
-  float min_box_opacity = 0.7f; // the paper's rendering rule, for previews and held-out PSNR
+  float min_box_opacity = kDefaultMinBoxOpacity; // the render rule (render_rule.h), for previews and held-out PSNR
 
   // Progress: called after each iteration and at level boundaries.
   struct Event {

@@ -1,5 +1,5 @@
 // `perf render`: draws training or held-out cameras of a workspace from a checkpoint (the final
-// one by default) with the render path (no jitter, the paper's 0.7 box-opacity rule), writes
+// one by default) with the render path (no jitter; the paper's box-opacity rule on request, render_rule.h), writes
 // PNGs, and scores each against its photo.
 #pragma once
 
@@ -11,6 +11,7 @@
 
 #include "recon_cuda/checkpoint.h"
 #include "recon_cuda/evaluation.h"
+#include "recon_cuda/render_rule.h"
 
 namespace perf::recon {
 
@@ -34,7 +35,7 @@ struct RenderViewsOptions {
   std::filesystem::path out_dir;     // empty: WORKSPACE/renders
   std::string split = "test";        // test, train or all
   std::vector<std::string> names;    // only these images (scene.json names); empty: the split
-  float min_box_opacity = 0.7f;
+  float min_box_opacity = kDefaultMinBoxOpacity;  // render_rule.h
   bool write_opacity = false;        // also <name>_opacity.png (1 - T_box)
   std::string device = "auto";
   int threads = 0;

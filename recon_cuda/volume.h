@@ -67,18 +67,15 @@ struct InitOptions {
   // (50x50, 32^3 + 64^3, 8 + 8 GN iterations) it measured 22.4 dB held-out against 21.3 dB
   // for a nearly clear start (0.1): carving a faint fog converges better than growing surfaces
   // from nothing. Re-measured with the fixed background, the active set and the alpha residual:
-  // 0.5 22.77, 0.9 23.71, 0.99 24.77, 0.9999 25.20, 0.99999 25.34, 1 - 1e-7 23.09 dB (a cliff);
-  // but 0.9999 costs the bonsai example 1.6 dB (learned shells, no alpha), so 0.99 stays.
+  // 0.5 27.12, 0.9 27.31, 0.99 27.47, 0.999 27.46, 0.9999 26.80 dB (scored without the render
+  // rule, render_rule.h; the paper's CG exit), and 0.9999 costs the bonsai example 1.6 dB.
+  // The Adam baseline starts here too: 60 + 60 steps gave 26.71 / 27.69 / 28.05 / 28.13 dB from
+  // 0.03 / 0.1 / 0.3 / 0.99.
   double box_opacity = 0.99;
   double shell_opacity = 0.1;  // mean opacity of the inner shells' texels, uniform in [0, 2 a]
   // Shell texel colours: this colour (e.g. the photos' mean) when set (>= 0), else random.
   float shell_colour[3] = {-1, -1, -1};
 };
-
-// The Adam baseline's start opacity (perf reconstruct --solver adam and the GPU benchmark, unless
-// one is given): its best measured, so that the baseline is compared at its best. Lego 50x50,
-// 60 + 60 Adam steps: 0.03 25.41, 0.1 25.87, 0.3 25.56, 0.99 25.32 dB.
-inline constexpr double kAdamBoxOpacity = 0.1;
 
 // Random colours in [0, 1], low densities and shell opacities (the outermost shell's opacity is
 // ignored by the ray math: it is always opaque).

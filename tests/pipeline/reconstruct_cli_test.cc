@@ -69,6 +69,7 @@ TEST_F(ReconstructCli, ReconstructsLogsCheckpointsResumesAndRenders) {
   const nlohmann::json summary = nlohmann::json::parse(std::ifstream(ws_ / "recon" / "recon.json"));
   EXPECT_EQ(summary["final_checkpoint"], "recon/level_1.perfvol");
   EXPECT_GT(summary["test_psnr"].get<double>(), 15.0);
+  EXPECT_EQ(summary["min_box_opacity"].get<double>(), 0.0);  // scored as fitted, without the paper's rule
 
   // Everything done: --resume says so and changes nothing.
   const auto before = fs::last_write_time(ws_ / "recon" / "level_1.perfvol");
@@ -84,6 +85,16 @@ TEST_F(ReconstructCli, ReconstructsLogsCheckpointsResumesAndRenders) {
   EXPECT_TRUE(fs::exists(ws_ / "renders" / "view0_opacity.png"));
   const ImageInfo info = ReadImageInfo(ws_ / "renders" / "view6.png");
   EXPECT_EQ(info.width, 32);
+
+  // By default the render is the volume as fitted; the rule blanks rays whose box opacity is below
+  // its threshold (1: every ray, since the box's opacity is below 1 along each).
+  r = RunCommand(Perf("render " + ws_.string() + " --min-box-opacity 0 -o " + (ws_ / "rule0").string()));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = RunCommand(Perf("render " + ws_.string() + " --min-box-opacity 1 -o " + (ws_ / "rule1").string()));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::vector<float> fitted = ReadImage(ws_ / "renders" / "view0.png").pixels;
+  EXPECT_EQ(fitted, ReadImage(ws_ / "rule0" / "view0.png").pixels);
+  EXPECT_NE(fitted, ReadImage(ws_ / "rule1" / "view0.png").pixels);
 }
 
 TEST_F(ReconstructCli, ResumeContinuesAfterTheLastLevel) {
@@ -160,8 +171,8 @@ TEST_F(ReconstructCli, BackgroundIsLearnedOrFixed) {
   EXPECT_NE(r.output.find("--background"), std::string::npos) << r.output;
 }
 
-// Each solver starts from its own measured best start opacity unless one is given.
-TEST_F(ReconstructCli, StartOpacityDefaultsPerSolver) {
+// Both solvers start from the same opacity (each measured best there) unless one is given.
+TEST_F(ReconstructCli, StartOpacityIsTheSameForBothSolvers) {
   const auto start_of = [&](const std::string& flags) {
     const auto r = RunCommand(Perf("reconstruct -q " + ws_.string() + " --levels 1 --start-resolution 8 --iterations 1 " +
                                    flags));
@@ -169,7 +180,7 @@ TEST_F(ReconstructCli, StartOpacityDefaultsPerSolver) {
     return nlohmann::json::parse(std::ifstream(ws_ / "recon" / "recon.json"))["init_opacity"].get<double>();
   };
   EXPECT_DOUBLE_EQ(start_of(""), 0.99);
-  EXPECT_DOUBLE_EQ(start_of("--solver adam"), 0.1);
+  EXPECT_DOUBLE_EQ(start_of("--solver adam"), 0.99);
   EXPECT_DOUBLE_EQ(start_of("--solver adam --init-opacity 0.5"), 0.5);
   EXPECT_DOUBLE_EQ(start_of("--init-opacity 0.3"), 0.3);
 }
@@ -200,6 +211,11 @@ TEST_F(ReconstructCli, BadInputsAreNamed) {
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("--init-opacity"), std::string::npos) << r.output;
   r = RunCommand(Perf("render " + ws_.string() + " --view nosuch.png"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  r = RunCommand(Perf("render " + ws_.string() + " --min-box-opacity 1.5"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("--min-box-opacity"), std::string::npos) << r.output;
+  r = RunCommand(Perf("render " + ws_.string() + " --min-box-opacity abc"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
 }
 

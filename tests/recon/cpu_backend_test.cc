@@ -58,20 +58,23 @@ TEST(CpuBackendTest, LinearizeMatchesTheDenseJacobian) {
   }
 }
 
-// Rays with the photos' alpha: the fourth residual is lambda ((1 - T_box) - alpha) (ray_math.h
-// AuxResidual); Linearize and J^T J p against the dense Jacobian of that residual.
+// Rays with the photos' alpha: the fourth residual is w ((1 - T_box) - alpha) with w =
+// alpha_weight, not lambda (ray_math.h AuxResidual); Linearize and J^T J p against the dense
+// Jacobian of that residual.
 TEST(CpuBackendTest, AlphaResidualMatchesTheDenseJacobian) {
   TinyProblem p(4);
   std::mt19937 rng(3);
   std::uniform_real_distribution<float> u(0.f, 1.f);
   for (int64_t i = 0; i < p.rays.size(); ++i) p.rays.alphas.push_back(i % 3 == 0 ? 0.f : u(rng));
   auto b = Cpu(2);
-  b->SetLevel(p.Level(), kVectors);
+  LevelProblem level = p.Level(0.05f);
+  level.residuals.alpha_weight = 0.3f;
+  b->SetLevel(level, kVectors);
   ASSERT_TRUE(UsesAlpha(b->level()));
   b->Upload(kX, p.x);
   const uint32_t seed = 21;
   const PassStats s = b->Linearize(kX, seed, kG, kD);
-  const DenseJacobian j(p, p.x, seed, 0.1);
+  const DenseJacobian j(p, p.x, seed, 0.3);
   EXPECT_NEAR(s.cost, j.Cost(), 1e-5 * j.Cost());
   std::vector<float> g(p.shape.ParamCount()), d(p.shape.ParamCount()), pv(p.shape.ParamCount()), out(g.size());
   b->Download(kG, g);

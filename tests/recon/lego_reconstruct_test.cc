@@ -59,12 +59,13 @@ TEST_F(LegoTest, HeldOutPsnrAt50Pixels) {
   ASSERT_EQ(r.levels.size(), 2u);
   std::printf("lego 50x50, 8 + 8 GN iterations: held-out PSNR %.2f dB in %.1f s (%s)\n", r.test_psnr,
               r.solve_seconds, r.backend.c_str());
-  // Measured 25.82 dB (fixed white background, projected GN, centred rays, opacity fitted to
-  // the alpha, 6 CG iterations; it was 22.73 dB before those). The bar leaves 1 dB for float
-  // summation order across thread counts and machines, and sits above what any one of those
-  // changes reaches alone. Level 1 must improve on level 0.
+  // Measured 28.36 dB (fixed white background, projected GN, centred rays, opacity fitted to
+  // the alpha with weight 0.3, 6 CG iterations, scored without the paper's render rule; 22.98 dB
+  // before those). CALIBRATION.md's minimal implementation reached 26.6 dB in this setting, and
+  // the bar stays above it. It leaves 1 dB for float summation order across thread counts and
+  // machines. Level 1 must improve on level 0.
   EXPECT_TRUE(r.fixed_background);
-  EXPECT_GT(r.test_psnr, 24.8);
+  EXPECT_GT(r.test_psnr, 27.36);
   EXPECT_GT(r.levels[1].test_psnr, r.levels[0].test_psnr + 0.5);
   EXPECT_GT(r.levels[1].train_psnr, 20.0);
 }
@@ -89,15 +90,15 @@ TEST_F(LegoTest, ExportAndMasksAgainstAlpha) {
               static_cast<long long>(x.mesh_triangles));
   EXPECT_EQ(e.mask_truth, "alpha");
   ASSERT_EQ(e.masks.size(), 100u);
-  // Measured IoU 0.930 (precision 0.940, recall 0.989). The opacity residual fits the box
+  // Measured IoU 0.962 (precision 0.987, recall 0.975). The opacity residual fits the box
   // opacity to the photos' alpha; without it white fog outside the object, invisible against
-  // the white background, filled the masks (IoU 0.40). The bars leave about 0.05 for machines
-  // and thread counts; the masks are rendered at 50x50 and mapped up to 800x800, so their
-  // edges are soft.
-  EXPECT_GT(e.pooled.recall, 0.93);
-  EXPECT_GT(e.pooled.precision, 0.9);
-  EXPECT_GT(e.pooled.iou, 0.87);
-  EXPECT_GT(e.mean.ssim, 0.93);  // measured 0.956
+  // the white background, filled the masks (IoU 0.40); with its weight at 0.1 the IoU was 0.930.
+  // The bars leave about 0.03 for machines and thread counts; the masks are rendered at 50x50
+  // and mapped up to 800x800, so their edges are soft.
+  EXPECT_GT(e.pooled.recall, 0.94);
+  EXPECT_GT(e.pooled.precision, 0.95);
+  EXPECT_GT(e.pooled.iou, 0.93);
+  EXPECT_GT(e.mean.ssim, 0.95);  // measured 0.965
   EXPECT_NEAR(e.mean.psnr, result_->test_psnr, 0.05) << "eval and reconstruct score the same renders";
 }
 

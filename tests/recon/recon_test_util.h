@@ -66,9 +66,10 @@ struct TinyProblem {
     }
   }
 
-  // Pixel jitter on by default so that the tests cover the jittered ray as well.
+  // Pixel jitter on by default so that the tests cover the jittered ray as well. lambda weighs
+  // the fourth residual of either kind (the paper's term, or the alpha one where rays carry alpha).
   LevelProblem Level(float lambda = 0.1f, bool pixel_jitter = true) const {
-    return {shape, geometry, &rays, {lambda, 0.f, true, pixel_jitter}};
+    return {shape, geometry, &rays, {lambda, 0.f, true, pixel_jitter, true, lambda}};
   }
 };
 
