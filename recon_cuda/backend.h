@@ -159,6 +159,12 @@ class Backend {
   virtual void HoldParameters(VecId x, VecId g, VecId free, bool bounds) = 0;
   // y = y .* m (element-wise).
   virtual void Multiply(VecId y, VecId m) = 0;
+  // Until the next Linearize, MultiplyJtJ is needed only on the entries where `free` is 1 and for
+  // p that is 0 where it is 0 (the reduced system of projected Gauss-Newton). A backend may drop
+  // work that then adds exact zeros to those entries (the CPU backend drops recorded samples in
+  // empty space whose cells' densities are all held); the entries where free is 1 stay exactly
+  // as they were. Recomputing backends may ignore it.
+  virtual void RestrictJacobian(VecId /*free*/) {}
   // One Adam step (Kingma & Ba) with per-kind learning rates, t = step number from 1.
   virtual void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) = 0;
 

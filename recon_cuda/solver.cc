@@ -160,6 +160,7 @@ void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const Iter
     } else {
       t0 = WallClock::now();
       b->HoldParameters(kX, kG, kFree, o.hold_at_bounds);
+      b->RestrictJacobian(kFree);
       b->Multiply(kDiag, kFree);  // the reduced system's diagonal (and the floor's reference)
       s.held = b->level().shape.ParamCount() - std::llround(b->Dot(kFree, kFree));
       s.cg_iterations = SolvePcg(o, b, summary);
