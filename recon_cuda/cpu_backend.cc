@@ -253,10 +253,8 @@ class CpuBackend final : public Backend {
       for (int64_t i = b; i < e; ++i) py[i] *= pm[i];
     });
   }
-  // Drops the recorded samples that reach no free parameter with a non-zero value: a sample with
-  // dc = T_i alpha_i = 0 (its 8 cells' densities are all 0) adds 0 to every colour of J^T u, and
-  // when its cells' densities are all held its J p term (ds, dl times p's zero densities) and its
-  // density scatter (masked) vanish too. In carved empty space this is most of the march.
+  // Drops the recorded samples that reach no free parameter with a non-zero value (jacobian.h
+  // SkippableSample). In carved empty space this is most of the march.
   void RestrictJacobian(VecId free) override {
     if (!linearized_ || !recorded_) return;
     const float* pf = vec(free).data();
@@ -269,7 +267,7 @@ class CpuBackend final : public Backend {
           const BoxRay<float> ray = RayOf(b * kBlockRays + static_cast<int64_t>(r), lin_seed_);
           for (uint32_t j = first; j < block.end[r]; ++j) {
             const SampleJ& sj = block.samples[j];
-            if (sj.sp.dc == 0.f && !ReachesFreeDensity(TrilinearWeights(n, ray.GridPoint(sj.t)), pf)) continue;
+            if (SkippableSample(TrilinearWeights(n, ray.GridPoint(sj.t)), sj.sp, pf)) continue;
             block.samples[kept++] = sj;
           }
           first = block.end[r];
@@ -278,12 +276,6 @@ class CpuBackend final : public Backend {
         block.samples.resize(kept);
       });
     });
-  }
-  static bool ReachesFreeDensity(const GridSample<float>& gs, const float* free) {
-    for (int q = 0; q < 8; ++q) {
-      if (free[GridParam(gs.cell[q], 3)] != 0.f) return true;
-    }
-    return false;
   }
 
   void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) override {

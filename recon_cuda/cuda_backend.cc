@@ -112,6 +112,7 @@ class CudaBackend final : public Backend {
     PERF_CHECK(p.shape.num_shells == p.geometry.num_shells() && p.shape.num_shells <= kMaxShells);
     PERF_CHECK(num_vectors >= 0);
     Release();
+    restrict_to_ = nullptr;
     level_ = p;
     const MemoryEstimate e = EstimateMemory(p, num_vectors);
     if (e.Total() > e.available) throw ResourceError(TooLarge(p, num_vectors, e));
@@ -147,6 +148,8 @@ class CudaBackend final : public Backend {
     cuda::HoldParameters(ptr(x), ptr(g), ptr(free), n(), level_.shape.GridParamCount(), level_.fixed_shells, bounds);
   }
   void Multiply(VecId y, VecId m) override { cuda::Multiply(ptr(y), ptr(m), n()); }
+  // Nothing is recorded: JtJpKernel skips the samples on the fly (jacobian.h SkippableSample).
+  void RestrictJacobian(VecId free) override { restrict_to_ = ptr(free); }
   void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) override {
     cuda::AdamStep(ptr(x), ptr(g), ptr(m), ptr(v), AdamCoefficientsAt(s, t), n(), level_.shape.GridParamCount());
   }
@@ -158,13 +161,15 @@ class CudaBackend final : public Backend {
     lin_x_ = x;
     lin_seed_ = seed;
     linearized_ = true;
+    restrict_to_ = nullptr;
     return ToPassStats(r, t0);
   }
 
   PassStats MultiplyJtJ(VecId p, VecId out) override {
     PERF_CHECK_MSG(linearized_, "MultiplyJtJ before Linearize");
     const auto t0 = WallClock::now();
-    const cuda::RayStats r = cuda::MultiplyJtJ(Input(lin_x_, lin_seed_), ptr(p), ptr(out), n(), scratch_->Stats());
+    const cuda::RayStats r =
+        cuda::MultiplyJtJ(Input(lin_x_, lin_seed_), ptr(p), restrict_to_, ptr(out), n(), scratch_->Stats());
     return ToPassStats(r, t0);
   }
 
@@ -274,6 +279,7 @@ class CudaBackend final : public Backend {
   bool linearized_ = false;
   VecId lin_x_ = kNoVector;
   uint32_t lin_seed_ = 0;
+  const float* restrict_to_ = nullptr;  // RestrictJacobian's free vector until the next Linearize
 };
 
 }  // namespace

@@ -66,7 +66,9 @@ size_t StatsTempBytes(int64_t blocks);
 // g, diag: [ParamCount]; diag may be nullptr (Adam).
 RayStats Linearize(const PassInput& in, float* g, float* diag, int64_t params, const StatsScratch& s);
 // out = J^T J p at in.vol (the linearisation point) and in.seed; p, out: [ParamCount].
-RayStats MultiplyJtJ(const PassInput& in, const float* p, float* out, int64_t params, const StatsScratch& s);
+// free: nullptr, or the parameters the product is needed on (backend.h RestrictJacobian).
+RayStats MultiplyJtJ(const PassInput& in, const float* p, const float* free, float* out, int64_t params,
+                     const StatsScratch& s);
 // Rays offset, offset + stride, ... only.
 RayStats Cost(const PassInput& in, int stride, int offset, const StatsScratch& s);
 // colour: [height, width, 3], opacity: [height, width] (device).

@@ -49,18 +49,21 @@ struct AtomicSink {
 
 // The ray's scatter of J^T u (u: the residuals for the gradient, J p for J^T J p) and, with
 // kDiag, its exact share of diag(J^T J), merged cell by cell along the ray (jacobian.h).
+// free: J^T J p restricted to these parameters (SkippableSample), or nullptr.
 template <bool kDiag>
 struct ScatterVisitor {
   static constexpr int K = kDiag ? 9 : 4;  // J^T u values, then the 5 row values of diag
   float u[4];
   AtomicSink g, d;
   CellMerger<float, K> merger;
+  const float* free = nullptr;
 
   __device__ void Shell(int, const CubeCoord<float>&, const TexelSample<float>& ts, const ShellPartials<float>& sp) {
     ScatterJtuShell(ts, sp, u, g);
     if constexpr (kDiag) AddDiagShell(ts, sp, d);
   }
   __device__ void Sample(int, const MarchStep<float>&, const GridSample<float>& gs, const SamplePartials<float>& sp) {
+    if (free && SkippableSample(gs, sp, free)) return;
     float v[K];
     JtuValues(sp, u, v);
     if constexpr (kDiag) RowValues(sp, v + 4);
@@ -74,14 +77,16 @@ struct ScatterVisitor {
   __device__ void Finish() { merger.Finish(*this); }
 };
 
-// u += J_ray p (a gather).
+// u += J_ray p (a gather); free as in ScatterVisitor.
 struct JpVisitor {
   const float* p;
+  const float* free;
   float u[4];
   __device__ void Shell(int, const CubeCoord<float>&, const TexelSample<float>& ts, const ShellPartials<float>& sp) {
     AddJpShell(p, ts, sp, u);
   }
   __device__ void Sample(int, const MarchStep<float>&, const GridSample<float>& gs, const SamplePartials<float>& sp) {
+    if (free && SkippableSample(gs, sp, free)) return;
     AddJpSample(p, gs, sp, u);
   }
 };
@@ -144,8 +149,8 @@ __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, flo
   WriteBlockStats(mine, partials);
 }
 
-__global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const float* p, float* out,
-                                                          RayStats* partials) {
+__global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const float* p, const float* free,
+                                                          float* out, RayStats* partials) {
   const int64_t i = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   RayStats mine;
   if (i < in.rays.count) {
@@ -155,9 +160,9 @@ __global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const fl
     const float zero[3] = {0, 0, 0};
     const RayOutput<float> fwd =
         Forward(in.vol, r.ray, r.jit, zero, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in, i));
-    JpVisitor jp{p, {0, 0, 0, 0}};
+    JpVisitor jp{p, free, {0, 0, 0, 0}};
     Backward(in.vol, r.ray, r.jit, fwd, jp);
-    ScatterVisitor<false> v{{jp.u[0], jp.u[1], jp.u[2], jp.u[3]}, {out}, {nullptr}, {}};
+    ScatterVisitor<false> v{{jp.u[0], jp.u[1], jp.u[2], jp.u[3]}, {out}, {nullptr}, {}, free};
     Backward(in.vol, r.ray, r.jit, fwd, v);
     v.Finish();
     mine.rays = 1;
@@ -249,12 +254,13 @@ RayStats Linearize(const PassInput& in, float* g, float* diag, int64_t params, c
   return Total(s, blocks);
 }
 
-RayStats MultiplyJtJ(const PassInput& in, const float* p, float* out, int64_t params, const StatsScratch& s) {
+RayStats MultiplyJtJ(const PassInput& in, const float* p, const float* free, float* out, int64_t params,
+                     const StatsScratch& s) {
   PERF_CUDA_CHECK(cudaMemset(out, 0, params * sizeof(float)));
   const int64_t blocks = PassBlocks(in.rays.count);
   if (blocks == 0) return {};
   PERF_CHECK(blocks <= s.capacity);
-  JtJpKernel<<<GridFor(blocks), kRayThreads>>>(in, p, out, s.partials);
+  JtJpKernel<<<GridFor(blocks), kRayThreads>>>(in, p, free, out, s.partials);
   PERF_CUDA_CHECK_LAUNCH("JtJpKernel");
   return Total(s, blocks);
 }

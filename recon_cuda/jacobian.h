@@ -28,6 +28,20 @@ PERF_HD_INLINE void AddJpShell(const T* p, const TexelSample<T>& ts, const Shell
   for (int c = 0; c < 3; ++c) u[c] += sp.de * pb[c] + (sp.opaque ? T(0) : sp.da[c] * pb[3]);
 }
 
+// Whether J^T J p may skip a sample once it is needed only on the free parameters, for p that is
+// 0 on the held ones (backend.h RestrictJacobian; free: 1 free, 0 held). With dc = T_i alpha_i = 0
+// (the sample's cells have density 0) it adds exact zeros to every colour of J p and J^T u; with
+// its 8 cells' densities all held, its density terms of J p (ds, dl times p's zeros) vanish and
+// what it scatters to them is masked away.
+template <class T>
+PERF_HD_INLINE bool SkippableSample(const GridSample<T>& gs, const SamplePartials<T>& sp, const float* free) {
+  if (sp.dc != T(0)) return false;
+  for (int q = 0; q < 8; ++q) {
+    if (free[GridParam(gs.cell[q], 3)] != 0.f) return false;
+  }
+  return true;
+}
+
 // The 4 values a sample contributes, times its trilinear weight, to each of its cells in
 // J^T u: colour channel c gets dc u_c, sigma gets sum_c ds_c u_c + dl u_L.
 template <class T>

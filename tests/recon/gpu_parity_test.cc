@@ -142,6 +142,40 @@ TEST_F(GpuParityTest, JtJpAtTheLinearisationPoint) {
   ExpectClose(Get(gpu.get(), kOut), Get(cpu.get(), kOut), "J^T J p");
 }
 
+// RestrictJacobian: the CPU drops recorded samples, the GPU skips them on the fly; on the free
+// entries both equal the unrestricted product (half the box empty, its densities held).
+TEST_F(GpuParityTest, RestrictedJtJpOnTheFreeEntries) {
+  TinyProblem p = Problem(6);
+  const int n = p.shape.n;
+  enum : VecId { kFree = kVectors };
+  std::vector<float> free(p.shape.ParamCount(), 1.f), pv(p.shape.ParamCount());
+  std::mt19937 rng(6);
+  std::normal_distribution<float> normal;
+  for (float& v : pv) v = normal(rng);
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n / 2; ++i) {
+        const int64_t sigma = GridParam(GridCell(n, i, j, k), 3);
+        p.x[sigma] = free[sigma] = pv[sigma] = 0.f;
+      }
+  SetLevel(p.Level(), p.x, kVectors + 1);
+  for (Backend* b : {cpu.get(), gpu.get()}) {
+    b->Upload(kP, pv);
+    b->Upload(kFree, free);
+    b->Linearize(kX, 13, kG, kD);
+  }
+  cpu->MultiplyJtJ(kP, kOut);
+  std::vector<float> want = Get(cpu.get(), kOut);
+  for (Backend* b : {cpu.get(), gpu.get()}) {
+    b->RestrictJacobian(kFree);
+    b->MultiplyJtJ(kP, kOut);
+    b->Multiply(kOut, kFree);
+  }
+  for (size_t i = 0; i < want.size(); ++i) want[i] *= free[i];
+  ExpectClose(Get(gpu.get(), kOut), want, "restricted J^T J p (GPU)");
+  ExpectClose(Get(cpu.get(), kOut), want, "restricted J^T J p (CPU)");
+}
+
 TEST_F(GpuParityTest, CostOnSubsetsAndWithEarlyTermination) {
   TinyProblem p = Problem(4);
   LevelProblem level = p.Level();
