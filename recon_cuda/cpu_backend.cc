@@ -67,7 +67,7 @@ struct Scratch {
   std::vector<SampleRecord<float>> record;  // [max samples a ray]
   std::vector<GridSample<float>> weights;   // [max samples a ray]
   BlockJ row;                               // one ray, when recomputing
-  std::vector<float> acc[2];                // per-thread sums
+  std::vector<float> acc;                   // per-thread sums (Linearize: g and diag interleaved)
   uint64_t pass = 0;                        // the pass acc was zeroed for
 };
 
@@ -300,16 +300,16 @@ class CpuBackend final : public Backend {
     const bool want_diag = diag != kNoVector;
     const bool record = cache_ && want_diag;  // Adam (no diagonal) never multiplies by J^T J
     const uint64_t pass = BeginPass();
-    PassStats stats = ForBlocks(1, pass, [&](int64_t block, int64_t begin, int64_t end, Scratch& s) {
+    PassStats stats = ForBlocks(want_diag ? 2 : 1, pass, [&](int64_t block, int64_t begin, int64_t end, Scratch& s) {
       BlockJ* out = record ? &blocks_[block] : nullptr;
       if (out) ClearBlock(out, end - begin);
       return want_diag ? LinearizeBlock<true>(vol, seed, begin, end, s, out)
                        : LinearizeBlock<false>(vol, seed, begin, end, s, out);
-    }, want_diag ? 2 : 1);
+    });
     if (want_diag) {
       ReduceInterleaved(pass, g, diag);
     } else {
-      ReduceInto(pass, 0, g);
+      ReduceInto(pass, g);
     }
     lin_x_ = x;
     lin_seed_ = seed;
@@ -328,7 +328,7 @@ class CpuBackend final : public Backend {
     const uint64_t pass = BeginPass();
     PassStats stats = ForBlocks(1, pass, [&](int64_t block, int64_t begin, int64_t end, Scratch& s) {
       BlockStats bs;
-      AddSink sink{s.acc[0].data()};
+      AddSink sink{s.acc.data()};
       for (int64_t i = begin; i < end; ++i) {
         const BoxRay<float> ray = RayOf(i, lin_seed_);
         const SampleJ* samples;
@@ -370,7 +370,7 @@ class CpuBackend final : public Backend {
       }
       return bs;
     });
-    ReduceInto(pass, 0, out);
+    ReduceInto(pass, out);
     stats.seconds = SecondsSince(t0);
     return stats;
   }
@@ -453,8 +453,8 @@ class CpuBackend final : public Backend {
       const RayOutput<float> fwd = Forward(vol, ray, jit, &level_.rays->colours[3 * i], weight_,
                                            level_.residuals.stop_transmittance, s.record.data(), AlphaOf(i));
       LinearizeVisitor<kDiag> v{{fwd.residual[0], fwd.residual[1], fwd.residual[2], fwd.residual[3]},
-                                AddSink{s.acc[0].data(), kDiag ? 1 : 0, 0},
-                                AddSink{kDiag ? s.acc[0].data() : nullptr, 1, 4},
+                                AddSink{s.acc.data(), kDiag ? 1 : 0, 0},
+                                AddSink{kDiag ? s.acc.data() : nullptr, 1, 4},
                                 {},
                                 out,
                                 out ? &out->shells[(i - begin) * level_.shape.num_shells] : nullptr};
@@ -531,10 +531,11 @@ class CpuBackend final : public Backend {
 
   uint64_t BeginPass() { return ++pass_; }
 
-  // Runs fn(block, begin, end, scratch) over all blocks of rays; `sums` per-thread buffers are
-  // zeroed on a thread's first block of `pass`. Block statistics are combined in block order.
+  // Runs fn(block, begin, end, scratch) over all blocks of rays; with width > 0 the per-thread
+  // sums (width floats per parameter) are zeroed on a thread's first block of `pass`. Block
+  // statistics are combined in block order.
   template <class Fn>
-  PassStats ForBlocks(int sums, uint64_t pass, Fn&& fn, int width = 1) {
+  PassStats ForBlocks(int width, uint64_t pass, Fn&& fn) {
     const int64_t n = level_.rays->size();
     const int64_t nblocks = (n + kBlockRays - 1) / kBlockRays;
     std::vector<BlockStats> per_block(nblocks);
@@ -546,8 +547,8 @@ class CpuBackend final : public Backend {
           s.record.resize(max_samples_);
           s.weights.resize(max_samples_);
         }
-        if (sums > 0 && s.pass != pass) {
-          for (int a = 0; a < sums; ++a) s.acc[a].assign(params * width, 0.f);
+        if (width > 0 && s.pass != pass) {
+          s.acc.assign(params * width, 0.f);
           s.pass = pass;
         }
         for (int64_t b = r.begin(); b < r.end(); ++b) {
@@ -565,12 +566,18 @@ class CpuBackend final : public Backend {
     return stats;
   }
 
-  // out = sum of the per-thread buffers `which` used in `pass`.
-  void ReduceInto(uint64_t pass, int which, VecId out) {
+  // The per-thread sums of `pass`.
+  std::vector<const float*> SumsOf(uint64_t pass) {
     std::vector<const float*> parts;
     for (Scratch& s : scratch_) {
-      if (s.pass == pass && !s.acc[which].empty()) parts.push_back(s.acc[which].data());
+      if (s.pass == pass && !s.acc.empty()) parts.push_back(s.acc.data());
     }
+    return parts;
+  }
+
+  // out = the sum of the per-thread sums of `pass`.
+  void ReduceInto(uint64_t pass, VecId out) {
+    const std::vector<const float*> parts = SumsOf(pass);
     float* o = vec(out).data();
     ForChunks([&](int64_t b, int64_t e) {
       if (parts.empty()) {
@@ -585,12 +592,9 @@ class CpuBackend final : public Backend {
     });
   }
 
-  // g and diag = the sums of the per-thread interleaved buffers (AddSink) used in `pass`.
+  // g and diag = the sums of the per-thread interleaved sums (AddSink) of `pass`.
   void ReduceInterleaved(uint64_t pass, VecId g, VecId diag) {
-    std::vector<const float*> parts;
-    for (Scratch& s : scratch_) {
-      if (s.pass == pass && !s.acc[0].empty()) parts.push_back(s.acc[0].data());
-    }
+    const std::vector<const float*> parts = SumsOf(pass);
     float* og = vec(g).data();
     float* od = vec(diag).data();
     ForChunks([&](int64_t b, int64_t e) {
