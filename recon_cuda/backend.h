@@ -83,6 +83,9 @@ struct PassStats {
   int64_t rays = 0;       // rays evaluated
   int64_t samples = 0;    // march samples composited
   double seconds = 0;
+  // Linearize only: the cost of the rays of its `subset` alone, summed as Cost(x, seed, subset)
+  // sums it (the line search's starting cost without a pass of its own).
+  double subset_cost = 0;
 };
 
 // -10 log10(mse), 99 dB for a perfect match.
@@ -170,7 +173,7 @@ class Backend {
 
   // Passes. `seed` fixes every ray's jitter; the same seed gives the same rays in every pass.
   // g and diag: outputs, or kNoVector to skip (Adam needs no diagonal).
-  virtual PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag) = 0;
+  virtual PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset = {}) = 0;
   // out = J^T J p, J at the last Linearize's x and seed (x must not have changed since).
   virtual PassStats MultiplyJtJ(VecId p, VecId out) = 0;
   virtual PassStats Cost(VecId x, uint32_t seed, RaySubset subset = {}) = 0;

@@ -294,7 +294,8 @@ class CpuBackend final : public Backend {
     Project(x);
   }
 
-  PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag) override {
+  PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset) override {
+    PERF_CHECK(subset.stride >= 1 && subset.offset >= 0 && subset.offset < subset.stride);
     const auto t0 = WallClock::now();
     const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, vec(x).data());
     const bool want_diag = diag != kNoVector;
@@ -303,8 +304,8 @@ class CpuBackend final : public Backend {
     PassStats stats = ForBlocks(want_diag ? 2 : 1, pass, [&](int64_t block, int64_t begin, int64_t end, Scratch& s) {
       BlockJ* out = record ? &blocks_[block] : nullptr;
       if (out) ClearBlock(out, end - begin);
-      return want_diag ? LinearizeBlock<true>(vol, seed, begin, end, s, out)
-                       : LinearizeBlock<false>(vol, seed, begin, end, s, out);
+      return want_diag ? LinearizeBlock<true>(vol, seed, subset, begin, end, s, out)
+                       : LinearizeBlock<false>(vol, seed, subset, begin, end, s, out);
     });
     if (want_diag) {
       ReduceInterleaved(pass, g, diag);
@@ -422,13 +423,15 @@ class CpuBackend final : public Backend {
 
  private:
   struct BlockStats {
-    double cost = 0, colour_sse = 0;
+    double cost = 0, colour_sse = 0, subset_cost = 0;
     int64_t rays = 0, samples = 0;
-    void Add(const RayOutput<float>& o) {
+    void Add(const RayOutput<float>& o, bool in_subset = false) {
       double sse = 0;
       for (int c = 0; c < 3; ++c) sse += static_cast<double>(o.residual[c]) * o.residual[c];
       colour_sse += sse;
-      cost += 0.5 * (sse + static_cast<double>(o.residual[3]) * o.residual[3]);
+      const double ray_cost = 0.5 * (sse + static_cast<double>(o.residual[3]) * o.residual[3]);
+      cost += ray_cost;
+      if (in_subset) subset_cost += ray_cost;
       rays += 1;
       samples += o.count;
     }
@@ -444,8 +447,8 @@ class CpuBackend final : public Backend {
   }
 
   template <bool kDiag>
-  BlockStats LinearizeBlock(const VolumeView<float>& vol, uint32_t seed, int64_t begin, int64_t end, Scratch& s,
-                            BlockJ* out) const {
+  BlockStats LinearizeBlock(const VolumeView<float>& vol, uint32_t seed, RaySubset subset, int64_t begin,
+                            int64_t end, Scratch& s, BlockJ* out) const {
     BlockStats bs;
     for (int64_t i = begin; i < end; ++i) {
       const BoxRay<float> ray = RayOf(i, seed);
@@ -461,7 +464,7 @@ class CpuBackend final : public Backend {
       Backward(vol, ray, jit, fwd, v, s.record.data());
       v.Finish();
       if (out) out->end[i - begin] = static_cast<uint32_t>(out->samples.size());
-      bs.Add(fwd);
+      bs.Add(fwd, i % subset.stride == subset.offset);
     }
     return bs;
   }
@@ -562,6 +565,7 @@ class CpuBackend final : public Backend {
       stats.colour_sse += b.colour_sse;
       stats.rays += b.rays;
       stats.samples += b.samples;
+      stats.subset_cost += b.subset_cost;
     }
     return stats;
   }

@@ -154,9 +154,11 @@ class CudaBackend final : public Backend {
     cuda::AdamStep(ptr(x), ptr(g), ptr(m), ptr(v), AdamCoefficientsAt(s, t), n(), level_.shape.GridParamCount());
   }
 
-  PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag) override {
+  PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset) override {
+    PERF_CHECK(subset.stride >= 1 && subset.offset >= 0 && subset.offset < subset.stride);
     const auto t0 = WallClock::now();
     const cuda::RayStats r = cuda::Linearize(Input(x, seed), ptr(g), diag == kNoVector ? nullptr : ptr(diag), n(),
+                                             subset.stride, subset.offset,
                                              scratch_->Stats());
     lin_x_ = x;
     lin_seed_ = seed;
@@ -253,6 +255,7 @@ class CudaBackend final : public Backend {
     s.colour_sse = r.colour_sse;
     s.rays = r.rays;
     s.samples = r.samples;
+    s.subset_cost = r.subset_cost;
     s.seconds = SecondsSince(t0);  // the pass has synchronised (its statistics are on the host)
     return s;
   }

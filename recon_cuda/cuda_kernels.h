@@ -47,6 +47,7 @@ struct PassInput {
 struct RayStats {
   double cost = 0, colour_sse = 0;
   long long rays = 0, samples = 0;
+  double subset_cost = 0;  // Linearize: the cost of the rays i with i % stride == offset
 };
 
 // Working memory of the pass statistics: one RayStats per block of rays, the device-side sum
@@ -64,7 +65,8 @@ size_t StatsTempBytes(int64_t blocks);
 
 // Passes (backend.h). Outputs are overwritten (zeroed first), not accumulated.
 // g, diag: [ParamCount]; diag may be nullptr (Adam).
-RayStats Linearize(const PassInput& in, float* g, float* diag, int64_t params, const StatsScratch& s);
+RayStats Linearize(const PassInput& in, float* g, float* diag, int64_t params, int stride, int offset,
+                   const StatsScratch& s);
 // out = J^T J p at in.vol (the linearisation point) and in.seed; p, out: [ParamCount].
 // free: nullptr, or the parameters the product is needed on (backend.h RestrictJacobian).
 RayStats MultiplyJtJ(const PassInput& in, const float* p, const float* free, float* out, int64_t params,

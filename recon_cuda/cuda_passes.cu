@@ -93,7 +93,8 @@ struct JpVisitor {
 
 struct SumStats {
   __device__ __forceinline__ RayStats operator()(const RayStats& a, const RayStats& b) const {
-    return {a.cost + b.cost, a.colour_sse + b.colour_sse, a.rays + b.rays, a.samples + b.samples};
+    return {a.cost + b.cost, a.colour_sse + b.colour_sse, a.rays + b.rays, a.samples + b.samples,
+            a.subset_cost + b.subset_cost};
   }
 };
 
@@ -102,7 +103,7 @@ struct SumStats {
 __device__ __forceinline__ RayStats StatsOf(const RayOutput<float>& o) {
   double sse = 0;
   for (int c = 0; c < 3; ++c) sse += static_cast<double>(o.residual[c]) * o.residual[c];
-  return {0.5 * (sse + static_cast<double>(o.residual[3]) * o.residual[3]), sse, 1, o.count};
+  return {0.5 * (sse + static_cast<double>(o.residual[3]) * o.residual[3]), sse, 1, o.count, 0.0};
 }
 
 __device__ __forceinline__ void WriteBlockStats(const RayStats& mine, RayStats* partials) {
@@ -131,8 +132,8 @@ __device__ __forceinline__ float AlphaOf(const PassInput& in, int64_t i) {
 }
 
 template <bool kDiag>
-__global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, float* g, float* diag,
-                                                               RayStats* partials) {
+__global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, float* g, float* diag, int stride,
+                                                               int offset, RayStats* partials) {
   const int64_t i = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   RayStats mine;
   if (i < in.rays.count) {
@@ -145,6 +146,7 @@ __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, flo
     Backward(in.vol, r.ray, r.jit, fwd, v);
     v.Finish();
     mine = StatsOf(fwd);
+    if (i % stride == offset) mine.subset_cost = mine.cost;
   }
   WriteBlockStats(mine, partials);
 }
@@ -239,16 +241,17 @@ size_t StatsTempBytes(int64_t blocks) {
   return bytes;
 }
 
-RayStats Linearize(const PassInput& in, float* g, float* diag, int64_t params, const StatsScratch& s) {
+RayStats Linearize(const PassInput& in, float* g, float* diag, int64_t params, int stride, int offset,
+                   const StatsScratch& s) {
   PERF_CUDA_CHECK(cudaMemset(g, 0, params * sizeof(float)));
   if (diag) PERF_CUDA_CHECK(cudaMemset(diag, 0, params * sizeof(float)));
   const int64_t blocks = PassBlocks(in.rays.count);
   if (blocks == 0) return {};
   PERF_CHECK(blocks <= s.capacity);
   if (diag) {
-    LinearizeKernel<true><<<GridFor(blocks), kRayThreads>>>(in, g, diag, s.partials);
+    LinearizeKernel<true><<<GridFor(blocks), kRayThreads>>>(in, g, diag, stride, offset, s.partials);
   } else {
-    LinearizeKernel<false><<<GridFor(blocks), kRayThreads>>>(in, g, nullptr, s.partials);
+    LinearizeKernel<false><<<GridFor(blocks), kRayThreads>>>(in, g, nullptr, stride, offset, s.partials);
   }
   PERF_CUDA_CHECK_LAUNCH("LinearizeKernel");
   return Total(s, blocks);

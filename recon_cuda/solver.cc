@@ -135,7 +135,8 @@ void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const Iter
     const uint32_t seed = Hash(o.seed, static_cast<uint32_t>(it), 0u);
 
     auto t0 = WallClock::now();
-    const PassStats lin = b->Linearize(kX, seed, kG, o.type == SolverType::kGaussNewton ? kDiag : kNoVector);
+    const PassStats lin =
+        b->Linearize(kX, seed, kG, o.type == SolverType::kGaussNewton ? kDiag : kNoVector, ls_subset);
     ++summary->linearize_passes;
     s.seconds_linearize = SecondsSince(t0);
     s.cost = lin.cost;
@@ -167,11 +168,7 @@ void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const Iter
       s.seconds_cg = SecondsSince(t0);
 
       t0 = WallClock::now();
-      double cost0 = lin.cost;
-      if (o.line_search_ray_stride > 1) {
-        cost0 = b->Cost(kX, seed, ls_subset).cost;
-        ++summary->cost_passes;
-      }
+      const double cost0 = lin.subset_cost;  // the line search's rays at x, from the linearisation
       // Paper Algorithm 3: shrink while the cost keeps falling; take the last gamma before it rose.
       double gamma = o.initial_step, best_gamma = 0, best = std::numeric_limits<double>::infinity();
       double prev = std::numeric_limits<double>::infinity();

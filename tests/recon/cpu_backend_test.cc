@@ -163,6 +163,26 @@ TEST(CpuBackendTest, CostPassAgreesWithLinearizeAndSubsets) {
   EXPECT_NE(b->Cost(kX, 10).cost, all.cost);  // another seed, other jitter
 }
 
+// Linearize's subset cost is the line search's starting cost: exactly what Cost sums on that
+// subset, with and without the diagonal, over several blocks of rays (2592 rays, 3 blocks).
+TEST(CpuBackendTest, LinearizeSumsItsSubsetAsCostDoes) {
+  const TinyProblem p(5, 4, 2, 6, 24, 18);
+  ASSERT_GT(p.rays.size(), 2048);
+  auto b = Cpu(2);
+  b->SetLevel(p.Level(), kVectors);
+  b->Upload(kX, p.x);
+  for (const VecId diag : {VecId{kD}, kNoVector}) {
+    const PassStats whole = b->Linearize(kX, 9, kG, diag);
+    EXPECT_EQ(whole.subset_cost, whole.cost);
+    for (int off = 0; off < 4; ++off) {
+      const PassStats lin = b->Linearize(kX, 9, kG, diag, RaySubset{4, off});
+      const PassStats cost = b->Cost(kX, 9, RaySubset{4, off});
+      EXPECT_EQ(lin.subset_cost, cost.cost) << "offset " << off;
+      EXPECT_LT(lin.subset_cost, 0.5 * lin.cost);
+    }
+  }
+}
+
 TEST(CpuBackendTest, OneAndTwoThreadsAgree) {
   const TinyProblem p(5, 8, 4, 6, 16, 12);
   std::vector<float> g1(p.shape.ParamCount()), g2(p.shape.ParamCount());

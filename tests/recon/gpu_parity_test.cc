@@ -182,6 +182,8 @@ TEST_F(GpuParityTest, CostOnSubsetsAndWithEarlyTermination) {
   SetLevel(level, p.x);
   for (RaySubset s : {RaySubset{1, 0}, RaySubset{4, 0}, RaySubset{3, 2}}) {
     ExpectStatsClose(gpu->Cost(kX, 9, s), cpu->Cost(kX, 9, s), "cost");
+    const double subset = cpu->Cost(kX, 9, s).cost;
+    EXPECT_NEAR(gpu->Linearize(kX, 9, kG, kD, s).subset_cost, subset, 1e-5 * subset) << "Linearize's subset cost";
   }
   // The default early termination: a ray whose transmittance crosses the threshold within float
   // rounding of it may stop one sample apart on the two backends (a change below 1e-4 of its
