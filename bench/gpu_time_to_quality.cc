@@ -342,6 +342,10 @@ int main(int argc, char** argv) {
   app.add_option("--line-search-stride", s.solver.line_search_ray_stride, "Line search on every k-th ray")
       ->capture_default_str();
   app.add_option("--seed", s.seed, "Random start and jitter")->capture_default_str();
+  app.add_option("--min-box-opacity", s.min_box_opacity,
+                 "Held-out renders: the paper's floater rule (0.7; 0: off, the volume as fitted)")
+      ->check(CLI::Range(0.0f, 1.0f))
+      ->capture_default_str();
   app.add_option("--bandwidth-gbs", bandwidth, "Peak memory bandwidth for the roofline (default: by device name)");
   app.add_option("--out-dir", out_dir, "Where the JSON and SVG go")->capture_default_str();
   app.add_option("--tag", tag, "File name stem (default: gpu_<data folder>_<date>)");
