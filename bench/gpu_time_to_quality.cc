@@ -129,33 +129,31 @@ Data Load(const fs::path& dir) {
 // The view as a float image, downscaled by an integer factor with a box filter (f x f pixel
 // averages; perf reconstruct uses OpenImageIO's filtered resize, so its coarse levels see
 // slightly smoother photos); intrinsics scaled as Downscaled (training_data.h) does.
+// 8-bit pixels [height, width, channels] as floats in [0, 1], f x f pixel averages.
+Image BoxDownscale(const uint8_t* bytes, int width, int height, int channels, int f) {
+  const int w = std::max(1, width / f), h = std::max(1, height / f);
+  Image out(w, h, channels);
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      for (int c = 0; c < channels; ++c) {
+        int sum = 0;
+        for (int dy = 0; dy < f; ++dy)
+          for (int dx = 0; dx < f; ++dx)
+            sum += bytes[(static_cast<int64_t>(y * f + dy) * width + x * f + dx) * channels + c];
+        out.at(x, y, c) = static_cast<float>(sum) / (255.f * f * f);
+      }
+    }
+  }
+  return out;
+}
+
 PosedImage ToPosed(const View& v, int f) {
   PosedImage p;
   p.name = v.name;
   p.camera = v.camera;
-  const int w = std::max(1, v.width / f), h = std::max(1, v.height / f);
-  p.image = Image(w, h, 3);
-  for (int y = 0; y < h; ++y) {
-    for (int x = 0; x < w; ++x) {
-      for (int c = 0; c < 3; ++c) {
-        int sum = 0;
-        for (int dy = 0; dy < f; ++dy)
-          for (int dx = 0; dx < f; ++dx) sum += v.rgb[(static_cast<int64_t>(y * f + dy) * v.width + x * f + dx) * 3 + c];
-        p.image.at(x, y, c) = static_cast<float>(sum) / (255.f * f * f);
-      }
-    }
-  }
-  if (v.alpha) {
-    p.alpha = Image(w, h, 1);
-    for (int y = 0; y < h; ++y) {
-      for (int x = 0; x < w; ++x) {
-        int sum = 0;
-        for (int dy = 0; dy < f; ++dy)
-          for (int dx = 0; dx < f; ++dx) sum += v.alpha[static_cast<int64_t>(y * f + dy) * v.width + x * f + dx];
-        p.alpha.at(x, y, 0) = static_cast<float>(sum) / (255.f * f * f);
-      }
-    }
-  }
+  p.image = BoxDownscale(v.rgb, v.width, v.height, 3, f);
+  if (v.alpha) p.alpha = BoxDownscale(v.alpha, v.width, v.height, 1, f);
+  const int w = p.image.width, h = p.image.height;
   const float sx = static_cast<float>(w) / v.width, sy = static_cast<float>(h) / v.height;
   p.camera.fx *= sx;
   p.camera.cx *= sx;
@@ -214,8 +212,7 @@ Run RunHierarchy(Backend* backend, const Data& d, SolverType type, const Setting
     double excluded = 0;  // held-out evaluation within this level
     const VolumeShape shape{s.start << level, s.start << level, num_shells};
     if (x.empty()) {
-      InitOptions init{s.seed};
-      x = InitialParams(shape, d.geometry, init);
+      x = InitialParams(shape, d.geometry, InitOptions{s.seed});
       if (d.alpha) SetBackgroundShells(shape, d.background, x);
     }
     const int factor = PyramidFactor(train_cameras, d.geometry, shape.n, 1 << (s.levels - 1 - level));

@@ -63,10 +63,11 @@ inline bool UsesAlpha(const LevelProblem& p) {
   return p.residuals.use_alpha && p.rays != nullptr && !p.rays->alphas.empty();
 }
 
-// The weight of the level's fourth residual: alpha_weight for the alpha residual, else lambda.
-inline float OpacityResidualWeight(const LevelProblem& p) {
-  return UsesAlpha(p) ? p.residuals.alpha_weight : p.residuals.lambda;
+// The weight of the fourth residual: alpha_weight for the alpha residual (fits_alpha), else lambda.
+inline float OpacityResidualWeight(const ResidualSettings& r, bool fits_alpha) {
+  return fits_alpha ? r.alpha_weight : r.lambda;
 }
+inline float OpacityResidualWeight(const LevelProblem& p) { return OpacityResidualWeight(p.residuals, UsesAlpha(p)); }
 
 using VecId = int;
 inline constexpr VecId kNoVector = -1;
@@ -75,6 +76,8 @@ inline constexpr VecId kNoVector = -1;
 struct RaySubset {
   int stride = 1;
   int offset = 0;
+  bool Valid() const { return stride >= 1 && offset >= 0 && offset < stride; }
+  bool Contains(int64_t i) const { return i % stride == offset; }
 };
 
 struct PassStats {

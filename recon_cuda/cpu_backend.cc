@@ -295,7 +295,7 @@ class CpuBackend final : public Backend {
   }
 
   PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset) override {
-    PERF_CHECK(subset.stride >= 1 && subset.offset >= 0 && subset.offset < subset.stride);
+    PERF_CHECK(subset.Valid());
     const auto t0 = WallClock::now();
     const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, vec(x).data());
     const bool want_diag = diag != kNoVector;
@@ -379,7 +379,7 @@ class CpuBackend final : public Backend {
   PassStats Cost(VecId x, uint32_t seed, RaySubset subset) override {
     const auto t0 = WallClock::now();
     const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, vec(x).data());
-    PERF_CHECK(subset.stride >= 1 && subset.offset >= 0 && subset.offset < subset.stride);
+    PERF_CHECK(subset.Valid());
     PassStats stats = ForBlocks(0, 0, [&](int64_t, int64_t begin, int64_t end, Scratch&) {
       BlockStats bs;
       int64_t i = begin + ((subset.offset - begin % subset.stride) + subset.stride) % subset.stride;
@@ -464,7 +464,7 @@ class CpuBackend final : public Backend {
       Backward(vol, ray, jit, fwd, v, s.record.data());
       v.Finish();
       if (out) out->end[i - begin] = static_cast<uint32_t>(out->samples.size());
-      bs.Add(fwd, i % subset.stride == subset.offset);
+      bs.Add(fwd, subset.Contains(i));
     }
     return bs;
   }
@@ -604,13 +604,12 @@ class CpuBackend final : public Backend {
     ForChunks([&](int64_t b, int64_t e) {
       for (int64_t i = b; i < e; ++i) {
         const int64_t at = 2 * (i - i % 4) + i % 4;
-        float sg = 0.f, sd = 0.f;
-        for (size_t k = 0; k < parts.size(); ++k) {
-          sg = k == 0 ? parts[k][at] : sg + parts[k][at];
-          sd = k == 0 ? parts[k][at + 4] : sd + parts[k][at + 4];
+        og[i] = parts.empty() ? 0.f : parts[0][at];
+        od[i] = parts.empty() ? 0.f : parts[0][at + 4];
+        for (size_t k = 1; k < parts.size(); ++k) {
+          og[i] += parts[k][at];
+          od[i] += parts[k][at + 4];
         }
-        og[i] = sg;
-        od[i] = sd;
       }
     });
   }

@@ -155,7 +155,7 @@ class CudaBackend final : public Backend {
   }
 
   PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset) override {
-    PERF_CHECK(subset.stride >= 1 && subset.offset >= 0 && subset.offset < subset.stride);
+    PERF_CHECK(subset.Valid());
     const auto t0 = WallClock::now();
     const cuda::RayStats r = cuda::Linearize(Input(x, seed), ptr(g), diag == kNoVector ? nullptr : ptr(diag), n(),
                                              subset.stride, subset.offset,
@@ -176,7 +176,7 @@ class CudaBackend final : public Backend {
   }
 
   PassStats Cost(VecId x, uint32_t seed, RaySubset subset) override {
-    PERF_CHECK(subset.stride >= 1 && subset.offset >= 0 && subset.offset < subset.stride);
+    PERF_CHECK(subset.Valid());
     const auto t0 = WallClock::now();
     return ToPassStats(cuda::Cost(Input(x, seed), subset.stride, subset.offset, scratch_->Stats()), t0);
   }

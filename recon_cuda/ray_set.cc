@@ -14,6 +14,12 @@ int64_t RaySet::Bytes() const {
                               (colours.size() + alphas.size()) * sizeof(float));
 }
 
+bool ImagesHaveAlpha(const std::vector<PosedImage>& images) {
+  return !images.empty() && std::all_of(images.begin(), images.end(), [](const PosedImage& im) {
+    return im.alpha.width == im.image.width && im.alpha.height == im.image.height;
+  });
+}
+
 RaySet MakeRaySet(const std::vector<PosedImage>& images) {
   RaySet rays;
   int64_t total = 0;
@@ -24,9 +30,7 @@ RaySet MakeRaySet(const std::vector<PosedImage>& images) {
     }
     total += static_cast<int64_t>(im.image.width) * im.image.height;
   }
-  const bool alpha = !images.empty() && std::all_of(images.begin(), images.end(), [](const PosedImage& im) {
-    return im.alpha.width == im.image.width && im.alpha.height == im.image.height;
-  });
+  const bool alpha = ImagesHaveAlpha(images);
   rays.pixels.reserve(total);
   rays.colours.reserve(3 * total);
   if (alpha) rays.alphas.reserve(total);

@@ -187,9 +187,8 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   const std::vector<PosedImage>& preview_views = test.empty() ? train : test;
   say(StrCat("backend: ", result.backend, "; ", train.size(), " training and ", test.size(), " held-out views; ",
              levels, " levels from ", o.start_resolution, "^3"));
-  const bool alpha_known = std::all_of(train.begin(), train.end(), [](const PosedImage& im) { return im.alpha.width > 0; });
-  const bool fits_alpha = alpha_known && o.residuals.use_alpha;
-  const float opacity_weight = fits_alpha ? o.residuals.alpha_weight : o.residuals.lambda;
+  const bool fits_alpha = o.residuals.use_alpha && ImagesHaveAlpha(train);  // as every level's RaySet will
+  const float opacity_weight = OpacityResidualWeight(o.residuals, fits_alpha);
   const std::string opacity_residual = opacity_weight <= 0 ? "off" : (fits_alpha ? "alpha" : "auxiliary");
   say(StrCat("opacity residual (weight ", opacity_weight, "): ",
              opacity_residual == "alpha" ? "the box opacity fits the photos' alpha"

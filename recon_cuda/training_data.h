@@ -42,10 +42,13 @@ struct RaySet {
   std::vector<PinholeCamera<float>> cameras;
   std::vector<RayPixel> pixels;
   std::vector<float> colours;  // [size(), 3]
-  std::vector<float> alphas;   // [size()] when every image had an alpha image, else empty
+  std::vector<float> alphas;   // [size()] when ImagesHaveAlpha, else empty
   int64_t size() const { return static_cast<int64_t>(pixels.size()); }
   int64_t Bytes() const;
 };
+
+// Whether every image has an alpha image of its size (then MakeRaySet carries the alphas).
+bool ImagesHaveAlpha(const std::vector<PosedImage>& images);
 
 RaySet MakeRaySet(const std::vector<PosedImage>& images);
 
