@@ -1,18 +1,100 @@
 #include "common/atomic_file.h"
 
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <atomic>
 #include <cerrno>
 #include <cstring>
 #include <fstream>
+#include <mutex>
+#include <map>
 #include <sstream>
+#include <utility>
 
 #include "common/errors.h"
 
 namespace fs = std::filesystem;
 
 namespace perf {
+namespace {
+
+constexpr const char* kDiskHint = "check the free disk space and that the folder is writable";
+
+std::string Errno() { return std::strerror(errno); }
+
+// Closes a file descriptor once, reporting close(2)'s own error (NFS and full disks report
+// lost writes there).
+class Fd {
+ public:
+  explicit Fd(int fd) : fd_(fd) {}
+  ~Fd() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  Fd(const Fd&) = delete;
+  Fd& operator=(const Fd&) = delete;
+  int get() const { return fd_; }
+  bool Close() { return ::close(std::exchange(fd_, -1)) == 0; }
+
+ private:
+  int fd_;
+};
+
+void WriteAll(int fd, std::string_view data, const fs::path& target) {
+  while (!data.empty()) {
+    const ssize_t n = ::write(fd, data.data(), data.size());
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) throw IoError(target.string(), "writing failed: " + (n < 0 ? Errno() : std::string("no progress")), kDiskHint);
+    data.remove_prefix(static_cast<size_t>(n));
+  }
+}
+
+// fsync of a folder, so that a rename in it survives a power cut. Best effort: some file
+// systems refuse to fsync folders.
+void SyncDirectory(const fs::path& dir) {
+  const int fd = ::open(dir.empty() ? "." : dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) return;
+  ::fsync(fd);
+  ::close(fd);
+}
+
+// Moves the finished temporary into place (after the input check), then syncs the folder.
+void Commit(const fs::path& tmp, const fs::path& target, Durability durability) {
+  CheckNotInput(target);
+  std::error_code ec;
+  fs::rename(tmp, target, ec);
+  if (ec) {
+    throw IoError(target.string(), "cannot move the finished file into place: " + ec.message(),
+                  "check that the folder is writable and on one file system");
+  }
+  if (durability == Durability::kDurable) SyncDirectory(target.parent_path());
+}
+
+// Runs `body`; on any exception removes `tmp` and rethrows.
+template <typename Body>
+void RemovingOnFailure(const fs::path& tmp, Body&& body) {
+  try {
+    body();
+  } catch (...) {
+    std::error_code ignored;
+    fs::remove(tmp, ignored);
+    throw;
+  }
+}
+
+// Inputs by device and inode, with the path they were registered under: a registered file that
+// is gone (its inode may be reused by a new file) no longer protects anything.
+struct Protected {
+  std::mutex mutex;
+  std::map<std::pair<dev_t, ino_t>, fs::path> files;
+};
+Protected& ProtectedInputs() {
+  static Protected p;
+  return p;
+}
+
+}  // namespace
 
 fs::path TempPathFor(const fs::path& target) {
   static std::atomic<unsigned> counter{0};
@@ -21,33 +103,43 @@ fs::path TempPathFor(const fs::path& target) {
   return target.parent_path() / (target.stem().string() + suffix);
 }
 
-void WriteAtomically(const fs::path& target, const std::function<void(const fs::path&)>& write) {
+void WriteFileAtomically(const fs::path& target, std::string_view contents, Durability durability) {
+  CheckNotInput(target);
   const fs::path tmp = TempPathFor(target);
-  try {
-    write(tmp);
-    std::error_code ec;
-    fs::rename(tmp, target, ec);
-    if (ec) {
-      throw IoError(target.string(), "cannot move the finished file into place: " + ec.message(),
-                    "check that the folder is writable and on one file system");
+  Fd fd(::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644));
+  if (fd.get() < 0) throw IoError(target.string(), "cannot create the file: " + Errno(), kDiskHint);
+  RemovingOnFailure(tmp, [&] {
+    WriteAll(fd.get(), contents, target);
+    if (durability == Durability::kDurable && ::fsync(fd.get()) != 0) {
+      throw IoError(target.string(), "writing failed (fsync): " + Errno(), kDiskHint);
     }
-  } catch (...) {
-    std::error_code ignored;
-    fs::remove(tmp, ignored);
-    throw;
-  }
+    if (!fd.Close()) throw IoError(target.string(), "writing failed (close): " + Errno(), kDiskHint);
+    Commit(tmp, target, durability);
+  });
 }
 
-void WriteFileAtomically(const fs::path& target, std::string_view contents) {
-  WriteAtomically(target, [&](const fs::path& tmp) {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) {
-      throw IoError(tmp.string(), StrCat("cannot create file: ", std::strerror(errno)),
-                    "check that the folder exists and is writable");
+void WriteStreamAtomically(const fs::path& target, const std::function<void(std::ostream&)>& write,
+                           Durability durability) {
+  std::ostringstream buffer(std::ios::binary);
+  write(buffer);
+  if (!buffer) throw IoError(target.string(), "the data could not be formatted in memory");
+  WriteFileAtomically(target, std::move(buffer).str(), durability);
+}
+
+void WriteAtomically(const fs::path& target, const std::function<void(const fs::path&)>& write,
+                     Durability durability) {
+  CheckNotInput(target);
+  const fs::path tmp = TempPathFor(target);
+  RemovingOnFailure(tmp, [&] {
+    write(tmp);
+    // What the library left must be a file whose data reached the file system.
+    Fd fd(::open(tmp.c_str(), O_RDONLY | O_CLOEXEC));
+    if (fd.get() < 0) throw IoError(target.string(), "the written file is gone: " + Errno(), kDiskHint);
+    if (durability == Durability::kDurable && ::fsync(fd.get()) != 0) {
+      throw IoError(target.string(), "writing failed (fsync): " + Errno(), kDiskHint);
     }
-    out.write(contents.data(), static_cast<std::streamsize>(contents.size()));
-    out.flush();
-    if (!out) throw IoError(tmp.string(), "write failed (disk full?)");
+    fd.Close();
+    Commit(tmp, target, durability);
   });
 }
 
@@ -68,7 +160,32 @@ std::string ReadFileToString(const fs::path& path) {
   if (!in) throw IoError(path.string(), StrCat("cannot open for reading: ", std::strerror(errno)));
   std::ostringstream ss;
   ss << in.rdbuf();
+  if (in.bad()) throw IoError(path.string(), "reading failed");
   return ss.str();
+}
+
+void ProtectInput(const fs::path& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return;
+  Protected& p = ProtectedInputs();
+  std::lock_guard lock(p.mutex);
+  p.files[{st.st_dev, st.st_ino}] = path;
+}
+
+void CheckNotInput(const fs::path& target, std::string_view what) {
+  struct stat st {};
+  if (::stat(target.c_str(), &st) != 0) return;  // nothing there yet: cannot be an input
+  Protected& p = ProtectedInputs();
+  std::lock_guard lock(p.mutex);
+  const auto it = p.files.find({st.st_dev, st.st_ino});
+  struct stat input {};
+  if (it != p.files.end() && ::stat(it->second.c_str(), &input) == 0 && input.st_dev == st.st_dev &&
+      input.st_ino == st.st_ino) {
+    throw InputError(target.string(), "", "",
+                     StrCat(what, " would be written over an input file (a photo or model PERF reads)"),
+                     "inputs are never modified: choose a workspace folder that does not hold the photos, "
+                     "e.g. a new folder beside them");
+  }
 }
 
 }  // namespace perf

@@ -218,6 +218,19 @@ ExportResult RunExport(const ExportOptions& o) {
   if (!(o.mask.render_scale > 0 && o.mask.render_scale <= 8)) {
     throw InputError("command line", "--mask-render-scale", StrCat(o.mask.render_scale), "must be in (0, 8]");
   }
+  if (!(o.mesh_options.iso_opacity > 0 && o.mesh_options.iso_opacity < 1)) {
+    throw InputError("command line", "--iso", StrCat(o.mesh_options.iso_opacity), "must be in (0, 1)",
+                     "an opacity across one voxel; 0.5 is a common choice");
+  }
+  if (!(o.mesh_options.min_component_fraction >= 0 && o.mesh_options.min_component_fraction <= 1)) {
+    throw InputError("command line", "--min-component", StrCat(o.mesh_options.min_component_fraction),
+                     "must be in [0, 1]");
+  }
+  if (!(o.vdb.min_cell_opacity >= 0 && o.vdb.min_cell_opacity < 1)) {
+    throw InputError("command line", "--vdb-min-opacity", StrCat(o.vdb.min_cell_opacity), "must be in [0, 1)");
+  }
+  if (o.orbit.frames < 0) throw InputError("command line", "--orbit-frames", StrCat(o.orbit.frames), "must be >= 0");
+  if (o.renders && o.orbit.frames > 0) CheckOrbitOptions(o.orbit);
   const Scene scene = ReadScene(o.workspace / "scene.json");
   LoadedCheckpoint l = recon::LoadForRendering(o.workspace, o.checkpoint, o.device, o.threads);
   ExportResult r;

@@ -237,23 +237,6 @@ void CheckMesh(const Mesh& mesh) {
   }
 }
 
-// Opens `tmp`, lets `write` fill it, and checks the stream; for WriteAtomically.
-void WriteStreamTo(const fs::path& tmp, const fs::path& target,
-                   const std::function<void(std::ostream&)>& write) {
-  std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-  if (!out) {
-    throw IoError(target.string(), StrCat("cannot create file: ", std::strerror(errno)),
-                  "check that the folder exists and is writable");
-  }
-  write(out);
-  out.flush();
-  if (!out) throw IoError(target.string(), "write failed (disk full?)");
-}
-
-void WriteFile(const fs::path& path, const std::function<void(std::ostream&)>& write) {
-  WriteAtomically(path, [&](const fs::path& tmp) { WriteStreamTo(tmp, path, write); });
-}
-
 }  // namespace
 
 void WritePly(std::ostream& out, const Mesh& mesh) {
@@ -375,13 +358,13 @@ void WriteGlb(std::ostream& out, const Mesh& mesh) {
 }
 
 void WritePly(const fs::path& path, const Mesh& mesh) {
-  WriteFile(path, [&](std::ostream& out) { WritePly(out, mesh); });
+  WriteStreamAtomically(path, [&](std::ostream& out) { WritePly(out, mesh); });
 }
 void WriteObj(const fs::path& path, const Mesh& mesh) {
-  WriteFile(path, [&](std::ostream& out) { WriteObj(out, mesh); });
+  WriteStreamAtomically(path, [&](std::ostream& out) { WriteObj(out, mesh); });
 }
 void WriteGlb(const fs::path& path, const Mesh& mesh) {
-  WriteFile(path, [&](std::ostream& out) { WriteGlb(out, mesh); });
+  WriteStreamAtomically(path, [&](std::ostream& out) { WriteGlb(out, mesh); });
 }
 
 }  // namespace perf::exporter

@@ -18,11 +18,18 @@ double Median(std::vector<double> v) {
 
 }  // namespace
 
-std::vector<OrbitView> OrbitCameras(const Scene& scene, const OrbitOptions& o) {
-  if (o.frames < 1) throw InputError("command line", "--orbit-frames", StrCat(o.frames), "must be at least 1");
+void CheckOrbitOptions(const OrbitOptions& o) {
+  if (o.frames < 1 || o.frames > kMaxOrbitFrames) {
+    throw InputError("command line", "--orbit-frames", StrCat(o.frames), StrCat("must be 1 to ", kMaxOrbitFrames),
+                     "0 on perf export skips the orbit");
+  }
   if (!(std::abs(o.elevation_degrees) < 89)) {
     throw InputError("command line", "--orbit-elevation", StrCat(o.elevation_degrees), "must be between -89 and 89 degrees");
   }
+}
+
+std::vector<OrbitView> OrbitCameras(const Scene& scene, const OrbitOptions& o) {
+  CheckOrbitOptions(o);
   if (scene.images.empty()) throw InputError("scene.json", "images", "[]", "the scene has no images", "re-run perf import");
   std::vector<double> distance, fov_y;
   for (const SceneImage& im : scene.images) {

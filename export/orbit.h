@@ -22,7 +22,14 @@ struct OrbitView {
   int width = 0, height = 0;
 };
 
-// Throws InputError (naming the option) for frames < 1 or a scene without images.
+// One turn at 0.1 degree a frame; more is surely a typo.
+inline constexpr int kMaxOrbitFrames = 3600;
+
+// Throws InputError naming the option for frames outside 1..kMaxOrbitFrames or an elevation
+// outside (-89, 89) degrees.
+void CheckOrbitOptions(const OrbitOptions& options);
+
+// Throws as CheckOrbitOptions, and InputError for a scene without images.
 std::vector<OrbitView> OrbitCameras(const Scene& scene, const OrbitOptions& options);
 
 }  // namespace perf::exporter

@@ -1,5 +1,6 @@
 #include "export/vdb_export.h"
 
+#include <openvdb/io/Stream.h>
 #include <openvdb/openvdb.h>
 
 #include <algorithm>
@@ -133,17 +134,13 @@ VdbStats WriteVdb(const recon::Checkpoint& c, const fs::path& path, const VdbOpt
   file_meta.insertMeta("perf_opacity_length", openvdb::DoubleMetadata(length));
 
   openvdb::GridPtrVec grids{density, colour};
-  WriteAtomically(path, [&](const fs::path& tmp) {
+  // Serialised in memory (the same format io::File writes, without its grid offsets) and written
+  // with checked calls: io::File does not report a full disk.
+  WriteStreamAtomically(path, [&](std::ostream& out) {
     try {
-      openvdb::io::File file(tmp.string());
-      file.write(grids, file_meta);
-      file.close();
+      openvdb::io::Stream(out).write(grids, file_meta);
     } catch (const openvdb::Exception& e) {
-      throw IoError(path.string(), StrCat("cannot write the OpenVDB file: ", e.what()),
-                    "check that the folder exists and is writable");
-    } catch (const std::ios_base::failure& e) {
-      throw IoError(path.string(), StrCat("cannot write the OpenVDB file: ", e.what()),
-                    "check that the folder exists and is writable, and the free disk space");
+      throw IoError(path.string(), StrCat("cannot write the OpenVDB file: ", e.what()));
     }
   });
   std::error_code ec;

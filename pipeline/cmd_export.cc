@@ -61,6 +61,7 @@ void AddExportCommand(CLI::App& app) {
     o.volume = !args->no_volume;
     o.mesh = !args->no_mesh;
     o.renders = !args->no_renders;
+    const auto lock = LockWorkspace(o.workspace, "export");
     StepProgress progress("export", args->quiet);
     o.progress = [&](const std::string& step, int done, int total) { progress.Update(step, done, total); };
     const exporter::ExportResult r = exporter::RunExport(o);
@@ -111,6 +112,7 @@ void AddEvalCommand(CLI::App& app) {
     o.checkpoint = args->checkpoint;
     o.gt_masks = args->gt_masks;
     o.html = !args->no_html;
+    const auto lock = LockWorkspace(o.workspace, "eval");
     StepProgress progress("eval", args->quiet);
     o.progress = [&](const std::string& step, int done, int total) { progress.Update(step, done, total); };
     const exporter::EvalResult r = exporter::RunEval(o);

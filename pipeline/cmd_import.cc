@@ -64,7 +64,7 @@ void AddImportCommand(CLI::App& app) {
   cmd->add_option("--shell-radii", args->shell_radii, "Override the shell radii (increasing, world units)");
   cmd->add_option("--min-track-length", o.bounds.min_track_length,
                   "Sparse points seen by fewer images are ignored when placing the box")->capture_default_str();
-  cmd->add_option("-j,--threads", o.num_threads, "Worker threads (0: all cores)")->capture_default_str();
+  AddThreadsOption(cmd, &o.num_threads, 0);
   cmd->add_flag("--preview-box", args->preview_box,
                 "Also write WORKSPACE/preview/box_*.png: the box drawn over the held-out views");
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
@@ -74,9 +74,20 @@ void AddImportCommand(CLI::App& app) {
     if (!args->box_center.empty()) o.box_center = ToVec(args->box_center);
     if (!args->box_size.empty()) o.box_size = ToVec(args->box_size);
     if (!args->shell_radii.empty()) o.shell_radii = args->shell_radii;
+    const auto lock = LockWorkspace(o.workspace, "import", true);
     Progress progress("import", args->quiet);
     o.progress = [&progress](int done, int total) { progress.Update(done, total, "images"); };
-    const ImportResult r = RunImport(o);
+    ImportResult r;
+    try {
+      r = RunImport(o);
+    } catch (...) {
+      // A failed import into a new folder leaves no half-filled workspace behind.
+      if (lock->created_workspace()) {
+        std::error_code ec;
+        std::filesystem::remove_all(o.workspace, ec);
+      }
+      throw;
+    }
     progress.Finish();
     if (!args->quiet) std::cout << ImportSummary(r) << "workspace: " << o.workspace.string() << "\n";
     if (args->preview_box) {

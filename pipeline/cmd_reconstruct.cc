@@ -97,6 +97,7 @@ void AddReconstructCommand(CLI::App& app) {
     if (args->no_pyramid) o.pyramid = false;
     if (args->no_hold) o.solver.hold_at_bounds = false;
     if (args->no_alpha) o.residuals.use_alpha = false;
+    const auto lock = LockWorkspace(o.workspace, "reconstruct");
     Progress progress("reconstruct", args->quiet);
     o.on_event = [&](const recon::ReconstructOptions::Event& e) { ShowReconstructEvent(progress, e); };
     const recon::ReconstructResult r = recon::Reconstruct(o);
@@ -129,6 +130,9 @@ void AddRenderCommand(CLI::App& app) {
     o.workspace = args->workspace;
     o.checkpoint = args->checkpoint;
     o.out_dir = args->out;
+    // Renders into the workspace write it; into a folder of the user's (-o) they only read it.
+    std::unique_ptr<WorkspaceLock> lock;
+    if (o.out_dir.empty()) lock = LockWorkspace(o.workspace, "render");
     Progress progress("render", args->quiet);
     o.progress = [&](int done, int total) { progress.Update(done, total, "views"); };
     const recon::RenderViewsResult r = recon::RenderViews(o);

@@ -59,6 +59,7 @@ void AddRunCommand(CLI::App& app) {
     }
     o.quiet = args->log_level == "quiet";
     o.stop = &g_stop;
+    const auto lock = LockWorkspace(o.workspace, "run", true);
     std::signal(SIGINT, OnInterrupt);
     const RunResult r = RunPipeline(o);
     std::signal(SIGINT, SIG_DFL);

@@ -32,11 +32,12 @@ void AddSfmCommand(CLI::App& app) {
   cmd->add_option("--max-features", o->max_num_features, "Most SIFT features per image")->capture_default_str();
   cmd->add_option("--min-registered", o->min_registered_images, "Fewer registered images is an error")
       ->capture_default_str();
-  cmd->add_option("-j,--threads", o->num_threads, "Threads for colmap (-1: all cores)")->capture_default_str();
+  AddThreadsOption(cmd, &o->num_threads, -1);
   cmd->add_option("--colmap-binary", o->colmap_binary, "The colmap executable")->capture_default_str();
   cmd->add_flag("--force", o->force, "Run again even if WORKSPACE/sparse/0 exists");
   cmd->add_flag("-q,--quiet", *quiet, "No progress output");
   cmd->callback([o, quiet]() {
+    const auto lock = LockWorkspace(o->workspace, "sfm", true);
     Progress progress("sfm", *quiet);
     o->progress = [&progress](const std::string& line) { progress.Message(line); };
     const SfmResult r = RunSfm(*o);

@@ -2,12 +2,43 @@
 #include "pipeline/commands.h"
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
+#include <thread>
+
+#include "common/errors.h"
 
 namespace perf {
 
+int MaxThreads() { return 8 * static_cast<int>(std::max(1u, std::thread::hardware_concurrency())); }
+
+void AddThreadsOption(CLI::App* cmd, int* threads, int all_cores) {
+  const int most = MaxThreads();
+  cmd->add_option("-j,--threads", *threads, StrCat("Worker threads (", all_cores, ": all cores; at most ", most, ")"))
+      ->check(CLI::Validator(
+          [all_cores, most](std::string& v) -> std::string {
+            int n = 0;
+            if (!CLI::detail::lexical_cast(v, n) || (n != all_cores && (n < 1 || n > most))) {
+              return StrCat("-j ", v, ": must be ", all_cores, " (all cores) or 1 to ", most,
+                            " (8 times this machine's cores)");
+            }
+            return {};
+          },
+          "THREADS"))
+      ->capture_default_str();
+}
+
+std::unique_ptr<WorkspaceLock> LockWorkspace(const std::filesystem::path& workspace, std::string_view command,
+                                             bool create) {
+  std::error_code ec;
+  if (!create && !std::filesystem::is_directory(workspace, ec)) return nullptr;
+  auto lock = std::make_unique<WorkspaceLock>(workspace, command);
+  SweepStaleTemporaries(workspace);
+  return lock;
+}
+
 void AddDeviceOptions(CLI::App* cmd, std::string* device, int* threads) {
   cmd->add_option("--device", *device, "cpu, cuda or auto")->capture_default_str();
-  cmd->add_option("-j,--threads", *threads, "CPU worker threads (0: all cores)")->capture_default_str();
+  AddThreadsOption(cmd, threads, 0);
 }
 
 void AddMinBoxOpacityOption(CLI::App* cmd, float* min_box_opacity, const std::string& use) {

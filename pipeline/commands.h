@@ -2,7 +2,12 @@
 // errors propagate as perf::Error and are turned into messages and exit codes by main().
 #pragma once
 
+#include <filesystem>
+#include <memory>
 #include <string>
+#include <string_view>
+
+#include "common/workspace_lock.h"
 
 namespace CLI {
 class App;
@@ -17,6 +22,16 @@ void AddRenderCommand(CLI::App& app);
 void AddExportCommand(CLI::App& app);
 void AddEvalCommand(CLI::App& app);
 void AddRunCommand(CLI::App& app);
+
+// -j,--threads: `all_cores` (0, or -1 for colmap) or 1 to 8x the cores; anything else is exit 2.
+void AddThreadsOption(CLI::App* cmd, int* threads, int all_cores);
+
+// Takes the workspace's writer lock (common/workspace_lock.h) for the command's life and sweeps
+// what killed runs left behind. Throws InputError when another perf command holds it. Commands
+// that need an existing workspace pass create = false: a missing folder gets no lock (nullptr)
+// and the stage's own message ("no scene.json here").
+std::unique_ptr<WorkspaceLock> LockWorkspace(const std::filesystem::path& workspace, std::string_view command,
+                                             bool create = false);
 
 // --device and -j,--threads: the same for every command that runs a backend.
 void AddDeviceOptions(CLI::App* cmd, std::string* device, int* threads);

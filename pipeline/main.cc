@@ -1,6 +1,7 @@
 // The `perf` command line: one executable, one subcommand per stage (DESIGN.md "Stages").
 #include <CLI/CLI.hpp>
 #include <iostream>
+#include <new>
 
 #include "common/errors.h"
 #include "common/version.h"
@@ -20,7 +21,9 @@ int main(int argc, char** argv) {
   perf::AddExportCommand(app);
   perf::AddEvalCommand(app);
   perf::AddRunCommand(app);
-  // Exit codes: 0 ok, 1 internal error (a bug), 2 bad input, 3 file system, 4 other failure,
+  // Exit codes (README "Safety"): 0 ok, 1 internal error (a bug), 2 bad input (a file, field or
+  // option named in the message; also a workspace another perf command holds), 3 file system
+  // (cannot read or write, disk full), 4 the work itself failed (e.g. the solver diverged),
   // 5 not enough memory, 130 stopped by Ctrl-C (resumable).
   try {
     app.parse(argc, argv);
@@ -42,6 +45,9 @@ int main(int argc, char** argv) {
   } catch (const perf::InternalError& e) {
     std::cerr << "error: " << e.what() << "\nThis is a bug in perf; please report it with the command line.\n";
     return 1;
+  } catch (const std::bad_alloc&) {
+    std::cerr << "error: out of memory; use a smaller --max-size or --downscale, fewer --levels, or fewer threads (-j)\n";
+    return 5;
   } catch (const std::exception& e) {
     std::cerr << "error: " << e.what() << "\n";
     return 4;

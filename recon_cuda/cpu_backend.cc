@@ -11,19 +11,10 @@
 
 #include "common/errors.h"
 #include "common/stopwatch.h"
+#include "common/system_memory.h"
 #include "recon_cuda/jacobian.h"
 
 namespace perf::recon {
-
-int64_t AvailableMemory() {
-  std::ifstream in("/proc/meminfo");
-  std::string key, unit;
-  int64_t value = 0;
-  while (in >> key >> value >> unit) {
-    if (key == "MemAvailable:") return value * 1024;
-  }
-  return 0;
-}
 
 namespace {
 
@@ -655,6 +646,12 @@ class CpuBackend final : public Backend {
 }  // namespace
 
 std::unique_ptr<Backend> MakeCpuBackend(const CpuBackendOptions& options) {
+  // TBB crashes destroying an arena of ~100000 slots (perf render -j 100000 died with SIGSEGV).
+  const int most = 8 * static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  if (options.threads < 0 || options.threads > most) {
+    throw InputError("command line", "-j/--threads", std::to_string(options.threads),
+                     StrCat("must be 0 (all cores) or 1 to ", most, " (8 times this machine's cores)"));
+  }
   return std::make_unique<CpuBackend>(options);
 }
 

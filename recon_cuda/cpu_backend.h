@@ -18,7 +18,7 @@
 namespace perf::recon {
 
 struct CpuBackendOptions {
-  int threads = 0;  // 0: all cores
+  int threads = 0;  // 0: all cores; more than 8x the cores is refused (InputError)
   // Keep the Jacobian partials between passes when they fit (see above).
   bool cache_jacobian = true;
   // Memory the backend may use; 0: what /proc/meminfo calls available, less 10 %.
@@ -26,8 +26,5 @@ struct CpuBackendOptions {
 };
 
 std::unique_ptr<Backend> MakeCpuBackend(const CpuBackendOptions& options);
-
-// Free memory as /proc/meminfo's MemAvailable (bytes), 0 if unknown.
-int64_t AvailableMemory();
 
 }  // namespace perf::recon

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <optional>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
@@ -10,8 +11,10 @@
 #include "common/errors.h"
 #include "common/json_log.h"
 #include "common/stopwatch.h"
+#include "common/system_memory.h"
 #include "recon_cuda/checkpoint.h"
 #include "recon_cuda/evaluation.h"
+#include "recon_cuda/previous_run.h"
 #include "sfm_import/image_io.h"
 
 namespace perf::recon {
@@ -22,14 +25,6 @@ using nlohmann::json;
 
 void Fail(const char* option, const std::string& value, const std::string& problem, const std::string& hint = {}) {
   throw InputError("command line", option, value, problem, hint);
-}
-
-std::string FormatBytes(int64_t b) {
-  std::ostringstream s;
-  s.precision(3);
-  if (b >= (int64_t{1} << 30)) s << static_cast<double>(b) / (1 << 30) << " GiB";
-  else s << static_cast<double>(b) / (1 << 20) << " MiB";
-  return s.str();
 }
 
 json IterationJson(const LevelReport& lr, const SolverOptions& so, const IterationSummary& s, double elapsed) {
@@ -113,6 +108,29 @@ void ReconstructOptions::Check() const {
   solver.Check();
 }
 
+namespace {
+
+// Every level's solver memory is checked before anything is allocated or loaded: a level that
+// cannot fit fails now, not after the levels before it (--start-resolution 1024 wants ~17 GB).
+template <typename ShapeOf>
+void CheckLevelsFit(const Backend& backend, const VolumeGeometry& geometry, const ReconstructOptions& o, int start,
+                    int levels, const ShapeOf& shape_of) {
+  for (int level = start; level < levels; ++level) {
+    const LevelProblem problem{shape_of(level), geometry, nullptr, o.residuals, false};
+    const MemoryEstimate e = backend.EstimateMemory(problem, RequiredVectors(o.solver.type));
+    // The host also holds the parameters and their resampled copy between levels.
+    const int64_t host = 2 * problem.shape.ParamCount() * static_cast<int64_t>(sizeof(float));
+    if (e.available > 0 && e.vectors + e.scratch + host > e.available) {
+      throw ResourceError(StrCat("level ", level + 1, " (", DescribeShape(problem.shape), ") needs at least ",
+                                 FormatByteCount(e.vectors + e.scratch + host), " before its rays, but ",
+                                 FormatByteCount(e.available), " are available; use fewer --levels or a smaller "
+                                 "--start-resolution"));
+    }
+  }
+}
+
+}  // namespace
+
 bool FixedBackground(const std::string& background, const Scene& scene) {
   return background == "auto" ? EveryImageHasAlpha(scene) : background == "fixed";
 }
@@ -144,6 +162,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   };
 
   EnsureWritableDirectory(o.workspace / "recon");
+  RecoverPreviousRun(o.workspace);
   int start = 0;
   std::vector<float> x;
   const int last = LastCheckpointLevel(o.workspace);
@@ -169,6 +188,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     say(StrCat("resuming after level ", last, " (", path.string(), ")"));
   }
 
+  CheckLevelsFit(*backend, geometry, o, start, levels, shape_of);
   say("loading images");
   const std::vector<PosedImage> train = LoadImages(scene, o.workspace, Split::kTrain);
   const std::vector<PosedImage> test = LoadImages(scene, o.workspace, Split::kTest);
@@ -176,10 +196,10 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     throw InputError(scene_path.string(), "images", "0 train images", "nothing to reconstruct from",
                      "re-run perf import with --holdout 0 or more images");
   }
-  if (start == 0) {
-    // A fresh start: checkpoints of an earlier run would be mistaken for this one's.
-    for (int l = 0; l <= std::max(last, 16); ++l) fs::remove(CheckpointPath(o.workspace, l));
-  }
+  // A fresh start: an earlier run's checkpoints would be mistaken for this one's. They stay aside
+  // until this run has a level of its own, and come back if it fails before.
+  std::optional<PreviousRun> previous;
+  if (start == 0) previous.emplace(o.workspace);
   JsonLog log(o.workspace / "recon" / "log.jsonl", start > 0, "reconstruction log");
   if (start > 0) log.Write({{"event", "resume"}, {"level", start}});
   std::vector<PinholeCamera<float>> train_cameras;
@@ -237,10 +257,10 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     const MemoryEstimate mem = backend->SetLevel(problem, RequiredVectors(o.solver.type));
     say(StrCat("level ", level + 1, "/", levels, ": ", DescribeShape(shape), ", ", lr.rays, " rays",
                lr.image_downscale > 1 ? StrCat(" (images / ", lr.image_downscale, ")") : std::string(),
-               "; memory: vectors ", FormatBytes(mem.vectors), ", per-thread sums ", FormatBytes(mem.scratch),
+               "; memory: vectors ", FormatByteCount(mem.vectors), ", per-thread sums ", FormatByteCount(mem.scratch),
                ", Jacobian cache ",
-               backend->CachesJacobian() ? FormatBytes(mem.jacobian_cache) : std::string("off (recomputing)"),
-               mem.available > 0 ? StrCat(" of ", FormatBytes(mem.available), " available") : std::string()));
+               backend->CachesJacobian() ? FormatByteCount(mem.jacobian_cache) : std::string("off (recomputing)"),
+               mem.available > 0 ? StrCat(" of ", FormatByteCount(mem.available), " available") : std::string()));
 
     SolverOptions so = o.solver;
     so.max_iterations = o.iterations;
@@ -300,6 +320,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     }
     WriteCheckpoint(CheckpointPath(o.workspace, level),
                     MakeCheckpoint(scene, level, shape, summary.iterations, o.solver.type, x));
+    if (previous) previous->Discard();
     lr.seconds = SecondsSince(t_level) - eval_seconds;
     elapsed += lr.seconds;
     log.Write({{"event", "level"},

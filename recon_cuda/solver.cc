@@ -49,8 +49,13 @@ void SolverOptions::Check() const {
   if (max_iterations < 0) Fail("max_iterations", std::to_string(max_iterations), "must be >= 0");
   if (max_cg_iterations < 1) Fail("max_cg_iterations", std::to_string(max_cg_iterations), "must be >= 1");
   if (!(cg_exit_ratio > 0)) Fail("cg_exit_ratio", StrCat(cg_exit_ratio), "must be > 0");
-  if (!(damping >= 0)) Fail("damping", StrCat(damping), "must be >= 0");
-  if (!(initial_step > 0)) Fail("initial_step", StrCat(initial_step), "must be > 0");
+  if (!(damping >= 0 && std::isfinite(damping))) Fail("damping (--damping)", StrCat(damping), "must be finite and >= 0");
+  if (!(initial_step > 0 && std::isfinite(initial_step))) {
+    Fail("initial_step (--initial-step)", StrCat(initial_step), "must be finite and > 0");
+  }
+  if (!(diagonal_floor > 0 && std::isfinite(diagonal_floor))) {
+    Fail("diagonal_floor (--diagonal-floor)", StrCat(diagonal_floor), "must be finite and > 0 (default 1e-4)");
+  }
   if (!(step_factor > 0 && step_factor < 1)) Fail("step_factor", StrCat(step_factor), "must be in (0, 1)");
   if (max_line_search_steps < 1) Fail("max_line_search_steps", std::to_string(max_line_search_steps), "must be >= 1");
   if (line_search_ray_stride < 1) Fail("line_search_ray_stride", std::to_string(line_search_ray_stride), "must be >= 1");

@@ -13,6 +13,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstring>
+#include <map>
 #include <fstream>
 #include <istream>
 #include <optional>
@@ -711,11 +712,16 @@ void ValidateReconstruction(const Reconstruction& rec, const std::string& source
     }
   }
 
+  std::map<std::string_view, uint32_t> ids_by_name;  // one pose per photo
   for (const auto& [id, image] : rec.images) {
     PERF_CHECK(image.image_id == id);
     const auto what = [&im = image] {
       return StrCat("image \"", Printable(im.name), "\" (id ", im.image_id, ")");
     };
+    if (const auto [it, fresh] = ids_by_name.emplace(image.name, id); !fresh) {
+      Invalid(source, what() + " name", Printable(image.name),
+              StrCat("image ", it->second, " has the same name: one photo with two poses"), kReexportHint);
+    }
     if (rec.cameras.count(image.camera_id) == 0) {
       Invalid(source, what() + " camera_id", std::to_string(image.camera_id),
               "no camera with this id in the cameras file", kMismatchHint);
@@ -788,13 +794,7 @@ void ReadFile(const fs::path& path,
 
 void WriteFile(const fs::path& path, void (*write)(std::ostream&, const Reconstruction&),
                const Reconstruction& rec) {
-  WriteAtomically(path, [&](const fs::path& tmp) {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) throw IoError(tmp.string(), StrCat("cannot create file: ", std::strerror(errno)));
-    write(out, rec);
-    out.flush();
-    if (!out) throw IoError(tmp.string(), "write failed (disk full?)");
-  });
+  WriteStreamAtomically(path, [&](std::ostream& out) { write(out, rec); });
 }
 
 }  // namespace

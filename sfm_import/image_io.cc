@@ -2,6 +2,7 @@
 
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imagebufalgo.h>
+#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 
 #include <algorithm>
@@ -10,6 +11,7 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
+#include "common/system_memory.h"
 
 namespace fs = std::filesystem;
 namespace OIIO = OIIO_NAMESPACE;
@@ -46,58 +48,102 @@ std::unique_ptr<OIIO::ImageInput> OpenInput(const fs::path& path) {
   return in;
 }
 
+// Sizes read from a header are bounded before anything is allocated: 65536 pixels a side and
+// 2^30 pixels in all (OpenEXR's and libpng's own practical limits are of that order).
+void CheckDimensions(const fs::path& path, const OIIO::ImageSpec& spec) {
+  const std::string size = StrCat(spec.width, "x", spec.height, "x", spec.nchannels);
+  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) {
+    throw InputError(path.string(), "size", size, "image has no pixels", "re-export it");
+  }
+  constexpr int64_t kMaxSide = 65536, kMaxPixels = int64_t{1} << 30;
+  if (spec.width > kMaxSide || spec.height > kMaxSide || int64_t{spec.width} * spec.height > kMaxPixels) {
+    throw InputError(path.string(), "size", size, "larger than PERF reads (65536 pixels a side, 2^30 pixels in all)",
+                     "downscale the photo first (e.g. oiiotool --resize 50%)");
+  }
+}
+
 }  // namespace
 
 ImageInfo ReadImageInfo(const fs::path& path) {
   auto in = OpenInput(path);
   const OIIO::ImageSpec& spec = in->spec();
+  CheckDimensions(path, spec);
   ImageInfo info{spec.width, spec.height, spec.nchannels, FromTypeDesc(spec.format)};
   in->close();
-  if (info.width <= 0 || info.height <= 0 || info.channels <= 0) {
-    throw InputError(path.string(), "size", StrCat(info.width, "x", info.height, "x", info.channels),
-                     "image has no pixels");
-  }
   return info;
+}
+
+int64_t DecodedBytes(const ImageInfo& info) {
+  return int64_t{info.width} * info.height * std::min(info.channels, 4) * static_cast<int64_t>(sizeof(float));
 }
 
 Image ReadImage(const fs::path& path, ImageInfo* info) {
   auto in = OpenInput(path);
   const OIIO::ImageSpec spec = in->spec();
-  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) {
-    throw InputError(path.string(), "size", StrCat(spec.width, "x", spec.height), "image has no pixels");
-  }
+  CheckDimensions(path, spec);
   // Grey, grey+alpha, RGB and RGBA are kept; extra channels beyond 4 are dropped.
   const int channels = std::min(spec.nchannels, 4);
+  const ImageInfo read{spec.width, spec.height, channels, FromTypeDesc(spec.format)};
+  CheckFitsInMemory(DecodedBytes(read), StrCat("decoding ", path.string(), " (", spec.width, "x", spec.height, ")"),
+                    "downscale the photos first, or use fewer threads (-j)");
   Image image(spec.width, spec.height, channels);
   // Reads the first subimage/miplevel as stored: no EXIF reorientation (COLMAP does none).
-  if (!in->read_image(0, 0, 0, channels, OIIO::TypeDesc::FLOAT, image.pixels.data())) {
-    throw InputError(path.string(), "pixels", "", "cannot decode the image (" + in->geterror() + ")",
+  // Decoders report truncated or corrupt data as errors or warnings; either refuses the image
+  // (a truncated JPEG otherwise decodes as grey without a word).
+  const bool ok = in->read_image(0, 0, 0, channels, OIIO::TypeDesc::FLOAT, image.pixels.data());
+  const std::string problem = in->has_error() ? in->geterror() : std::string();
+  in->close();
+  if (!ok || !problem.empty()) {
+    throw InputError(path.string(), "pixels", "", "cannot decode the image" + (problem.empty() ? "" : " (" + problem + ")"),
                      "the file may be truncated or corrupt; re-export it");
   }
-  in->close();
-  if (info) *info = ImageInfo{spec.width, spec.height, channels, FromTypeDesc(spec.format)};
+  if (info) *info = read;
   return image;
 }
 
+namespace {
+
+// Encodes `image` as the format of `path`'s extension, through `out`; throws IoError naming
+// `path`. `file` is where the encoder writes (a temporary, or `path` itself with an ioproxy).
+void Encode(OIIO::ImageOutput& out, const fs::path& path, const std::string& file, const Image& image,
+            PixelFormat format) {
+  OIIO::ImageSpec spec(image.width, image.height, image.channels, ToTypeDesc(format));
+  if (image.channels == 4) spec.alpha_channel = 3;
+  if (image.channels == 2) spec.alpha_channel = 1;
+  if (!out.open(file, spec)) {
+    throw IoError(path.string(), "cannot create the image file (" + out.geterror() + ")",
+                  "check that the folder is writable");
+  }
+  // OIIO clamps and quantises float to integer formats on write.
+  const bool ok = out.write_image(OIIO::TypeDesc::FLOAT, image.pixels.data());
+  const bool closed = out.close();
+  if (!ok || !closed) {
+    throw IoError(path.string(), "writing the image failed (" + out.geterror() + ")",
+                  "check the free disk space and that the folder is writable");
+  }
+}
+
+}  // namespace
+
 void WriteImage(const fs::path& path, const Image& image, PixelFormat format) {
   PERF_CHECK(!image.empty());
-  WriteAtomically(path, [&](const fs::path& tmp) {
-    auto out = OIIO::ImageOutput::create(tmp.string());
-    if (!out) {
-      throw IoError(path.string(), "no image writer for this extension (" + OIIO::geterror() + ")");
-    }
-    OIIO::ImageSpec spec(image.width, image.height, image.channels, ToTypeDesc(format));
-    if (image.channels == 4) spec.alpha_channel = 3;
-    if (image.channels == 2) spec.alpha_channel = 1;
-    if (!out->open(tmp.string(), spec)) {
-      throw IoError(path.string(), "cannot create the image file (" + out->geterror() + ")",
-                    "check that the folder is writable");
-    }
-    // OIIO clamps and quantises float to integer formats on write.
-    if (!out->write_image(OIIO::TypeDesc::FLOAT, image.pixels.data()) || !out->close()) {
-      throw IoError(path.string(), "writing the image failed (" + out->geterror() + ")", "disk full?");
-    }
-  });
+  auto out = OIIO::ImageOutput::create(path.string());
+  if (!out) throw IoError(path.string(), "no image writer for this extension (" + OIIO::geterror() + ")");
+  // The formats PERF writes (PNG, JPEG, EXR) are encoded in memory, then written with checked
+  // calls: OIIO's file writers do not all report a full disk. (OIIO 2.4's TIFF writer claims an
+  // ioproxy but fails on it, so other formats go through a temporary file.)
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  const bool in_memory = ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".exr";
+  if (in_memory && out->supports("ioproxy")) {
+    std::vector<unsigned char> bytes;
+    OIIO::Filesystem::IOVecOutput proxy(bytes);
+    out->set_ioproxy(&proxy);
+    Encode(*out, path, path.string(), image, format);
+    WriteFileAtomically(path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+    return;
+  }
+  WriteAtomically(path, [&](const fs::path& tmp) { Encode(*out, path, tmp.string(), image, format); });
 }
 
 Image ResizeImage(const Image& image, int width, int height) {

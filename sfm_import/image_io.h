@@ -4,6 +4,7 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
 #include <filesystem>
 
 #include "sfm_import/image.h"
@@ -15,11 +16,17 @@ struct ImageInfo {
   PixelFormat format = PixelFormat::kUInt8;
 };
 
-// Reads only the header. Throws InputError if the file is not a readable image.
+// Reads only the header. Throws InputError if the file is not a readable image, or larger
+// than PERF reads (65536 pixels a side, 2^30 pixels).
 ImageInfo ReadImageInfo(const std::filesystem::path& path);
 
+// Bytes ReadImage allocates for an image of this header.
+int64_t DecodedBytes(const ImageInfo& info);
+
 // Reads the whole image as float. `info` (optional) receives the stored format. Images with
-// alpha come back with associated (premultiplied) colour, OpenImageIO's default.
+// alpha come back with associated (premultiplied) colour, OpenImageIO's default. Throws
+// InputError on truncated or corrupt data (decoder warnings included), ResourceError when the
+// decoded image would not fit in the available memory.
 Image ReadImage(const std::filesystem::path& path, ImageInfo* info = nullptr);
 
 // Writes atomically; the file format follows the extension. Values are clamped to [0, 1] for

@@ -1,7 +1,9 @@
 #include "sfm_import/importer.h"
 
 #include <tbb/global_control.h>
+#include <tbb/info.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -14,6 +16,7 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
+#include "common/system_memory.h"
 #include "sfm_import/camera_models.h"
 #include "sfm_import/colmap_model.h"
 #include "sfm_import/image_io.h"
@@ -49,7 +52,8 @@ std::set<std::string> ListImages(const fs::path& dir) {
   std::set<std::string> names;
   for (const auto& e : fs::recursive_directory_iterator(dir, fs::directory_options::skip_permission_denied)) {
     if (e.is_regular_file() && HasImageExtension(e.path())) {
-      names.insert(fs::relative(e.path(), dir).generic_string());
+      // Lexically: fs::relative would resolve a symlinked photo to its target's path.
+      names.insert(e.path().lexically_relative(dir).generic_string());
     }
   }
   return names;
@@ -73,22 +77,72 @@ void ProcessImage(const ImageJob& job, const ImportOptions& o, const fs::path& w
   Image rgb = ToRgb(img, {o.background.x(), o.background.y(), o.background.z()},
                     job.alpha_rel.empty() ? nullptr : &alpha);
   const PixelFormat out = OutputFormat(info.format);
-  fs::create_directories((ws / job.out_rel).parent_path());
+  EnsureWritableDirectory((ws / job.out_rel).parent_path());
   WriteImage(ws / job.out_rel, rgb, out);
   if (!alpha.empty()) {
-    fs::create_directories((ws / job.alpha_rel).parent_path());
+    EnsureWritableDirectory((ws / job.alpha_rel).parent_path());
     WriteImage(ws / job.alpha_rel, alpha, out == PixelFormat::kUInt8 ? PixelFormat::kUInt8 : PixelFormat::kUInt16);
   }
 }
 
-void RunJobs(const std::vector<ImageJob>& jobs, const ImportOptions& o) {
+// Decoding, undistorting and resizing hold about three float copies of a photo at once; the
+// number of photos in flight is bounded so that they fit in the available memory.
+int Concurrency(const ImportOptions& o, int64_t largest_decode) {
+  const int threads = o.num_threads > 0 ? o.num_threads : tbb::info::default_concurrency();
+  const int64_t per_job = 3 * largest_decode;
+  const int64_t available = AvailableMemory();
+  if (available <= 0 || per_job <= 0) return threads;
+  if (per_job > available) {
+    CheckFitsInMemory(per_job, "importing one photo", "downscale the photos first (e.g. with oiiotool --resize)");
+  }
+  return static_cast<int>(std::clamp<int64_t>(available / per_job, 1, threads));
+}
+
+void RunJobs(const std::vector<ImageJob>& jobs, const ImportOptions& o, int64_t largest_decode) {
+  // Nothing may land on an input, whatever the folders' names: checked before the first write.
+  for (const ImageJob& job : jobs) {
+    CheckNotInput(o.workspace / job.out_rel, "the workspace image of " + job.source.string());
+    if (!job.alpha_rel.empty()) CheckNotInput(o.workspace / job.alpha_rel, "the alpha image of " + job.source.string());
+  }
+  CheckNotInput(o.workspace / "scene.json", "scene.json");
   std::atomic<int> done{0};
   const int total = static_cast<int>(jobs.size());
-  tbb::parallel_for(0, total, [&](int i) {
-    ProcessImage(jobs[i], o, o.workspace);
-    const int d = ++done;
-    if (o.progress) o.progress(d, total);
+  tbb::task_arena arena(Concurrency(o, largest_decode));
+  arena.execute([&] {
+    tbb::parallel_for(0, total, [&](int i) {
+      ProcessImage(jobs[i], o, o.workspace);
+      const int d = ++done;
+      if (o.progress) o.progress(d, total);
+    });
   });
+}
+
+// Workspace-relative output path for an input name: sanitised into `folder`, with `ext`, and
+// made unique ("x.jpg" and "x.png" both become x.png: the second is x-2.png).
+std::string ClaimOutputName(const std::string& folder, const std::string& name, const std::string& ext,
+                            std::set<std::string>* taken) {
+  const std::string base = ReplaceExtension(WorkspaceSafeName(name), "");
+  std::string rel = folder + "/" + base + ext;
+  for (int k = 2; !taken->insert(rel).second; ++k) rel = StrCat(folder, "/", base, "-", k, ext);
+  return rel;
+}
+
+// Photos of one size each: the odd one out is named (the size most photos share is the good one).
+void CheckOneSize(const std::vector<std::pair<fs::path, ImageInfo>>& infos, const std::string& group,
+                  const std::string& hint) {
+  std::map<std::pair<int, int>, int> count;
+  for (const auto& [path, info] : infos) ++count[{info.width, info.height}];
+  if (count.size() <= 1) return;
+  const auto common = std::max_element(count.begin(), count.end(), [](const auto& a, const auto& b) {
+                        return a.second < b.second;
+                      })->first;
+  for (const auto& [path, info] : infos) {
+    if (std::pair{info.width, info.height} == common) continue;
+    throw InputError(path.string(), "size", StrCat(info.width, "x", info.height),
+                     StrCat("differs from the other ", count[common], " photos of ", group, " (", common.first, "x",
+                            common.second, ")"),
+                     hint);
+  }
 }
 
 // Every N-th image in the given order is held out: COLMAP images sorted by name (the mip-NeRF
@@ -148,6 +202,8 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
   const fs::path model_dir = o.colmap_dir;
   const colmap::ModelFormat format = colmap::DetectModelFormat(model_dir);
   colmap::Reconstruction rec = colmap::ReadReconstruction(model_dir);
+  std::error_code ec;
+  for (fs::directory_iterator it(model_dir, ec), end; !ec && it != end; it.increment(ec)) ProtectInput(it->path());
 
   fs::path images_dir = o.images_dir;
   if (images_dir.empty()) images_dir = model_dir.parent_path().parent_path() / "images";
@@ -191,23 +247,24 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
 
   // Check each image's size against its camera: equal, or an exact integer downscale
   // (mip-NeRF 360's images_4/), which scales the intrinsics.
+  std::map<uint32_t, std::vector<std::pair<fs::path, ImageInfo>>> by_camera;
   std::map<uint32_t, std::pair<int, int>> disk_size;  // camera -> size of its images on disk
-  std::map<uint32_t, std::string> size_witness;
   PixelFormat source_format = PixelFormat::kUInt8;
+  int64_t largest_decode = 0;
   for (const auto& [id, im] : rec.images) {
     if (!on_disk.count(im.name)) continue;
     const fs::path p = images_dir / im.name;
+    ProtectInput(p);
     const ImageInfo info = ReadImageInfo(p);
     source_format = info.format;
-    const colmap::Camera& cam = rec.cameras.at(im.camera_id);
-    const auto [it, inserted] = disk_size.emplace(im.camera_id, std::make_pair(info.width, info.height));
-    if (!inserted && it->second != std::make_pair(info.width, info.height)) {
-      throw InputError(p.string(), "size", StrCat(info.width, "x", info.height),
-                       StrCat("differs from ", size_witness[im.camera_id], " (", it->second.first, "x",
-                              it->second.second, ") which shares camera ", im.camera_id),
-                       "images of one camera must all have one size");
-    }
-    size_witness.emplace(im.camera_id, im.name);
+    largest_decode = std::max(largest_decode, DecodedBytes(info));
+    by_camera[im.camera_id].emplace_back(p, info);
+    disk_size.emplace(im.camera_id, std::make_pair(info.width, info.height));
+  }
+  for (const auto& [cam_id, infos] : by_camera) {
+    CheckOneSize(infos, StrCat("camera ", cam_id), "images of one camera must all have one size");
+    const colmap::Camera& cam = rec.cameras.at(cam_id);
+    const auto& [p, info] = infos.front();
     if (static_cast<uint64_t>(info.width) == cam.width && static_cast<uint64_t>(info.height) == cam.height) continue;
     bool integer_downscale = false;
     for (int k = 2; k <= 64 && !integer_downscale; ++k) {
@@ -216,7 +273,7 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
     }
     if (!integer_downscale) {
       throw InputError(p.string(), "size", StrCat(info.width, "x", info.height),
-                       StrCat("camera ", im.camera_id, " in the model is ", cam.width, "x", cam.height,
+                       StrCat("camera ", cam_id, " in the model is ", cam.width, "x", cam.height,
                               ", and this is neither that size nor an integer downscale of it"),
                        "pass the images the model was made from (or a folder like images_4/ that is an exact downscale)");
     }
@@ -261,6 +318,7 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
 
   const std::string ext = OutputExtension(source_format);
   std::vector<ImageJob> jobs;
+  std::set<std::string> taken;
   for (const auto& [id, im] : rec.images) {
     if (!on_disk.count(im.name)) continue;
     const Eigen::Quaterniond q(im.qvec[0], im.qvec[1], im.qvec[2], im.qvec[3]);
@@ -268,7 +326,7 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
     const Eigen::Vector3d t_cw(im.tvec[0], im.tvec[1], im.tvec[2]);
     SceneImage si;
     si.name = im.name;
-    si.path = "images/" + ReplaceExtension(im.name, ext);
+    si.path = ClaimOutputName("images", im.name, ext, &taken);
     si.source_path = fs::absolute(images_dir / im.name).lexically_normal().string();
     si.camera_id = static_cast<int>(im.camera_id);
     si.world_from_cam.leftCols<3>() = r_cw.transpose();
@@ -290,7 +348,7 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
   }
   PlaceBoundsAndShells(o, points, model_dir.string(), r);
   EnsureWritableDirectory(o.workspace / "images");
-  RunJobs(jobs, o);
+  RunJobs(jobs, o, largest_decode);
 }
 
 // ---- NeRF json ----
@@ -299,23 +357,22 @@ void ImportNerf(const ImportOptions& o, ImportResult* r) {
   const NerfTransforms t = ReadNerfTransforms(o.nerf_json);
   const std::string source = o.nerf_json.string();
   // All frames share one camera; check the sizes agree.
-  std::optional<ImageInfo> first;
-  std::string first_name;
+  std::vector<std::pair<fs::path, ImageInfo>> infos;
   PixelFormat fmt = PixelFormat::kUInt8;
   bool any_alpha = false;
-  for (size_t i = 0; i < t.frames.size(); ++i) {
-    const ImageInfo info = ReadImageInfo(t.frames[i].image_path);
+  int64_t largest_decode = 0;
+  ProtectInput(o.nerf_json);
+  for (const auto& frame : t.frames) {
+    ProtectInput(frame.image_path);
+    const ImageInfo info = ReadImageInfo(frame.image_path);
     fmt = info.format;
     any_alpha = any_alpha || info.channels == 2 || info.channels == 4;
-    if (!first) {
-      first = info;
-      first_name = t.frames[i].image_path.string();
-    } else if (info.width != first->width || info.height != first->height) {
-      throw InputError(t.frames[i].image_path.string(), "size", StrCat(info.width, "x", info.height),
-                       StrCat("differs from ", first_name, " (", first->width, "x", first->height, ")"),
-                       "all frames of a transforms.json must have one size");
-    }
+    largest_decode = std::max(largest_decode, DecodedBytes(info));
+    infos.emplace_back(frame.image_path, info);
   }
+  PERF_CHECK(!infos.empty());  // ReadNerfTransforms refuses a json without frames
+  CheckOneSize(infos, source, "all frames of a transforms.json must have one size");
+  const ImageInfo* first = &infos.front().second;
   SceneCamera sc;
   sc.id = 1;
   double fx, fy, cx, cy;
@@ -332,15 +389,18 @@ void ImportNerf(const ImportOptions& o, ImportResult* r) {
   const fs::path base = o.nerf_json.parent_path();
   const std::string ext = OutputExtension(fmt);
   std::vector<ImageJob> jobs;
-  std::set<std::string> names;
+  std::set<std::string> names, taken, taken_alpha;
   for (const auto& f : t.frames) {
     SceneImage si;
-    si.name = fs::relative(f.image_path, base).generic_string();
+    // Lexically: fs::relative would resolve symlinks. A path outside the json's folder keeps
+    // its ".." here; WorkspaceSafeName keeps the workspace file inside the workspace.
+    si.name = f.image_path.lexically_normal().lexically_relative(base.lexically_normal()).generic_string();
+    if (si.name.empty()) si.name = f.image_path.filename().generic_string();
     if (!names.insert(si.name).second) {
       throw InputError(source, "frames.file_path", f.file_path, "listed twice");
     }
-    si.path = "images/" + ReplaceExtension(si.name, ext);
-    if (any_alpha) si.alpha_path = "alpha/" + ReplaceExtension(si.name, ".png");
+    si.path = ClaimOutputName("images", si.name, ext, &taken);
+    if (any_alpha) si.alpha_path = ClaimOutputName("alpha", si.name, ".png", &taken_alpha);
     si.source_path = fs::absolute(f.image_path).lexically_normal().string();
     si.camera_id = sc.id;
     si.world_from_cam = f.world_from_cam;
@@ -354,7 +414,7 @@ void ImportNerf(const ImportOptions& o, ImportResult* r) {
   PlaceBoundsAndShells(no, {}, source, r);
   EnsureWritableDirectory(o.workspace / "images");
   if (any_alpha) EnsureWritableDirectory(o.workspace / "alpha");
-  RunJobs(jobs, o);
+  RunJobs(jobs, o, largest_decode);
 }
 
 }  // namespace
@@ -382,10 +442,16 @@ void ImportOptions::Check() const {
   if ((background.array() < 0).any() || (background.array() > 1).any()) {
     throw InputError(kCommandLine, "--background", "", "colour components must be in [0, 1]");
   }
-  if (box_size && ((box_size->array() <= 0).any() || !box_size->allFinite())) {
-    throw InputError(kCommandLine, "--box-size", "", "box sides must be positive");
+  // World units must survive the reconstruction's 32-bit floats with room for its arithmetic.
+  constexpr double kMinLength = 1e-6, kMaxLength = 1e6;
+  const auto list = [](const Eigen::Vector3d& v) { return StrCat(v.x(), ",", v.y(), ",", v.z()); };
+  if (box_size && !((box_size->array() >= kMinLength).all() && (box_size->array() <= kMaxLength).all())) {
+    throw InputError(kCommandLine, "--box-size", list(*box_size), "box sides must be between 1e-6 and 1e6 world units",
+                     "give the sides in the model's units (import without --box-size prints the automatic box)");
   }
-  if (box_center && !box_center->allFinite()) throw InputError(kCommandLine, "--box-center", "", "not finite");
+  if (box_center && !(box_center->array().abs() <= kMaxLength).all()) {
+    throw InputError(kCommandLine, "--box-center", list(*box_center), "must be finite and within 1e6 world units of the origin");
+  }
   if (shell_radii) {
     double prev = 0;
     for (double v : *shell_radii) {
@@ -395,9 +461,14 @@ void ImportOptions::Check() const {
       prev = v;
     }
     if (shell_radii->empty()) throw InputError(kCommandLine, "--shell-radii", "", "empty");
+    if (shell_radii->size() > kMaxSceneShells || shell_radii->back() > 1e9) {
+      throw InputError(kCommandLine, "--shell-radii", StrCat(shell_radii->size(), " radii up to ", shell_radii->back()),
+                       StrCat("at most ", kMaxSceneShells, " radii, each at most 1e9 world units"));
+    }
   }
-  if (bounds.num_shells < 1) {
-    throw InputError(kCommandLine, "--shells", std::to_string(bounds.num_shells), "must be >= 1");
+  if (bounds.num_shells < 1 || bounds.num_shells > kMaxSceneShells) {
+    throw InputError(kCommandLine, "--shells", std::to_string(bounds.num_shells),
+                     StrCat("must be 1 to ", kMaxSceneShells, " (the reconstruction's limit)"));
   }
 }
 

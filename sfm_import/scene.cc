@@ -154,7 +154,7 @@ Scene SceneFromJson(const std::string& text, const std::string& name) {
   json j;
   try {
     j = json::parse(text);
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {  // parse_error, and out_of_range for numbers like 1e400
     throw InputError(name, "", "", StrCat("not valid JSON (", e.what(), ")"),
                      "the file is corrupt; re-run `perf import`");
   }
@@ -191,7 +191,9 @@ Scene SceneFromJson(const std::string& text, const std::string& name) {
   const json& shells = r.Get(j, "shells", "");
   s.shells.center = r.Vec3(r.Get(shells, "center", "shells"), "shells.center");
   const json& radii = r.Get(shells, "radii", "shells");
-  if (!radii.is_array() || radii.empty()) r.Fail("shells.radii", radii, "expected a non-empty array");
+  if (!radii.is_array() || radii.empty() || radii.size() > kMaxSceneShells) {
+    r.Fail("shells.radii", radii, StrCat("expected an array of 1 to ", kMaxSceneShells, " radii"));
+  }
   for (size_t i = 0; i < radii.size(); ++i) {
     const double v = r.Number(radii[i], StrCat("shells.radii[", i, "]"));
     if (v <= 0 || (!s.shells.radii.empty() && v <= s.shells.radii.back())) {
@@ -240,6 +242,11 @@ Scene SceneFromJson(const std::string& text, const std::string& name) {
     im.path = r.String(r.Get(e, "path", p), p + ".path");
     im.source_path = e.value("source_path", "");
     im.alpha_path = e.value("alpha_path", "");
+    for (const auto& [field, value] : {std::pair{".path", &im.path}, std::pair{".alpha_path", &im.alpha_path}}) {
+      if (!value->empty() && !IsInsideWorkspace(*value)) {
+        r.Fail(p + field, json(*value), "must be a relative path inside the workspace (no \"..\", no leading /)");
+      }
+    }
     im.camera_id = r.Int(r.Get(e, "camera_id", p), p + ".camera_id");
     bool found = false;
     for (const auto& c : s.cameras) found = found || c.id == im.camera_id;
@@ -257,7 +264,38 @@ Scene SceneFromJson(const std::string& text, const std::string& name) {
   return s;
 }
 
-void WriteScene(const fs::path& path, const Scene& scene) { WriteFileAtomically(path, SceneToJson(scene)); }
+void WriteScene(const fs::path& path, const Scene& scene) {
+  WriteFileAtomically(path, SceneToJson(scene), Durability::kDurable);
+}
+
+std::string WorkspaceSafeName(std::string_view name) {
+  std::string out;
+  std::string part;
+  const auto flush = [&] {
+    if (part.empty() || part == ".") {
+      part.clear();
+      return;
+    }
+    if (part == "..") part = "_up_";
+    if (!out.empty()) out += '/';
+    out += part;
+    part.clear();
+  };
+  for (const char ch : name) {
+    const auto c = static_cast<unsigned char>(ch);
+    if (c == '/') {
+      flush();
+    } else {
+      part += (c < 0x20 || c == 0x7f || c == '\\') ? '_' : ch;
+    }
+  }
+  flush();
+  return out.empty() ? std::string("_") : out;
+}
+
+bool IsInsideWorkspace(std::string_view path) {
+  return !path.empty() && WorkspaceSafeName(path) == path;
+}
 
 Scene ReadScene(const fs::path& path) {
   if (!fs::exists(path)) {

@@ -9,11 +9,14 @@
 #include <Eigen/Core>
 #include <filesystem>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace perf {
 
 inline constexpr int kSceneVersion = 1;
+// The most environment shells a scene may have (the reconstruction's kMaxShells, ray_math.h).
+inline constexpr int kMaxSceneShells = 8;
 
 // The camera as the source described it, kept so that exports can map back into the original
 // (distorted) photos.
@@ -87,7 +90,15 @@ std::string SceneToJson(const Scene& scene);
 // Parses and validates (version, references, finite values); `name` is used in messages.
 Scene SceneFromJson(const std::string& text, const std::string& name);
 
-// Path overloads: WriteScene is atomic.
+// A name taken from an input (a COLMAP image name, a NeRF file_path) made safe to use as a
+// relative path inside the workspace: '/'-separated, no root, no "." or empty components, ".."
+// replaced by "_up_" (so "../x.png" and "x.png" stay apart), backslashes and control characters
+// replaced by '_'. Never empty.
+std::string WorkspaceSafeName(std::string_view name);
+// Whether `path` (scene.json's image paths) is relative and stays inside the workspace.
+bool IsInsideWorkspace(std::string_view path);
+
+// Path overloads: WriteScene is atomic (and durable: later stages trust it).
 void WriteScene(const std::filesystem::path& path, const Scene& scene);
 Scene ReadScene(const std::filesystem::path& path);
 

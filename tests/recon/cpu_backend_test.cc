@@ -289,5 +289,25 @@ TEST(CpuBackendTest, SetLevelRefusesWhatDoesNotFit) {
   }
 }
 
+TEST(CpuBackendTest, AbsurdThreadCountsAreRefusedAndAFailedSetLevelLeavesAUsableBackend) {
+  // TBB crashed destroying an arena of 100000 threads (perf render -j 100000: SIGSEGV).
+  CpuBackendOptions o;
+  o.threads = 100000;
+  EXPECT_THROW(MakeCpuBackend(o), InputError);
+  o.threads = -3;
+  EXPECT_THROW(MakeCpuBackend(o), InputError);
+  // A level that does not fit is refused before allocating; the backend then takes one that
+  // fits, and is destroyed cleanly.
+  const TinyProblem p(1);
+  o.threads = 2;
+  o.max_memory = 1024;
+  auto b = MakeCpuBackend(o);
+  EXPECT_THROW(b->SetLevel(p.Level(0.1f, true), kVectors), ResourceError);
+  b = Cpu(2);
+  b->SetLevel(p.Level(0.1f, true), kVectors);
+  b->Upload(kX, p.x);
+  EXPECT_GT(b->Cost(kX, 1).cost, 0);
+}
+
 }  // namespace
 }  // namespace perf::recon

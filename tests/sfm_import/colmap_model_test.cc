@@ -551,6 +551,19 @@ TEST(ColmapModelBadInput, ImageWithMissingCamera) {
                   "image \"sub dir/img 7.png\" (id 7) camera_id = 99", "no camera with this id");
 }
 
+TEST(ColmapModelBadInput, TwoImagesWithOneNameInEitherFormat) {
+  Reconstruction rec = MakeReconstruction();
+  const uint32_t first = rec.images.begin()->first;
+  const uint32_t second = std::next(rec.images.begin())->first;
+  rec.images.at(second).name = rec.images.at(first).name;  // one photo, two poses
+  EXPECT_CONTAINS(ValidationMessage(rec), "scene/sparse/0", "name", "has the same name");
+  for (const ModelFormat format : {ModelFormat::kBinary, ModelFormat::kText}) {
+    TempDir tmp;
+    WriteReconstruction(tmp.path(), rec, format);
+    EXPECT_CONTAINS(MessageOf([&] { ReadReconstruction(tmp.path()); }), "same name");
+  }
+}
+
 TEST(ColmapModelBadInput, TrackWithMissingImageOrPoint) {
   Reconstruction rec = MakeReconstruction();
   rec.points3D.at(1).track[1].image_id = 1234;

@@ -125,6 +125,31 @@ TEST(ImageIo, TruncatedPngIsInputError) {
   EXPECT_THROW(ReadImage(dir / "a.png"), InputError);
 }
 
+TEST(ImageIo, TruncatedJpegIsInputErrorNotGrey) {
+  // libjpeg only warns ("premature end of data") and fills the rest with grey.
+  test::TempDir dir;
+  WriteImage(dir / "a.jpg", Gradient(64, 64, 3), PixelFormat::kUInt8);
+  std::filesystem::resize_file(dir / "a.jpg", std::filesystem::file_size(dir / "a.jpg") / 2);
+  try {
+    ReadImage(dir / "a.jpg");
+    FAIL() << "a truncated JPEG was read";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("a.jpg"), std::string::npos) << e.what();
+  }
+}
+
+TEST(ImageIo, HugeHeaderIsRefusedBeforeDecoding) {
+  test::TempDir dir;
+  WriteImage(dir / "wide.png", Image(70000, 1, 1), PixelFormat::kUInt8);  // tiny file, 70000 wide
+  try {
+    ReadImageInfo(dir / "wide.png");
+    FAIL() << "a 70000-pixel side was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("size = 70000x1x1"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(ReadImage(dir / "wide.png"), InputError);
+}
+
 TEST(ImageIo, KnowsImageExtensions) {
   EXPECT_TRUE(HasImageExtension("a/b/IMG_001.JPG"));
   EXPECT_TRUE(HasImageExtension("x.exr"));

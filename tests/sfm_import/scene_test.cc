@@ -118,11 +118,23 @@ INSTANTIATE_TEST_SUITE_P(
         Corruption{"images[1].camera_id", [](nlohmann::json& j) { j["images"][1]["camera_id"] = 3; }},
         Corruption{"images[2].split", [](nlohmann::json& j) { j["images"][2]["split"] = "val"; }},
         Corruption{"images[0].world_from_cam", [](nlohmann::json& j) { j["images"][0]["world_from_cam"][0][0] = 5.0; }},
-        Corruption{"images", [](nlohmann::json& j) { j["images"] = nlohmann::json::array(); }}));
+        Corruption{"images", [](nlohmann::json& j) { j["images"] = nlohmann::json::array(); }},
+        // Paths that would read or write outside the workspace, and more shells than it solves.
+        Corruption{"images[0].path", [](nlohmann::json& j) { j["images"][0]["path"] = "images/../../x.png"; }},
+        Corruption{"images[1].path", [](nlohmann::json& j) { j["images"][1]["path"] = "/tmp/x.png"; }},
+        Corruption{"images[0].alpha_path", [](nlohmann::json& j) { j["images"][0]["alpha_path"] = "../a.png"; }},
+        Corruption{"shells.radii", [](nlohmann::json& j) { j["shells"]["radii"] = {1, 2, 3, 4, 5, 6, 7, 8, 9}; }}));
 
 TEST(Scene, InvalidJsonIsInputError) {
   EXPECT_THROW(SceneFromJson("{ not json", "scene.json"), InputError);
   EXPECT_THROW(SceneFromJson("[1, 2]", "scene.json"), InputError);
+  // A number beyond double (nlohmann's out_of_range, not a parse_error) names the file too.
+  try {
+    SceneFromJson(R"({"format": "perf-scene", "version": 1e400})", "ws/scene.json");
+    FAIL() << "1e400 was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("ws/scene.json"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace

@@ -1,0 +1,19 @@
+// What the machine has to give: memory to check sizes against before allocating them.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+namespace perf {
+
+// Free memory as /proc/meminfo's MemAvailable (bytes), 0 if unknown.
+int64_t AvailableMemory();
+
+// Throws ResourceError when `bytes` for `what` exceed the available memory (unknown: passes).
+// `what` names the allocation in the message, e.g. "decoding photo.png (10000x10000)".
+void CheckFitsInMemory(int64_t bytes, const std::string& what, const std::string& hint);
+
+// "1.5 GiB"-style.
+std::string FormatByteCount(int64_t bytes);
+
+}  // namespace perf

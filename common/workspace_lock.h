@@ -1,0 +1,34 @@
+// One writer per workspace (DESIGN.md "Safety"): every command that writes a workspace holds an
+// advisory flock(2) on WORKSPACE/.perf.lock while it runs. The kernel drops the lock when the
+// process ends, however it ends, so a killed run never leaves a stale lock behind.
+#pragma once
+
+#include <filesystem>
+#include <string_view>
+
+namespace perf {
+
+class WorkspaceLock {
+ public:
+  // Creates the workspace folder when it does not exist and takes the lock without waiting.
+  // Throws InputError naming the holder's pid and command when another process holds it.
+  WorkspaceLock(const std::filesystem::path& workspace, std::string_view command);
+  ~WorkspaceLock();
+  WorkspaceLock(const WorkspaceLock&) = delete;
+  WorkspaceLock& operator=(const WorkspaceLock&) = delete;
+
+  // Whether the workspace folder was made by this lock (it did not exist before).
+  bool created_workspace() const { return created_; }
+  static std::filesystem::path PathIn(const std::filesystem::path& workspace);
+
+ private:
+  int fd_ = -1;
+  bool created_ = false;
+};
+
+// Removes what atomic writes of processes that no longer run left behind (temporaries named
+// <stem>.tmp<pid>-<n><ext>, files or folders; atomic_file.h) in the workspace's top level and
+// in the folders PERF owns there. Returns the number removed.
+int SweepStaleTemporaries(const std::filesystem::path& workspace);
+
+}  // namespace perf
