@@ -11,9 +11,9 @@
 #include <mutex>
 #include <map>
 #include <sstream>
-#include <utility>
 
 #include "common/errors.h"
+#include "common/unique_fd.h"
 
 namespace fs = std::filesystem;
 
@@ -23,23 +23,6 @@ namespace {
 constexpr const char* kDiskHint = "check the free disk space and that the folder is writable";
 
 std::string Errno() { return std::strerror(errno); }
-
-// Closes a file descriptor once, reporting close(2)'s own error (NFS and full disks report
-// lost writes there).
-class Fd {
- public:
-  explicit Fd(int fd) : fd_(fd) {}
-  ~Fd() {
-    if (fd_ >= 0) ::close(fd_);
-  }
-  Fd(const Fd&) = delete;
-  Fd& operator=(const Fd&) = delete;
-  int get() const { return fd_; }
-  bool Close() { return ::close(std::exchange(fd_, -1)) == 0; }
-
- private:
-  int fd_;
-};
 
 void WriteAll(int fd, std::string_view data, const fs::path& target) {
   while (!data.empty()) {
@@ -106,7 +89,7 @@ fs::path TempPathFor(const fs::path& target) {
 void WriteFileAtomically(const fs::path& target, std::string_view contents, Durability durability) {
   CheckNotInput(target);
   const fs::path tmp = TempPathFor(target);
-  Fd fd(::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644));
+  UniqueFd fd(::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644));
   if (fd.get() < 0) throw IoError(target.string(), "cannot create the file: " + Errno(), kDiskHint);
   RemovingOnFailure(tmp, [&] {
     WriteAll(fd.get(), contents, target);
@@ -133,7 +116,7 @@ void WriteAtomically(const fs::path& target, const std::function<void(const fs::
   RemovingOnFailure(tmp, [&] {
     write(tmp);
     // What the library left must be a file whose data reached the file system.
-    Fd fd(::open(tmp.c_str(), O_RDONLY | O_CLOEXEC));
+    UniqueFd fd(::open(tmp.c_str(), O_RDONLY | O_CLOEXEC));
     if (fd.get() < 0) throw IoError(target.string(), "the written file is gone: " + Errno(), kDiskHint);
     if (durability == Durability::kDurable && ::fsync(fd.get()) != 0) {
       throw IoError(target.string(), "writing failed (fsync): " + Errno(), kDiskHint);

@@ -67,16 +67,14 @@ WorkspaceLock::WorkspaceLock(const fs::path& workspace, std::string_view command
                   "choose a writable location");
   }
   const fs::path path = PathIn(workspace);
-  fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
-  if (fd_ < 0) {
+  fd_ = UniqueFd(::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644));
+  if (!fd_.valid()) {
     throw IoError(path.string(), StrCat("cannot create the workspace lock: ", std::strerror(errno)),
                   "check that the workspace folder is writable");
   }
-  if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+  if (::flock(fd_.get(), LOCK_EX | LOCK_NB) != 0) {
     const int err = errno;
-    const std::string holder = Holder(fd_);
-    ::close(fd_);
-    fd_ = -1;
+    const std::string holder = Holder(fd_.get());
     if (err == EWOULDBLOCK) {
       throw InputError(path.string(), "lock", holder, "another perf command is writing this workspace",
                        "wait for it to finish (or stop it), or use another workspace folder");
@@ -86,13 +84,9 @@ WorkspaceLock::WorkspaceLock(const fs::path& workspace, std::string_view command
   }
   // Who holds it, for the message a second writer gets. Best effort: the lock is what counts.
   const std::string who = StrCat("pid ", ::getpid(), " (perf ", command, ")\n");
-  if (::ftruncate(fd_, 0) == 0) {
-    [[maybe_unused]] const ssize_t n = ::pwrite(fd_, who.data(), who.size(), 0);
+  if (::ftruncate(fd_.get(), 0) == 0) {
+    [[maybe_unused]] const ssize_t n = ::pwrite(fd_.get(), who.data(), who.size(), 0);
   }
-}
-
-WorkspaceLock::~WorkspaceLock() {
-  if (fd_ >= 0) ::close(fd_);  // closing the last descriptor releases the flock
 }
 
 int SweepStaleTemporaries(const fs::path& workspace) {

@@ -6,6 +6,8 @@
 #include <filesystem>
 #include <string_view>
 
+#include "common/unique_fd.h"
+
 namespace perf {
 
 class WorkspaceLock {
@@ -13,7 +15,6 @@ class WorkspaceLock {
   // Creates the workspace folder when it does not exist and takes the lock without waiting.
   // Throws InputError naming the holder's pid and command when another process holds it.
   WorkspaceLock(const std::filesystem::path& workspace, std::string_view command);
-  ~WorkspaceLock();
   WorkspaceLock(const WorkspaceLock&) = delete;
   WorkspaceLock& operator=(const WorkspaceLock&) = delete;
 
@@ -22,7 +23,7 @@ class WorkspaceLock {
   static std::filesystem::path PathIn(const std::filesystem::path& workspace);
 
  private:
-  int fd_ = -1;
+  UniqueFd fd_;  // closing it releases the flock
   bool created_ = false;
 };
 

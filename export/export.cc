@@ -232,6 +232,7 @@ ExportResult RunExport(const ExportOptions& o) {
   if (o.orbit.frames < 0) throw InputError("command line", "--orbit-frames", StrCat(o.orbit.frames), "must be >= 0");
   if (o.renders && o.orbit.frames > 0) CheckOrbitOptions(o.orbit);
   const Scene scene = ReadScene(o.workspace / "scene.json");
+  for (const SceneImage& im : scene.images) ProtectInput(im.source_path);  // the user's photos
   LoadedCheckpoint l = recon::LoadForRendering(o.workspace, o.checkpoint, o.device, o.threads);
   ExportResult r;
   r.checkpoint = l.path;

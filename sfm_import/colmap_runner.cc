@@ -1,10 +1,7 @@
 #include "sfm_import/colmap_runner.h"
 
-#include <fcntl.h>
 #include <signal.h>
-#include <spawn.h>
 #include <sys/stat.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -26,9 +23,8 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
+#include "common/subprocess.h"
 #include "sfm_import/camera_models.h"
-
-extern char** environ;
 
 namespace fs = std::filesystem;
 
@@ -94,34 +90,10 @@ int CountInputImages(const fs::path& images) {
 // --------------------------------------------------------------------------------------------
 // Finding and running colmap
 
-bool IsExecutableFile(const fs::path& path) {
-  std::error_code ec;
-  return fs::is_regular_file(path, ec) && ::access(path.c_str(), X_OK) == 0;
-}
-
 fs::path FindColmap(const std::string& binary) {
-  const std::string hint =
-      "install COLMAP (`sudo apt-get install colmap`, or run scripts/setup.sh), or pass its path "
-      "with --colmap-binary";
-  if (binary.find('/') != std::string::npos) {
-    if (!IsExecutableFile(binary)) {
-      throw IoError(binary, "the colmap binary does not exist or is not executable", hint);
-    }
-    return binary;
-  }
-  const char* path_env = std::getenv("PATH");
-  const std::string path_list = path_env ? path_env : "";
-  size_t begin = 0;
-  while (begin <= path_list.size()) {
-    size_t end = path_list.find(':', begin);
-    if (end == std::string::npos) end = path_list.size();
-    // An empty PATH entry means the current directory (POSIX).
-    const fs::path dir =
-        end == begin ? fs::path(".") : fs::path(path_list.substr(begin, end - begin));
-    if (IsExecutableFile(dir / binary)) return dir / binary;
-    begin = end + 1;
-  }
-  throw IoError(binary, "`" + binary + "` was not found on PATH", hint);
+  return FindExecutable(binary,
+                        "install COLMAP (`sudo apt-get install colmap`, or run scripts/setup.sh), or pass its path "
+                        "with --colmap-binary");
 }
 
 // What a line of a step's output says about progress, as a short status, or nullopt.
@@ -137,16 +109,6 @@ struct StepResult {
   }
 };
 
-std::string ShellQuote(const std::string& s) {
-  if (!s.empty() && s.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ"
-                                        "0123456789_-./=:,+") == std::string::npos) {
-    return s;
-  }
-  std::string out = "'";
-  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return out + "'";
-}
-
 std::string Timestamp() {
   const std::time_t now = std::time(nullptr);
   std::tm tm{};
@@ -156,105 +118,15 @@ std::string Timestamp() {
   return buf;
 }
 
-// Owns a spawned child until it has been reaped, so an exception while reading its output
-// (a failed log write, a throwing progress callback) never leaves a stray colmap running.
-class ChildGuard {
- public:
-  explicit ChildGuard(pid_t pid) : pid_(pid) {}
-  ChildGuard(const ChildGuard&) = delete;
-  ChildGuard& operator=(const ChildGuard&) = delete;
-  ~ChildGuard() {
-    if (pid_ <= 0) return;
-    ::kill(pid_, SIGTERM);
-    int status = 0;
-    while (::waitpid(pid_, &status, 0) < 0 && errno == EINTR) {
-    }
-  }
-  // Waits for the child; returns its wait status.
-  int Wait() {
-    int status = 0;
-    while (::waitpid(pid_, &status, 0) < 0) {
-      if (errno != EINTR) throw IoError("colmap", StrCat("waitpid failed: ", std::strerror(errno)));
-    }
-    pid_ = -1;
-    return status;
-  }
-
- private:
-  pid_t pid_;
-};
-
-class Fd {
- public:
-  explicit Fd(int fd = -1) : fd_(fd) {}
-  Fd(const Fd&) = delete;
-  Fd& operator=(const Fd&) = delete;
-  ~Fd() { Close(); }
-  int get() const { return fd_; }
-  void Close() {
-    if (fd_ >= 0) ::close(fd_);
-    fd_ = -1;
-  }
-
- private:
-  int fd_;
-};
-
 // Runs `colmap <args>` without a shell (paths with spaces or quotes pass through untouched),
 // headless, with stdout and stderr through one pipe: every byte is appended to `log` and every
 // line is offered to `parse`, whose status is reported at most once a second.
 StepResult RunColmapStep(const fs::path& colmap, const std::vector<std::string>& args,
                          const std::string& stage, const ProgressParser& parse,
                          const SfmOptions& options, std::ofstream& log, const fs::path& log_path) {
-  std::string command_line = ShellQuote(colmap.string());
-  for (const auto& a : args) {
-    command_line += ' ';
-    command_line += ShellQuote(a);
-  }
+  const std::string command_line = CommandLine(colmap, args);
   // A prefix of our own: COLMAP's headings are lines of '=' already.
   log << "\n[perf " << Timestamp() << "] run: " << command_line << "\n" << std::flush;
-
-  std::vector<std::string> argv_storage;
-  argv_storage.push_back(colmap.string());
-  argv_storage.insert(argv_storage.end(), args.begin(), args.end());
-  std::vector<char*> argv;
-  for (auto& a : argv_storage) argv.push_back(a.data());
-  argv.push_back(nullptr);
-
-  // COLMAP links Qt even for its CLI commands; without a display, Qt aborts unless told to use
-  // the offscreen platform.
-  std::vector<std::string> env_storage;
-  for (char** e = environ; e && *e; ++e) {
-    if (std::strncmp(*e, "QT_QPA_PLATFORM=", 16) != 0) env_storage.emplace_back(*e);
-  }
-  env_storage.emplace_back("QT_QPA_PLATFORM=offscreen");
-  std::vector<char*> envp;
-  for (auto& e : env_storage) envp.push_back(e.data());
-  envp.push_back(nullptr);
-
-  // O_CLOEXEC: children spawned concurrently by other threads must not inherit our pipe, or
-  // we would never see end-of-file. The dup2 onto 1 and 2 below clears the flag in the child.
-  int fds[2];
-  if (::pipe2(fds, O_CLOEXEC) != 0) {
-    throw IoError(log_path.string(), StrCat("cannot create a pipe: ", std::strerror(errno)));
-  }
-  Fd read_end(fds[0]), write_end(fds[1]);
-
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_adddup2(&actions, write_end.get(), STDOUT_FILENO);
-  posix_spawn_file_actions_adddup2(&actions, write_end.get(), STDERR_FILENO);
-  posix_spawn_file_actions_addopen(&actions, STDIN_FILENO, "/dev/null", O_RDONLY, 0);
-  pid_t pid = -1;
-  const int spawn_error =
-      ::posix_spawn(&pid, colmap.c_str(), &actions, nullptr, argv.data(), envp.data());
-  posix_spawn_file_actions_destroy(&actions);
-  if (spawn_error != 0) {
-    throw IoError(colmap.string(), StrCat("cannot start colmap: ", std::strerror(spawn_error)),
-                  "check that it is an executable colmap binary (--colmap-binary)");
-  }
-  ChildGuard child(pid);
-  write_end.Close();  // so read() sees end-of-file when colmap exits
 
   StepResult result;
   std::string partial;
@@ -271,36 +143,27 @@ StepResult RunColmapStep(const fs::path& colmap, const std::vector<std::string>&
     result.tail.push_back(std::move(line));
     if (result.tail.size() > kLogTailLines) result.tail.pop_front();
   };
-  char buf[4096];
-  while (true) {
-    const ssize_t n = ::read(read_end.get(), buf, sizeof buf);
-    if (n < 0 && errno == EINTR) continue;
-    if (n < 0)
-      throw IoError(log_path.string(),
-                    StrCat("cannot read colmap's output: ", std::strerror(errno)));
-    if (n == 0) break;
-    log.write(buf, n);
+  // COLMAP links Qt even for its CLI commands; without a display, Qt aborts unless told to use
+  // the offscreen platform.
+  const ProcessResult process = RunProcess(colmap, args, {"QT_QPA_PLATFORM=offscreen"}, [&](std::string_view chunk) {
+    log.write(chunk.data(), static_cast<std::streamsize>(chunk.size()));
     log.flush();  // so the log is useful while a long step runs
     if (!log) throw IoError(log_path.string(), "cannot write the log (disk full?)");
-    for (ssize_t i = 0; i < n; ++i) {
+    for (const char c : chunk) {
       // COLMAP rewrites some lines with '\r'; either ends a line for us.
-      if (buf[i] == '\n' || buf[i] == '\r') {
+      if (c == '\n' || c == '\r') {
         handle_line(std::move(partial));
         partial.clear();
       } else if (partial.size() < 4096) {  // bounded even if a tool never ends a line
-        partial += buf[i];
+        partial += c;
       }
     }
-  }
+  });
   handle_line(std::move(partial));
   // The last status of a step (e.g. 12/12 images) is worth showing even if it came fast.
   if (!pending_status.empty()) Report(options, stage + ": " + pending_status);
-  const int status = child.Wait();
-  if (WIFSIGNALED(status)) {
-    result.signal = WTERMSIG(status);
-  } else {
-    result.exit_code = WEXITSTATUS(status);
-  }
+  result.exit_code = process.exit_code;
+  result.signal = process.signal;
   log << "[perf " << Timestamp() << "] "
       << (result.signal ? StrCat("killed by signal ", result.signal)
                         : StrCat("exit code ", result.exit_code))

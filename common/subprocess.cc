@@ -1,0 +1,164 @@
+#include "common/subprocess.h"
+
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
+
+#include "common/errors.h"
+#include "common/unique_fd.h"
+
+extern char** environ;
+
+namespace fs = std::filesystem;
+
+namespace perf {
+namespace {
+
+// Owns a spawned child until it has been reaped, so an exception while reading its output
+// never leaves a stray process running.
+class ChildGuard {
+ public:
+  explicit ChildGuard(pid_t pid) : pid_(pid) {}
+  ChildGuard(const ChildGuard&) = delete;
+  ChildGuard& operator=(const ChildGuard&) = delete;
+  ~ChildGuard() {
+    if (pid_ <= 0) return;
+    ::kill(pid_, SIGTERM);
+    int status = 0;
+    while (::waitpid(pid_, &status, 0) < 0 && errno == EINTR) {
+    }
+  }
+  // Waits for the child; returns its wait status.
+  int Wait(const fs::path& program) {
+    int status = 0;
+    while (::waitpid(pid_, &status, 0) < 0) {
+      if (errno != EINTR) throw IoError(program.string(), StrCat("waitpid failed: ", std::strerror(errno)));
+    }
+    pid_ = -1;
+    return status;
+  }
+
+ private:
+  pid_t pid_;
+};
+
+std::string ShellQuote(const std::string& s) {
+  if (!s.empty() && s.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ"
+                                        "0123456789_-./=:,+") == std::string::npos) {
+    return s;
+  }
+  std::string out = "'";
+  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
+}
+
+bool IsExecutableFile(const fs::path& path) {
+  std::error_code ec;
+  return fs::is_regular_file(path, ec) && ::access(path.c_str(), X_OK) == 0;
+}
+
+// This process's environment with `overrides` replacing same-named entries.
+std::vector<std::string> Environment(const std::vector<std::string>& overrides) {
+  std::vector<std::string> env;
+  for (char** e = environ; e && *e; ++e) {
+    const std::string_view entry(*e);
+    bool replaced = false;
+    for (const std::string& o : overrides) {
+      const size_t eq = o.find('=');
+      replaced = replaced || (eq != std::string::npos && entry.substr(0, eq + 1) == std::string_view(o).substr(0, eq + 1));
+    }
+    if (!replaced) env.emplace_back(entry);
+  }
+  env.insert(env.end(), overrides.begin(), overrides.end());
+  return env;
+}
+
+std::vector<char*> Pointers(std::vector<std::string>& strings) {
+  std::vector<char*> out;
+  for (std::string& s : strings) out.push_back(s.data());
+  out.push_back(nullptr);
+  return out;
+}
+
+}  // namespace
+
+std::string CommandLine(const fs::path& program, const std::vector<std::string>& args) {
+  std::string line = ShellQuote(program.string());
+  for (const std::string& a : args) line += ' ' + ShellQuote(a);
+  return line;
+}
+
+fs::path FindExecutable(const std::string& binary, const std::string& hint) {
+  if (binary.find('/') != std::string::npos) {
+    if (!IsExecutableFile(binary)) throw IoError(binary, "the program does not exist or is not executable", hint);
+    return binary;
+  }
+  const char* path_env = std::getenv("PATH");
+  const std::string path_list = path_env ? path_env : "";
+  size_t begin = 0;
+  while (begin <= path_list.size()) {
+    size_t end = path_list.find(':', begin);
+    if (end == std::string::npos) end = path_list.size();
+    // An empty PATH entry means the current directory (POSIX).
+    const fs::path dir = end == begin ? fs::path(".") : fs::path(path_list.substr(begin, end - begin));
+    if (IsExecutableFile(dir / binary)) return dir / binary;
+    begin = end + 1;
+  }
+  throw IoError(binary, "`" + binary + "` was not found on PATH", hint);
+}
+
+ProcessResult RunProcess(const fs::path& program, const std::vector<std::string>& args,
+                         const std::vector<std::string>& env,
+                         const std::function<void(std::string_view)>& on_output) {
+  std::vector<std::string> argv_storage{program.string()};
+  argv_storage.insert(argv_storage.end(), args.begin(), args.end());
+  std::vector<std::string> env_storage = Environment(env);
+  std::vector<char*> argv = Pointers(argv_storage), envp = Pointers(env_storage);
+
+  // O_CLOEXEC: children spawned concurrently by other threads must not inherit our pipe, or
+  // we would never see end-of-file. The dup2 onto 1 and 2 below clears the flag in the child.
+  int fds[2];
+  if (::pipe2(fds, O_CLOEXEC) != 0) {
+    throw IoError(program.string(), StrCat("cannot create a pipe: ", std::strerror(errno)));
+  }
+  UniqueFd read_end(fds[0]), write_end(fds[1]);
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_adddup2(&actions, write_end.get(), STDOUT_FILENO);
+  posix_spawn_file_actions_adddup2(&actions, write_end.get(), STDERR_FILENO);
+  posix_spawn_file_actions_addopen(&actions, STDIN_FILENO, "/dev/null", O_RDONLY, 0);
+  pid_t pid = -1;
+  const int spawn_error = ::posix_spawn(&pid, program.c_str(), &actions, nullptr, argv.data(), envp.data());
+  posix_spawn_file_actions_destroy(&actions);
+  if (spawn_error != 0) {
+    throw IoError(program.string(), StrCat("cannot start the program: ", std::strerror(spawn_error)),
+                  "check that it is an executable");
+  }
+  ChildGuard child(pid);
+  write_end.Close();  // so read() sees end-of-file when the child exits
+
+  char buf[4096];
+  while (true) {
+    const ssize_t n = ::read(read_end.get(), buf, sizeof buf);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) throw IoError(program.string(), StrCat("cannot read the program's output: ", std::strerror(errno)));
+    if (n == 0) break;
+    on_output(std::string_view(buf, static_cast<size_t>(n)));
+  }
+  const int status = child.Wait(program);
+  ProcessResult result;
+  if (WIFSIGNALED(status)) {
+    result.signal = WTERMSIG(status);
+  } else {
+    result.exit_code = WEXITSTATUS(status);
+  }
+  return result;
+}
+
+}  // namespace perf

@@ -1,0 +1,34 @@
+// Running another program (the colmap CLI) without a shell: arguments pass through untouched,
+// stdin is /dev/null, stdout and stderr come back through one pipe as they are written, and the
+// child is never left running when the caller throws.
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace perf {
+
+struct ProcessResult {
+  int exit_code = 0;  // valid when signal == 0
+  int signal = 0;     // the signal that killed the process, or 0
+};
+
+// Runs `program` with `args`; `env` entries ("NAME=value") replace or add to this process's
+// environment. `on_output` receives the child's output in chunks as it arrives; if it throws, the
+// child gets SIGTERM and is reaped before the exception propagates. Throws IoError when the
+// program cannot be started.
+ProcessResult RunProcess(const std::filesystem::path& program, const std::vector<std::string>& args,
+                         const std::vector<std::string>& env,
+                         const std::function<void(std::string_view chunk)>& on_output);
+
+// `program args...` as a shell would need it typed, for logs and messages.
+std::string CommandLine(const std::filesystem::path& program, const std::vector<std::string>& args);
+
+// `binary` itself when it names a path, else the first executable of that name on PATH; throws
+// IoError with `hint` otherwise.
+std::filesystem::path FindExecutable(const std::string& binary, const std::string& hint);
+
+}  // namespace perf
