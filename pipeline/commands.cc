@@ -6,6 +6,7 @@
 #include <thread>
 
 #include "common/errors.h"
+#include "recon_cuda/render_rule.h"
 
 namespace perf {
 
@@ -43,8 +44,8 @@ void AddDeviceOptions(CLI::App* cmd, std::string* device, int* threads) {
 
 void AddMinBoxOpacityOption(CLI::App* cmd, float* min_box_opacity, const std::string& use) {
   cmd->add_option("--min-box-opacity", *min_box_opacity,
-                  use + ": rays whose box opacity is below this see only the shells (the paper's floater rule: "
-                        "0.7; 0: off)")
+                  StrCat(use, ": rays whose box opacity is below this see only the shells (the paper's floater rule: ",
+                         recon::kPaperMinBoxOpacity, "; 0: off)"))
       ->check(CLI::Range(0.0f, 1.0f))
       ->capture_default_str();
 }

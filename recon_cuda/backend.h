@@ -32,18 +32,13 @@ struct ResidualSettings {
   // every pass sees the same rays (tests, reference solves).
   bool jitter = true;
   // With jitter, also move each ray to a random point of its pixel every iteration (DESIGN.md
-  // "One ray" step 1). Off by default, rays through pixel centres, a measured deviation from
-  // the design: a fresh point per iteration makes every Gauss-Newton step fit that iteration's
-  // sub-pixel noise (on lego 50x50 the training PSNR of jittered rays stays ~5 dB below that of
-  // centred rays), and held-out views are rendered through pixel centres. Lego 50x50, 32^3 +
-  // 64^3, 8 + 8 GN: 28.36 dB held-out with centred rays against 26.97 dB with pixel jitter.
+  // "One ray" step 1). Off (rays through pixel centres), a measured deviation from the design:
+  // each GN step would fit that iteration's sub-pixel noise (-1.4 dB on lego, docs/tuning.md).
   bool pixel_jitter = false;
   // Where the rays carry the photos' alpha (RaySet::alphas), the fourth residual fits the box
   // opacity to it instead of the paper's auxiliary term (ray_math.h AuxResidual).
   bool use_alpha = true;
-  // The weight of that alpha residual (lambda's counterpart). Lego 50x50, 8 + 8 GN: 0.1 / 0.3 /
-  // 0.5 / 1 gave 27.94 / 28.36 / 28.35 / 28.05 dB held-out and masks with IoU 0.930 / 0.962 /
-  // 0.962 / 0.959 against the true alpha; Adam (60 + 60) 28.13 dB at 0.1, 28.34 dB at 0.3.
+  // The weight of that alpha residual (lambda's counterpart); 0.3 (docs/tuning.md).
   float alpha_weight = 0.3f;
 };
 
@@ -103,11 +98,8 @@ struct MemoryEstimate {
   int64_t Total() const { return vectors + scratch + jacobian_cache + rays; }
 };
 
-// The baseline is compared at its best: CALIBRATION.md's rates (0.02 colour, 1.0 density) with
-// the density rate re-tuned for our volume (its box and sigma scale are not CALIBRATION's
-// [-1.5, 1.5]^3). Lego, held-out, lr_density 0.5 / 1 /
-// 2 / 4 / 8: 50x50 (60 + 60 steps) - / 28.34 / 28.48 / 28.50 / 28.41 dB; 100x100 (40 + 40)
-// 24.72 / 25.22 / 25.51 / 25.62 / 25.60 dB. lr_colour 0.04 with 4: 25.70 dB at 100x100.
+// Adam, the baseline, compared at its best: CALIBRATION.md's colour rate and a density rate
+// re-tuned for our volume (docs/tuning.md).
 struct AdamSettings {
   float lr_colour = 0.02f, lr_density = 4.0f, lr_opacity = 0.02f;
   float beta1 = 0.9f, beta2 = 0.999f, epsilon = 1e-8f;
@@ -174,7 +166,8 @@ class Backend {
   // p that is 0 where it is 0 (the reduced system of projected Gauss-Newton). A backend may drop
   // work that then adds exact zeros to those entries (the CPU backend drops recorded samples in
   // empty space whose cells' densities are all held); the entries where free is 1 stay exactly
-  // as they were. Recomputing backends may ignore it.
+  // as they were. The CUDA backend, which recomputes the partials, skips those samples on the fly
+  // (jacobian.h SkippableSample).
   virtual void RestrictJacobian(VecId /*free*/) {}
   // One Adam step (Kingma & Ba) with per-kind learning rates, t = step number from 1.
   virtual void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) = 0;

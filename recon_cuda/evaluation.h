@@ -18,7 +18,8 @@ double Psnr(const RenderOutput& render, const Image& truth);
 Image ToImage(const RenderOutput& render);          // RGB
 Image OpacityImage(const RenderOutput& render);     // one channel: 1 - T_box
 
-// Renders every view at its own size (no jitter, paper's min box opacity rule) and scores it.
+// Renders every view at its own size (no jitter; the render rule at `min_box_opacity`,
+// render_rule.h) and scores it.
 std::vector<ViewScore> ScoreViews(Backend* backend, VecId x, const std::vector<PosedImage>& views,
                                   float min_box_opacity);
 

@@ -14,6 +14,7 @@
 #include "common/system_memory.h"
 #include "recon_cuda/checkpoint.h"
 #include "recon_cuda/evaluation.h"
+#include "recon_cuda/hierarchy.h"
 #include "recon_cuda/previous_run.h"
 #include "sfm_import/image_io.h"
 
@@ -112,12 +113,10 @@ namespace {
 
 // Every level's solver memory is checked before anything is allocated or loaded: a level that
 // cannot fit fails now, not after the levels before it (--start-resolution 1024 wants ~17 GB).
-template <typename ShapeOf>
-void CheckLevelsFit(const Backend& backend, const VolumeGeometry& geometry, const ReconstructOptions& o, int start,
-                    int levels, const ShapeOf& shape_of) {
-  for (int level = start; level < levels; ++level) {
-    const LevelProblem problem{shape_of(level), geometry, nullptr, o.residuals, false};
-    const MemoryEstimate e = backend.EstimateMemory(problem, RequiredVectors(o.solver.type));
+void CheckLevelsFit(const Backend& backend, const VolumeGeometry& geometry, const HierarchyOptions& ho, int start) {
+  for (int level = start; level < ho.levels; ++level) {
+    const LevelProblem problem{LevelShape(ho, geometry.num_shells(), level), geometry, nullptr, ho.residuals, false};
+    const MemoryEstimate e = backend.EstimateMemory(problem, RequiredVectors(ho.solver.type));
     // The host also holds the parameters and their resampled copy between levels.
     const int64_t host = 2 * problem.shape.ParamCount() * static_cast<int64_t>(sizeof(float));
     if (e.available > 0 && e.vectors + e.scratch + host > e.available) {
@@ -127,6 +126,31 @@ void CheckLevelsFit(const Backend& backend, const VolumeGeometry& geometry, cons
                                  "--start-resolution"));
     }
   }
+}
+
+HierarchyOptions ToHierarchy(const ReconstructOptions& o, int levels) {
+  HierarchyOptions h;
+  h.levels = levels;
+  h.start_resolution = o.start_resolution;
+  h.iterations = o.iterations;
+  h.solver = o.solver;
+  h.init = o.init;
+  h.residuals = o.residuals;
+  h.pyramid = o.pyramid;
+  return h;
+}
+
+// The mean colour of the photos (--init-shells-from-photos).
+void MeanColour(const std::vector<PosedImage>& images, float colour[3]) {
+  double sum[3] = {0, 0, 0};
+  int64_t count = 0;
+  for (const PosedImage& im : images) {
+    for (size_t p = 0; p < im.image.pixels.size(); p += 3) {
+      for (int c = 0; c < 3; ++c) sum[c] += im.image.pixels[p + c];
+    }
+    count += static_cast<int64_t>(im.image.pixels.size() / 3);
+  }
+  for (int c = 0; c < 3; ++c) colour[c] = count > 0 ? static_cast<float>(sum[c] / count) : -1.f;
 }
 
 }  // namespace
@@ -154,12 +178,11 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   result.backend = backend->Describe();
   const int levels = o.levels > 0 ? o.levels : DefaultLevels(result.backend);
   result.fixed_background = FixedBackground(o.background, scene);
-  const float background[3] = {static_cast<float>(scene.background.x()), static_cast<float>(scene.background.y()),
-                               static_cast<float>(scene.background.z())};
-  const int num_shells = geometry.num_shells();
-  const auto shape_of = [&](int level) {
-    return VolumeShape{o.start_resolution << level, o.start_resolution << level, num_shells};
-  };
+  HierarchyOptions ho = ToHierarchy(o, levels);
+  ho.fixed_background = result.fixed_background;
+  ho.background = {static_cast<float>(scene.background.x()), static_cast<float>(scene.background.y()),
+                   static_cast<float>(scene.background.z())};
+  const auto shape_of = [&](int level) { return LevelShape(ho, geometry.num_shells(), level); };
 
   EnsureWritableDirectory(o.workspace / "recon");
   RecoverPreviousRun(o.workspace);
@@ -184,11 +207,11 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     start = last + 1;
     x = Resample(c.shape, c.params, shape_of(start));
     // Constants of this run, whatever an earlier run (perhaps with learned shells) left there.
-    if (result.fixed_background) SetBackgroundShells(shape_of(start), background, x);
+    if (result.fixed_background) SetBackgroundShells(shape_of(start), ho.background.data(), x);
     say(StrCat("resuming after level ", last, " (", path.string(), ")"));
   }
 
-  CheckLevelsFit(*backend, geometry, o, start, levels, shape_of);
+  CheckLevelsFit(*backend, geometry, ho, start);
   say("loading images");
   const std::vector<PosedImage> train = LoadImages(scene, o.workspace, Split::kTrain);
   const std::vector<PosedImage> test = LoadImages(scene, o.workspace, Split::kTest);
@@ -202,8 +225,6 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   if (start == 0) previous.emplace(o.workspace);
   JsonLog log(o.workspace / "recon" / "log.jsonl", start > 0, "reconstruction log");
   if (start > 0) log.Write({{"event", "resume"}, {"level", start}});
-  std::vector<PinholeCamera<float>> train_cameras;
-  for (const PosedImage& im : train) train_cameras.push_back(im.camera);
   const std::vector<PosedImage>& preview_views = test.empty() ? train : test;
   say(StrCat("backend: ", result.backend, "; ", train.size(), " training and ", test.size(), " held-out views; ",
              levels, " levels from ", o.start_resolution, "^3"));
@@ -219,113 +240,93 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                    ")", o.background == "auto" ? ", the colour every photo's alpha was composited over" : "")
           : std::string("background: learned (environment shells)"));
 
+  if (start == 0 && o.init_shells_from_photos) MeanColour(train, ho.init.shell_colour);
+  TrainingViews views;
+  for (const PosedImage& im : train) views.cameras.push_back(im.camera);
+  views.rays = [&train](int factor) {
+    if (factor == 1) return MakeRaySet(train);
+    std::vector<PosedImage> small;
+    for (const PosedImage& im : train) small.push_back(Downscaled(im, factor));
+    return MakeRaySet(small);
+  };
+
   double elapsed = 0;  // solver time so far (excludes held-out evaluation and previews)
-  for (int level = start; level < levels; ++level) {
-    const auto t_level = WallClock::now();
-    double eval_seconds = 0;
-    const VolumeShape shape = shape_of(level);
-    if (x.empty()) {  // level 0 of a fresh start
-      InitOptions init = o.init;
-      if (o.init_shells_from_photos) {
-        double sum[3] = {0, 0, 0};
-        int64_t count = 0;
-        for (const PosedImage& im : train) {
-          for (size_t p = 0; p < im.image.pixels.size(); p += 3) {
-            for (int c = 0; c < 3; ++c) sum[c] += im.image.pixels[p + c];
-          }
-          count += static_cast<int64_t>(im.image.pixels.size() / 3);
-        }
-        for (int c = 0; c < 3; ++c) init.shell_colour[c] = count > 0 ? static_cast<float>(sum[c] / count) : -1.f;
-      }
-      x = InitialParams(shape, geometry, init);
-      if (result.fixed_background) SetBackgroundShells(shape, background, x);
-    }
-    LevelReport lr;
-    lr.level = level;
-    lr.shape = shape;
-    lr.image_downscale = o.pyramid ? PyramidFactor(train_cameras, geometry, shape.n, 1 << (levels - 1 - level)) : 1;
-    RaySet rays;
-    if (lr.image_downscale > 1) {
-      std::vector<PosedImage> small;
-      for (const PosedImage& im : train) small.push_back(Downscaled(im, lr.image_downscale));
-      rays = MakeRaySet(small);
-    } else {
-      rays = MakeRaySet(train);
-    }
-    lr.rays = rays.size();
-    LevelProblem problem{shape, geometry, &rays, o.residuals, result.fixed_background};
-    const MemoryEstimate mem = backend->SetLevel(problem, RequiredVectors(o.solver.type));
-    say(StrCat("level ", level + 1, "/", levels, ": ", DescribeShape(shape), ", ", lr.rays, " rays",
+  auto t_level = WallClock::now();
+  double eval_seconds = 0;  // held-out evaluation and previews within the level
+  LevelReport lr;
+  double level_start_elapsed = 0, iter_time = 0;  // for the log's elapsed solver time
+  int held_out_iteration = -1;  // the iteration whose held-out PSNR was logged last
+  double held_out_psnr = 0;
+  const auto held_out = [&](VecId params) {
+    const auto t0 = WallClock::now();
+    const double psnr = MeanPsnr(ScoreViews(backend.get(), params, test, o.min_box_opacity));
+    eval_seconds += SecondsSince(t0);
+    return psnr;
+  };
+  HierarchyCallbacks cb;
+  cb.level_started = [&](const HierarchyLevel& h) {
+    lr = LevelReport{};
+    lr.level = h.level;
+    lr.shape = h.shape;
+    lr.image_downscale = h.image_downscale;
+    lr.rays = h.rays;
+    held_out_iteration = -1;
+    level_start_elapsed = elapsed + SecondsSince(t_level);  // setup (rays, SetLevel) counts
+    iter_time = 0;
+    const MemoryEstimate& mem = h.memory;
+    say(StrCat("level ", h.level + 1, "/", levels, ": ", DescribeShape(h.shape), ", ", lr.rays, " rays",
                lr.image_downscale > 1 ? StrCat(" (images / ", lr.image_downscale, ")") : std::string(),
                "; memory: vectors ", FormatByteCount(mem.vectors), ", per-thread sums ", FormatByteCount(mem.scratch),
                ", Jacobian cache ",
                backend->CachesJacobian() ? FormatByteCount(mem.jacobian_cache) : std::string("off (recomputing)"),
                mem.available > 0 ? StrCat(" of ", FormatByteCount(mem.available), " available") : std::string()));
-
-    SolverOptions so = o.solver;
-    so.max_iterations = o.iterations;
-    so.seed = Hash(o.init.seed, static_cast<uint32_t>(level), 0x1e7e1u);
-    int held_out_iteration = -1;  // the iteration whose held-out PSNR was logged last
-    double held_out_psnr = 0;
-    auto held_out = [&]() {
-      const auto t0 = WallClock::now();
-      const double psnr = MeanPsnr(ScoreViews(backend.get(), kSolverX, test, o.min_box_opacity));
-      eval_seconds += SecondsSince(t0);
-      return psnr;
-    };
-    double solve_elapsed_at_level_start = elapsed + SecondsSince(t_level);
-    double iter_time = 0;
-    auto callback = [&](const IterationSummary& s) {
-      iter_time += s.seconds_total;
-      json line = IterationJson(lr, so, s, solve_elapsed_at_level_start + iter_time);
-      const bool last_it = s.iteration + 1 == so.max_iterations;
-      if (!test.empty() && o.eval_every > 0 && ((s.iteration + 1) % o.eval_every == 0 || last_it)) {
-        held_out_psnr = held_out();
-        held_out_iteration = s.iteration;
-        line["test_psnr"] = held_out_psnr;
-      }
-      if (o.preview_every > 0 && ((s.iteration + 1) % o.preview_every == 0 || last_it)) {
-        const auto t0 = WallClock::now();
-        const PosedImage& v = preview_views.front();
-        const RenderOutput r = backend->Render(kSolverX, v.camera, v.image.width, v.image.height, o.min_box_opacity);
-        const fs::path p = o.workspace / "preview" / StrCat("recon_l", level, "_i", s.iteration + 1, ".png");
-        EnsureWritableDirectory(p.parent_path());
-        WriteImage(p, ToImage(r), PixelFormat::kUInt8);
-        eval_seconds += SecondsSince(t0);
-      }
-      log.Write(line);
-      ReconstructOptions::Event e;
-      e.level = level;
-      e.levels = levels;
-      e.iteration = s.iteration + 1;
-      e.iterations = so.max_iterations;
-      e.cost = s.cost_after;
-      e.train_psnr = s.train_psnr;
-      emit(e);
-      return true;
-    };
-    SolverSummary summary;
-    Solve(so, backend.get(), &x, callback, &summary);
-    if (summary.status == SolverStatus::kFailure) {
-      throw Error(StrCat("level ", level, ": the solver failed: ", summary.message,
-                         "; check the workspace images, or try --damping 0.1"));
+  };
+  cb.iteration = [&](const HierarchyLevel& h, const IterationSummary& s) {
+    iter_time += s.seconds_total;
+    json line = IterationJson(lr, h.solver, s, level_start_elapsed + iter_time);
+    const bool last_it = s.iteration + 1 == h.solver.max_iterations;
+    if (!test.empty() && o.eval_every > 0 && ((s.iteration + 1) % o.eval_every == 0 || last_it)) {
+      held_out_psnr = held_out(h.params);
+      held_out_iteration = s.iteration;
+      line["test_psnr"] = held_out_psnr;
     }
+    if (o.preview_every > 0 && ((s.iteration + 1) % o.preview_every == 0 || last_it)) {
+      const auto t0 = WallClock::now();
+      const PosedImage& v = preview_views.front();
+      const RenderOutput r = backend->Render(h.params, v.camera, v.image.width, v.image.height, o.min_box_opacity);
+      const fs::path p = o.workspace / "preview" / StrCat("recon_l", h.level, "_i", s.iteration + 1, ".png");
+      EnsureWritableDirectory(p.parent_path());
+      WriteImage(p, ToImage(r), PixelFormat::kUInt8);
+      eval_seconds += SecondsSince(t0);
+    }
+    log.Write(line);
+    ReconstructOptions::Event e;
+    e.level = h.level;
+    e.levels = levels;
+    e.iteration = s.iteration + 1;
+    e.iterations = h.solver.max_iterations;
+    e.cost = s.cost_after;
+    e.train_psnr = s.train_psnr;
+    emit(e);
+    return true;
+  };
+  cb.level_done = [&](const HierarchyLevel& h, const SolverSummary& summary, const std::vector<float>& x) {
     lr.iterations = summary.iterations;
     lr.cost = summary.final_cost;
     lr.train_psnr = summary.per_iteration.empty() ? 0 : summary.per_iteration.back().train_psnr;
     lr.status = StatusName(summary.status);
     if (!test.empty()) {
       // The last iteration's, when the log has it; else now (the backend still holds x).
-      lr.test_psnr = held_out_iteration == summary.iterations - 1 ? held_out_psnr : held_out();
+      lr.test_psnr = held_out_iteration == summary.iterations - 1 ? held_out_psnr : held_out(h.params);
     }
-    WriteCheckpoint(CheckpointPath(o.workspace, level),
-                    MakeCheckpoint(scene, level, shape, summary.iterations, o.solver.type, x));
+    WriteCheckpoint(CheckpointPath(o.workspace, h.level),
+                    MakeCheckpoint(scene, h.level, h.shape, summary.iterations, o.solver.type, x));
     if (previous) previous->Discard();
     lr.seconds = SecondsSince(t_level) - eval_seconds;
     elapsed += lr.seconds;
     log.Write({{"event", "level"},
-               {"level", level},
-               {"n", shape.n},
+               {"level", h.level},
+               {"n", h.shape.n},
                {"iterations", lr.iterations},
                {"seconds", lr.seconds},
                {"elapsed", elapsed},
@@ -334,14 +335,16 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                {"test_psnr", lr.test_psnr},
                {"status", lr.status},
                {"report", summary.BriefReport()}});
-    say(StrCat("level ", level + 1, "/", levels, " done in ", lr.seconds, " s: ", summary.BriefReport(),
+    say(StrCat("level ", h.level + 1, "/", levels, " done in ", lr.seconds, " s: ", summary.BriefReport(),
                test.empty() ? std::string() : StrCat("; held-out PSNR ", lr.test_psnr, " dB")));
     result.levels.push_back(lr);
     result.solve_seconds += lr.seconds;
-    result.final_checkpoint = CheckpointPath(o.workspace, level);
+    result.final_checkpoint = CheckpointPath(o.workspace, h.level);
     result.test_psnr = lr.test_psnr;
-    if (level + 1 < levels) x = Resample(shape, x, shape_of(level + 1));
-  }
+    t_level = WallClock::now();
+    eval_seconds = 0;
+  };
+  SolveHierarchy(backend.get(), geometry, views, ho, start, std::move(x), cb);
 
   json levels_json = json::array();
   for (const LevelReport& l : result.levels) {

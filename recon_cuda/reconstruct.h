@@ -43,8 +43,8 @@ struct ReconstructOptions {
   bool init_shells_from_photos = false;  // shells start at the training photos' mean colour
   // The shells: "learn" them (the paper), or keep them "fixed" at scene.json's background, the
   // colour RGBA photos were composited over on import; "auto" is fixed when every photo had an
-  // alpha channel (e.g. NeRF synthetic), learn otherwise. A known background is information:
-  // on lego 50x50 (32^3 + 64^3, 8 + 8 GN) held-out PSNR 23.72 dB learned, 24.42 dB fixed.
+  // alpha channel (e.g. NeRF synthetic), learn otherwise. A known background is information
+  // (+0.7 dB on lego, docs/tuning.md).
   std::string background = "auto";
   ResidualSettings residuals;
   // Coarse levels fit downscaled photos: the largest power-of-two downscale that keeps a voxel

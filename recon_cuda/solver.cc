@@ -234,6 +234,14 @@ void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const Iter
       break;
     }
   }
+  // The line search saw a subset of the rays: the final cost is measured on all of them, at the
+  // last iteration's jitter, so that it and initial_cost (a full Linearize) are on one footing.
+  if (o.type == SolverType::kGaussNewton && o.line_search_ray_stride > 1 && summary->iterations > 0 &&
+      summary->status != SolverStatus::kFailure) {
+    const uint32_t seed = Hash(o.seed, static_cast<uint32_t>(summary->iterations - 1), 0u);
+    summary->final_cost = b->Cost(kX, seed).cost;
+    ++summary->cost_passes;
+  }
   b->Download(kX, *x);
   summary->seconds_total = SecondsSince(t_solve);
 }

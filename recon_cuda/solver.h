@@ -36,18 +36,8 @@ struct SolverOptions {
   // Jitter: iteration k uses Hash(seed, k, 0) for every pass (DESIGN.md "Gauss-Newton step").
   uint32_t seed = 1;
 
-  // PCG (paper Algorithm 2). The paper leaves after 1-3 iterations through its ratio test
-  // (cg_exit_ratio 0.85). Here that test stopped CG after 2 iterations in most GN steps, and
-  // running 6 regardless was clearly better per second on lego 50x50 (32^3 + 64^3, CPU):
-  //   ratio 0.85, at most 3 (mostly 2): 8 + 8 GN 24.77 dB in 29 s, 16 + 16 25.43 dB in 70 s;
-  //   ratio 1.0, at most 6:             8 + 8 GN 25.34 dB in 30 s;
-  //   no ratio exit, 4 / 6 / 10:        8 + 8 GN 25.56 / 25.82 / 25.91 dB in 36 / 41 / 62 s,
-  //                                     6 + 6 GN with 6: 25.83 dB in 32 s.
-  // (Those were scored with the paper's render rule, render_rule.h. Scored as fitted, with the
-  // alpha weight 0.3 and the restricted J^T J p: the paper's exit 28.01 dB in 22 s, 6 CG 8 + 8
-  // 28.36 dB in 29 s, 6 + 6 28.32 dB in 22 s, 16 + 16 28.42 dB in 51 s.)
-  // (Before the active set, longer CG overshot, as CALIBRATION.md also saw.) On the bonsai
-  // example 6 gave -0.1 dB over the whole view and +0.8 dB inside the mask at 8 + 8.
+  // PCG (paper Algorithm 2) iterations per GN step: 6 without the paper's ratio exit, better
+  // per second than the paper's 1-3 (docs/tuning.md).
   int max_cg_iterations = 6;
   // Leave when |r_k+1|^2 / |r_k|^2 > this (the paper: 0.85). CG's residual need not fall
   // monotonically, so values above 1 tolerate a rise; infinity (the default) runs
@@ -56,29 +46,21 @@ struct SolverOptions {
   double cg_relative_tolerance = 1e-10;  // or when |r|^2 < this |r_0|^2
   // Levenberg-Marquardt style damping: solves (J^T J + damping D) d = -g. 0: plain Gauss-Newton.
   double damping = 0.0;
-  // Preconditioner floor relative to the largest diagonal entry. Besides guarding parameters no
-  // ray reaches, it holds back the steps of those the rays barely constrain (the colour of a
-  // nearly clear cell), which otherwise overshoot and are clamped. Measured on lego 50x50
-  // (8 + 8 GN): 1e-9 22.43 dB, 1e-5 22.63, 1e-4 22.73, 1e-3 21.75, 1e-2 21.0; again with held
-  // bounds, a fixed background and centred rays (no opacity residual): 1e-5 24.42, 1e-4 24.88,
-  // 1e-3 24.72 dB.
+  // Preconditioner floor relative to the largest diagonal entry: guards parameters no ray reaches
+  // and holds back barely constrained ones, which otherwise overshoot (1e-4: docs/tuning.md).
   double diagonal_floor = 1e-4;
 
-  // Projected Gauss-Newton: leave the parameters at a bound of their range whose gradient
-  // points out of it (sigma = 0 with g > 0, a colour at 0 or 1 pushed further) out of the
-  // iteration's CG system, instead of letting the step move them and the projection undo it.
-  // On lego 50x50 (8 + 8 GN, every other default) three quarters of the parameters are held by
-  // the last iterations, and held-out PSNR goes from 25.47 to 28.36 dB. CG's J^T J p then skips
-  // the samples that reach only held densities (backend.h RestrictJacobian).
+  // Projected Gauss-Newton: parameters at a bound of their range whose gradient points out of it
+  // stay out of the iteration's CG system (and J^T J p skips samples reaching only held
+  // densities, backend.h RestrictJacobian). On (+2.9 dB on lego: docs/tuning.md).
   bool hold_at_bounds = true;
 
   // Line search (paper Algorithm 3).
   double initial_step = 1.0;
   double step_factor = 0.7;
   int max_line_search_steps = 8;
-  // Evaluate the line search's costs on every k-th ray only (1: all rays). 4 measured the same
-  // held-out PSNR as 1 on lego (50x50, 8 + 8 iterations: 22.43 dB both) at half the line
-  // search's time (3DGS-LM uses 30 % of the images likewise).
+  // Evaluate the line search's costs on every k-th ray only (1: all rays); 4 scores as 1 at half
+  // the line search's time (docs/tuning.md).
   int line_search_ray_stride = 4;
 
   AdamSettings adam;
@@ -103,7 +85,7 @@ const char* StatusName(SolverStatus s);
 struct IterationSummary {
   int iteration = 0;          // 0-based within the level
   double cost = 0;            // at the start of the iteration (its rays and jitter)
-  double cost_after = 0;      // after the accepted step (line search rays)
+  double cost_after = 0;      // after the accepted step (line-search subset, scaled to all rays)
   double train_psnr = 0;      // on the fixed subset after the step; 0 when off
   int cg_iterations = 0;
   int64_t held = 0;           // parameters left out of the step (fixed shells, at a bound)
@@ -117,6 +99,8 @@ struct IterationSummary {
 
 struct SolverSummary {
   SolverStatus status = SolverStatus::kIterationLimit;
+  // The cost on all rays at the start and at the end (Gauss-Newton with a line-search subset
+  // measures the end with one more Cost pass).
   double initial_cost = 0, final_cost = 0;
   int iterations = 0;
   std::vector<IterationSummary> per_iteration;
@@ -125,7 +109,8 @@ struct SolverSummary {
   int linearize_passes = 0, jtj_passes = 0, cost_passes = 0;
   std::string message;
 
-  // One line: "GN: 8 iterations, cost 1.2e3 -> 4.5e1, 9.8 s (linearize 3.1, cg 2.5, line search 3.6), iteration limit".
+  // One line: "8 iterations, cost 1.2e+03 -> 45, 9.80 s (linearize 3.10, cg 2.50, line search 3.60,
+  // update 0.10, psnr 0.20), 8+48+20 passes, iteration limit".
   std::string BriefReport() const;
 };
 

@@ -63,14 +63,8 @@ struct InitOptions {
   uint32_t seed = 1;
   // Opacity of the box along its shortest side at the start: every cell's sigma is uniform in
   // [0, 2 s] with s chosen so that the mean optical depth across the box gives this opacity.
-  // The paper's "low opacity" is per cell: 0.99 across a 32^3 box is ~0.13 per cell. On lego
-  // (50x50, 32^3 + 64^3, 8 + 8 GN iterations) it measured 22.4 dB held-out against 21.3 dB
-  // for a nearly clear start (0.1): carving a faint fog converges better than growing surfaces
-  // from nothing. Re-measured with the fixed background, the active set and the alpha residual:
-  // 0.5 27.12, 0.9 27.31, 0.99 27.47, 0.999 27.46, 0.9999 26.80 dB (scored without the render
-  // rule, render_rule.h; the paper's CG exit), and 0.9999 costs the bonsai example 1.6 dB.
-  // The Adam baseline starts here too: 60 + 60 steps gave 26.71 / 27.69 / 28.05 / 28.13 dB from
-  // 0.03 / 0.1 / 0.3 / 0.99.
+  // 0.99 (~0.13 per cell at 32^3, the paper's "low opacity"): carving a faint fog converges
+  // better than growing surfaces from nothing, for GN and Adam alike (docs/tuning.md).
   double box_opacity = 0.99;
   double shell_opacity = 0.1;  // mean opacity of the inner shells' texels, uniform in [0, 2 a]
   // Shell texel colours: this colour (e.g. the photos' mean) when set (>= 0), else random.

@@ -1,6 +1,7 @@
 // COLMAP camera models: parameter order, projection and distortion, exactly as COLMAP defines
-// them (src/colmap/sensor/models.h), as structs of static functions templated on the scalar so
-// one body serves double here, float on the GPU and ceres::Jet in derivative tests.
+// them (COLMAP's src/colmap/sensor/models.h), as structs of static functions templated on the
+// scalar so one body serves double here and ceres::Jet in derivative tests. (The reconstruction
+// sees undistorted pinhole cameras only: ray_math.h's PinholeCamera.)
 //
 // Conventions (stated once, used everywhere in PERF):
 // - Camera frame: x right, y down, z forward (looking along +z). `cam_from_world` maps world

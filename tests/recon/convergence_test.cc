@@ -132,9 +132,12 @@ TEST_F(SolverTest, CallbackStopsAndSummaryReports) {
   EXPECT_EQ(summary.status, SolverStatus::kUserAbort);
   EXPECT_EQ(summary.iterations, 3);
   EXPECT_EQ(summary.linearize_passes, 3);
-  // >= 2 trial points each; the subset's cost at x comes from the linearisation, not a pass.
-  EXPECT_GE(summary.cost_passes, 3 * 2);
-  EXPECT_LE(summary.cost_passes, 3 * so.max_line_search_steps);
+  // >= 2 trial points each (the subset's cost at x comes from the linearisation, not a pass),
+  // and one pass for the final cost on all rays.
+  EXPECT_GE(summary.cost_passes, 3 * 2 + 1);
+  EXPECT_LE(summary.cost_passes, 3 * so.max_line_search_steps + 1);
+  // initial_cost and final_cost are both the cost of all rays (not a rescaled subset).
+  EXPECT_DOUBLE_EQ(summary.final_cost, backend->Cost(kSolverX, Hash(so.seed, 2, 0)).cost);
   const std::string report = summary.BriefReport();
   EXPECT_NE(report.find("3 iterations"), std::string::npos) << report;
   EXPECT_NE(report.find("stopped by the caller"), std::string::npos) << report;

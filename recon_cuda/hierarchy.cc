@@ -1,0 +1,52 @@
+#include "recon_cuda/hierarchy.h"
+
+#include "common/errors.h"
+
+namespace perf::recon {
+
+VolumeShape LevelShape(const HierarchyOptions& o, int num_shells, int level) {
+  return VolumeShape{o.start_resolution << level, o.start_resolution << level, num_shells};
+}
+
+std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geometry, const TrainingViews& train,
+                                  const HierarchyOptions& o, int start, std::vector<float> x,
+                                  const HierarchyCallbacks& cb) {
+  for (int level = start; level < o.levels; ++level) {
+    HierarchyLevel h;
+    h.level = level;
+    h.levels = o.levels;
+    h.shape = LevelShape(o, geometry.num_shells(), level);
+    if (x.empty()) {  // level 0 of a fresh start
+      x = InitialParams(h.shape, geometry, o.init);
+      if (o.fixed_background) SetBackgroundShells(h.shape, o.background.data(), x);
+    }
+    h.image_downscale = o.pyramid ? PyramidFactor(train.cameras, geometry, h.shape.n, 1 << (o.levels - 1 - level)) : 1;
+    const RaySet rays = train.rays(h.image_downscale);
+    h.rays = rays.size();
+    h.memory = backend->SetLevel({h.shape, geometry, &rays, o.residuals, o.fixed_background},
+                                 RequiredVectors(o.solver.type));
+    h.solver = o.solver;
+    h.solver.max_iterations = o.iterations;
+    h.solver.seed = Hash(o.init.seed, static_cast<uint32_t>(level), 0x1e7e1u);
+    if (cb.level_started) cb.level_started(h);
+
+    bool stopped = false;
+    SolverSummary summary;
+    Solve(h.solver, backend, &x,
+          [&](const IterationSummary& s) {
+            stopped = cb.iteration && !cb.iteration(h, s);
+            return !stopped;
+          },
+          &summary);
+    if (summary.status == SolverStatus::kFailure) {
+      throw Error(StrCat("level ", level, ": the solver failed: ", summary.message,
+                         "; check the workspace images, or try --damping 0.1"));
+    }
+    if (cb.level_done) cb.level_done(h, summary, x);
+    if (stopped) break;
+    if (level + 1 < o.levels) x = Resample(h.shape, x, LevelShape(o, geometry.num_shells(), level + 1));
+  }
+  return x;
+}
+
+}  // namespace perf::recon

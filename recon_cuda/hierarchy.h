@@ -1,0 +1,70 @@
+// The coarse-to-fine hierarchy of DESIGN.md "Hierarchy", with no file I/O: `perf reconstruct`
+// (reconstruct.h, the workspace adapter) and the GPU benchmark run this one loop. Level 0 starts
+// from InitialParams at start_resolution^3; each level fits (a pyramid level of) the training
+// photos for a fixed number of solver iterations and is interpolated into the next (every
+// resolution doubled).
+#pragma once
+
+#include <array>
+#include <functional>
+#include <vector>
+
+#include "recon_cuda/backend.h"
+#include "recon_cuda/solver.h"
+#include "recon_cuda/training_data.h"
+#include "recon_cuda/volume.h"
+
+namespace perf::recon {
+
+struct HierarchyOptions {
+  int levels = 2;
+  int start_resolution = 32;  // grid cells per axis (and texels per face side) at level 0
+  int iterations = 30;        // solver iterations per level (paper: 30)
+  SolverOptions solver;       // max_iterations and seed are set per level
+  InitOptions init;           // the start of level 0
+  ResidualSettings residuals;
+  bool fixed_background = false;              // the shells are constants in `background`
+  std::array<float, 3> background{1, 1, 1};  // (scene.json's background)
+  bool pyramid = true;  // coarse levels fit downscaled photos (PyramidFactor)
+};
+
+// The grid and shells of `level`.
+VolumeShape LevelShape(const HierarchyOptions& options, int num_shells, int level);
+
+// What the callbacks see of the level being solved.
+struct HierarchyLevel {
+  int level = 0, levels = 0;
+  VolumeShape shape;
+  int image_downscale = 1;
+  int64_t rays = 0;
+  MemoryEstimate memory;
+  SolverOptions solver;  // as run at this level
+  // The backend vector holding the current parameters while the level runs and after it is done
+  // (render or score from it in a callback).
+  VecId params = kSolverX;
+};
+
+struct HierarchyCallbacks {
+  // After SetLevel, before the first iteration.
+  std::function<void(const HierarchyLevel&)> level_started;
+  // After each iteration; false stops the level's solve there (and the hierarchy after it).
+  std::function<bool(const HierarchyLevel&, const IterationSummary&)> iteration;
+  // After the level's solve; the backend still holds the level. `x` is its solution.
+  std::function<void(const HierarchyLevel&, const SolverSummary&, const std::vector<float>& x)> level_done;
+};
+
+// The training photos: their full-size cameras (for the pyramid rule), and their rays at an
+// integer downscale factor of the photos (1: as they are; MakeRaySet of the downscaled photos).
+struct TrainingViews {
+  std::vector<PinholeCamera<float>> cameras;
+  std::function<RaySet(int factor)> rays;
+};
+
+// Runs levels [start, levels) on `backend`. `x` holds the parameters at level `start` (empty:
+// a fresh start from InitialParams). Returns the last level's solution. Throws Error when the
+// solver fails, and whatever a callback throws.
+std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geometry, const TrainingViews& train,
+                                  const HierarchyOptions& options, int start, std::vector<float> x,
+                                  const HierarchyCallbacks& callbacks);
+
+}  // namespace perf::recon
