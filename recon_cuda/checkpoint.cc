@@ -1,9 +1,11 @@
 #include "recon_cuda/checkpoint.h"
 
+#include <algorithm>
 #include <bit>
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <optional>
 #include <regex>
 
 #include "common/atomic_file.h"
@@ -42,8 +44,9 @@ class Reader {
     if (!in_.read(reinterpret_cast<char*>(&v), sizeof(T))) Truncated(field);
     return v;
   }
-  [[noreturn]] void Truncated(const char* field) {
-    throw InputError(name_, field, "", "the checkpoint is truncated",
+  [[noreturn]] void Truncated(const char* field, const std::string& value = "",
+                              const std::string& problem = "the checkpoint is truncated") {
+    throw InputError(name_, field, value, problem,
                      "it was not written completely; delete it and run perf reconstruct again (--resume restarts "
                      "from the previous level)");
   }
@@ -57,6 +60,54 @@ class Reader {
   std::istream& in_;
   const std::string& name_;
 };
+
+// Bytes left in `in` after its read position, or nullopt where the stream cannot seek (a pipe).
+std::optional<uint64_t> BytesLeft(std::istream& in) {
+  const std::streampos here = in.tellg();
+  if (here == std::streampos(-1)) return std::nullopt;
+  in.seekg(0, std::ios::end);
+  const std::streampos end = in.tellg();
+  in.clear();
+  in.seekg(here);
+  if (end == std::streampos(-1) || !in || end < here) {
+    in.clear();
+    return std::nullopt;
+  }
+  return static_cast<uint64_t>(end - here);
+}
+
+[[noreturn]] void ParamsTruncated(Reader& r, uint64_t count, const std::string& found) {
+  r.Truncated("parameters", StrCat(count), StrCat("the checkpoint is truncated: its parameter count ", count, " needs ",
+                                                  count * sizeof(float), " bytes after the header", found));
+}
+
+// Checks the header's parameter count against the bytes that follow it, before anything is
+// allocated for them. False where the stream cannot tell (ReadParams then bounds the memory).
+bool CheckParamBytes(Reader& r, uint64_t count) {
+  const std::optional<uint64_t> left = BytesLeft(r.in());
+  if (!left) return false;
+  const uint64_t needed = count * sizeof(float);
+  if (*left < needed) ParamsTruncated(r, count, StrCat(", the file has ", *left));
+  if (*left > needed) r.Bad("size", StrCat(*left - needed, " bytes"), "trailing bytes after the parameters");
+  return true;
+}
+
+// The `count` floats of the parameter block. Unless `checked` (CheckParamBytes found them all
+// there), read in chunks, so that a stream that ends early costs no more memory than it held.
+std::vector<float> ReadParams(Reader& r, uint64_t count, bool checked) {
+  constexpr uint64_t kChunk = uint64_t{1} << 22;  // floats (16 MiB)
+  std::vector<float> params;
+  if (checked) params.reserve(count);
+  for (uint64_t done = 0; done < count;) {
+    const uint64_t n = std::min(kChunk, count - done);
+    params.resize(done + n);
+    if (!r.in().read(reinterpret_cast<char*>(params.data() + done), static_cast<std::streamsize>(n * sizeof(float)))) {
+      ParamsTruncated(r, count, "");
+    }
+    done += n;
+  }
+  return params;
+}
 
 }  // namespace
 
@@ -135,10 +186,7 @@ Checkpoint ReadCheckpoint(std::istream& in, const std::string& name) {
     r.Bad("parameter count", std::to_string(count), StrCat("expected ", c.shape.ParamCount(), " for the shape"));
   }
   const uint64_t checksum = r.Get<uint64_t>("checksum");
-  c.params.resize(count);
-  if (!in.read(reinterpret_cast<char*>(c.params.data()), static_cast<std::streamsize>(count * sizeof(float)))) {
-    r.Truncated("parameters");
-  }
+  c.params = ReadParams(r, count, CheckParamBytes(r, count));
   if (Fnv1a(c.params.data(), count * sizeof(float)) != checksum) {
     r.Bad("checksum", "", "the parameters do not match the checksum");
   }
@@ -147,13 +195,8 @@ Checkpoint ReadCheckpoint(std::istream& in, const std::string& name) {
 }
 
 void WriteCheckpoint(const std::filesystem::path& path, const Checkpoint& c) {
-  WriteAtomically(path, [&](const std::filesystem::path& tmp) {
-    std::ofstream out(tmp, std::ios::binary);
-    if (!out) throw IoError(tmp.string(), "cannot create the checkpoint", "check that the workspace is writable");
-    WriteCheckpoint(out, c);
-    out.flush();
-    if (!out) throw IoError(tmp.string(), "cannot write the checkpoint", "check the free disk space");
-  });
+  // Durable: a later run resumes from it, so it is fsynced before and after the rename.
+  WriteStreamAtomically(path, [&](std::ostream& out) { WriteCheckpoint(out, c); }, Durability::kDurable);
 }
 
 Checkpoint ReadCheckpoint(const std::filesystem::path& path) {

@@ -13,7 +13,8 @@
 //   u64      parameter count (= ParamCount(n, m, num_shells))
 //   u64      FNV-1a 64 of the parameter bytes
 //   f32[count] parameters, layout of ray_types.h
-// The reader checks every field and names the file and field on any mismatch; writes are atomic.
+// The reader checks every field and names the file and field on any mismatch, and checks the
+// parameter count against the bytes the file holds before allocating; writes are atomic.
 #pragma once
 
 #include <cstdint>

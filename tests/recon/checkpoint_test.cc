@@ -3,8 +3,11 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
+#include <cstring>
 #include <fstream>
 #include <sstream>
+#include <streambuf>
 
 #include "common/errors.h"
 #include "tests/test_util.h"
@@ -115,6 +118,88 @@ TEST(CheckpointTest, DamageIsNamed) {
   std::string shells = good;
   shells[28] = 9;  // num_shells
   EXPECT_EQ(FieldOfError(shells), "num_shells");
+}
+
+// The sample's 264-byte header claiming an n^3 grid and m^2 texels per face (two shells), with
+// the matching parameter count, and no parameters after it.
+std::string HugeHeader(int32_t n, int32_t m) {
+  std::string h = Bytes(Sample()).substr(0, 264);
+  std::memcpy(&h[20], &n, 4);
+  std::memcpy(&h[24], &m, 4);
+  const uint64_t count = static_cast<uint64_t>(ParamCount(n, m, 2));
+  std::memcpy(&h[248], &count, 8);
+  return h;
+}
+
+// A stream that cannot seek (like a pipe): the reader cannot ask how many bytes are left.
+class PipeBuf : public std::streambuf {
+ public:
+  explicit PipeBuf(std::string bytes) : bytes_(std::move(bytes)) { setg(bytes_.data(), bytes_.data(), bytes_.data() + bytes_.size()); }
+
+ private:
+  std::string bytes_;
+};
+
+// The field of the InputError that reading `in` throws, checking that it names the file and
+// that it came quickly (nothing the size of the claimed parameters was allocated or zeroed).
+std::string FieldOfQuickError(std::istream& in) {
+  const auto start = std::chrono::steady_clock::now();
+  try {
+    ReadCheckpoint(in, "huge.perfvol");
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("huge.perfvol"), std::string::npos) << e.what();
+    EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(5));
+    return StrCat(e.field(), ": ", e.what());
+  }
+  return "read";
+}
+
+TEST(CheckpointTest, HugeCountWithShortBodyIsRefusedBeforeAllocating) {
+  // 4096^3 cells and 2 x 6 x 16384^2 texels: 1.15 TB of parameters claimed, none there. The old
+  // reader resized the vector to the claimed count first (bad_alloc, or gigabytes zeroed).
+  const std::string header = HugeHeader(4096, 16384);
+  std::istringstream in(header);
+  const std::string error = FieldOfQuickError(in);
+  EXPECT_EQ(error.rfind("parameters: ", 0), 0u) << error;
+  EXPECT_NE(error.find("287762808832"), std::string::npos) << error;  // the claimed count
+  EXPECT_NE(error.find("truncated"), std::string::npos) << error;
+  // A stream that cannot tell its size: read in bounded chunks, refused at the first short one.
+  PipeBuf pipe(header + std::string(1000, '\0'));
+  std::istream piped(&pipe);
+  EXPECT_EQ(FieldOfQuickError(piped).rfind("parameters: ", 0), 0u);
+  // The same through the path overload, on a file of the header alone.
+  test::TempDir dir;
+  std::ofstream(dir / "huge.perfvol", std::ios::binary) << HugeHeader(4096, 16384);
+  try {
+    ReadCheckpoint(dir / "huge.perfvol");
+    ADD_FAILURE() << "read";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.field(), "parameters");
+    EXPECT_EQ(e.value(), "287762808832");
+  }
+}
+
+TEST(CheckpointTest, ShortAndLongBodiesAreNamedOnEveryStream) {
+  const std::string good = Bytes(Sample());
+  PipeBuf whole(good), shorter(good.substr(0, good.size() - 4)), longer(good + "x");
+  std::istream a(&whole), b(&shorter), c(&longer);
+  ExpectEqual(ReadCheckpoint(a, "pipe"), Sample());
+  EXPECT_EQ(FieldOfQuickError(b).rfind("parameters: ", 0), 0u);
+  EXPECT_EQ(FieldOfQuickError(c).rfind("size: ", 0), 0u);
+}
+
+// Inputs the fuzzer (fuzz/checkpoint_fuzzer.cc) once found a problem with: each reads or is
+// refused with an InputError.
+TEST(CheckpointTest, FuzzRegressionsReadOrAreRefused) {
+  const std::filesystem::path dir = std::filesystem::path(PERF_SOURCE_DIR) / "fuzz/regressions/checkpoint";
+  if (!std::filesystem::is_directory(dir)) GTEST_SKIP() << dir << " not found";
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    std::ifstream in(e.path(), std::ios::binary);
+    try {
+      ReadCheckpoint(in, e.path().string());
+    } catch (const InputError&) {
+    }
+  }
 }
 
 TEST(CheckpointTest, MissingFileIsAnIoError) {
