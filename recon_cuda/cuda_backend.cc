@@ -3,6 +3,7 @@
 #include <cuda_runtime_api.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <vector>
 
 #include "common/errors.h"
@@ -57,22 +58,30 @@ struct DeviceRays {
   }
 };
 
-// Pass statistics and reductions' working memory.
+// Render draws an image in bands of at most this many pixels through buffers allocated with the
+// level (16 MiB), so that its memory is part of the level's estimate whatever the image size.
+constexpr int64_t kRenderBandPixels = int64_t{1} << 20;
+
+// Pass statistics, reductions' working memory and Render's band.
 struct Scratch {
   DeviceBuffer<cuda::RayStats> partials, total;
   DeviceBuffer<double> result;
   DeviceBuffer<uint8_t> temp;
+  DeviceBuffer<float> render_colour, render_opacity;  // [kRenderBandPixels, 3], [kRenderBandPixels]
 
   static int64_t Bytes(int64_t rays, int64_t params) {
     const int64_t blocks = cuda::PassBlocks(rays);
     return (blocks + 1) * static_cast<int64_t>(sizeof(cuda::RayStats)) + static_cast<int64_t>(sizeof(double)) +
-           static_cast<int64_t>(std::max(cuda::StatsTempBytes(blocks), cuda::ReduceTempBytes(params)));
+           static_cast<int64_t>(std::max(cuda::StatsTempBytes(blocks), cuda::ReduceTempBytes(params))) +
+           4 * kRenderBandPixels * static_cast<int64_t>(sizeof(float));
   }
   Scratch(int64_t rays, int64_t params)
       : partials(std::max<int64_t>(cuda::PassBlocks(rays), 1)),
         total(1),
         result(1),
-        temp(static_cast<int64_t>(std::max(cuda::StatsTempBytes(cuda::PassBlocks(rays)), cuda::ReduceTempBytes(params)))) {}
+        temp(static_cast<int64_t>(std::max(cuda::StatsTempBytes(cuda::PassBlocks(rays)), cuda::ReduceTempBytes(params)))),
+        render_colour(3 * kRenderBandPixels),
+        render_opacity(kRenderBandPixels) {}
   cuda::StatsScratch Stats() {
     return {partials.data(), partials.size(), total.data(), temp.data(), static_cast<size_t>(temp.size())};
   }
@@ -101,7 +110,11 @@ class CudaBackend final : public Backend {
     const int64_t rays = p.rays ? p.rays->size() : 0;
     e.vectors = int64_t{num_vectors} * params * 4;
     e.rays = p.rays ? RayBytes(p) : 0;
-    e.scratch = Scratch::Bytes(rays, params);
+    // Plus the local memory (stack frames) the driver backs for every thread the device can hold
+    // once the ray kernels run: ~1 KB x 132 SMs x 2048 threads = ~285 MB on an H100. It stays
+    // with the CUDA context, so after the first level it is counted twice (free memory already
+    // lacks it): a margin of a few tenths of a percent of such a device.
+    e.scratch = Scratch::Bytes(rays, params) + cuda::KernelLocalMemoryBytes();
     e.jacobian_cache = 0;  // never cached: MultiplyJtJ recomputes (cuda_passes.cu)
     e.available = Available();
     return e;
@@ -190,11 +203,18 @@ class CudaBackend final : public Backend {
     const int64_t pixels = static_cast<int64_t>(width) * height;
     r.colour.resize(3 * pixels);
     r.opacity.resize(pixels);
-    DeviceBuffer<float> colour(3 * pixels), opacity(pixels);
-    cuda::Render(MakeView(level_.shape, level_.geometry, ptr(x)), level_.geometry.box, camera, width, height,
-                 level_.residuals.stop_transmittance, min_box_opacity, colour.data(), opacity.data());
-    colour.CopyToHost(r.colour);
-    opacity.CopyToHost(r.opacity);
+    if (pixels == 0) return r;
+    PERF_CHECK_MSG(width <= kRenderBandPixels, "a render ", width, " pixels wide");
+    const int band = static_cast<int>(std::min<int64_t>(height, kRenderBandPixels / width));
+    for (int y0 = 0; y0 < height; y0 += band) {
+      const int rows = std::min(band, height - y0);
+      const int64_t first = static_cast<int64_t>(y0) * width, count = static_cast<int64_t>(rows) * width;
+      cuda::Render(MakeView(level_.shape, level_.geometry, ptr(x)), level_.geometry.box, camera, width, y0, rows,
+                   level_.residuals.stop_transmittance, min_box_opacity, scratch_->render_colour.data(),
+                   scratch_->render_opacity.data());
+      scratch_->render_colour.CopyPrefixToHost(std::span<float>(r.colour).subspan(3 * first, 3 * count));
+      scratch_->render_opacity.CopyPrefixToHost(std::span<float>(r.opacity).subspan(first, count));
+    }
     return r;
   }
 
@@ -233,8 +253,8 @@ class CudaBackend final : public Backend {
     }
     if (hint.empty()) hint = StrCat("the rays alone need ", Mib(e.rays), ": use a larger --downscale");
     return StrCat("level ", DescribeShape(p.shape), " needs ", Mib(e.Total()), " of GPU memory (", num_vectors,
-                  " solver vectors ", Mib(e.vectors), ", ", p.rays->size(), " rays ", Mib(e.rays), ", scratch ",
-                  Mib(e.scratch), ") but only ", Mib(e.available), " are free on ", name_, "; ", hint,
+                  " solver vectors ", Mib(e.vectors), ", ", p.rays->size(), " rays ", Mib(e.rays),
+                  ", scratch and the kernels' local memory ", Mib(e.scratch), ") but only ", Mib(e.available), " are free on ", name_, "; ", hint,
                   ", a larger --downscale, or --device cpu");
   }
 
@@ -293,20 +313,39 @@ int64_t CudaMemoryInUse() {
   return static_cast<int64_t>(total) - static_cast<int64_t>(free);
 }
 
+namespace {
+
+// Why cudaGetDeviceCount failed, in the three cases a user can act on: no driver (or one too old
+// for this runtime), no device visible, anything else with CUDA's own words.
+std::string NoDeviceReason(cudaError_t e) {
+  const std::string cuda = StrCat(cudaGetErrorString(e), " (", cudaGetErrorName(e), ")");
+  switch (e) {
+    case cudaErrorInsufficientDriver:
+      return StrCat("driver not found: no NVIDIA driver (libcuda.so.1) was loaded, or it is older than this CUDA "
+                    "runtime; ",
+                    cuda, "; check nvidia-smi, and that LD_LIBRARY_PATH still contains the driver's folder");
+    case cudaErrorNoDevice: {
+      const char* visible = std::getenv("CUDA_VISIBLE_DEVICES");
+      return StrCat("no device: the driver sees no CUDA device; ", cuda,
+                    visible ? StrCat("; CUDA_VISIBLE_DEVICES=\"", visible, "\"") : std::string());
+    }
+    default:
+      return StrCat("the CUDA runtime cannot use the driver: ", cuda);
+  }
+}
+
+}  // namespace
+
 bool ProbeCudaDevice(std::string* name, std::string* reason) {
   int count = 0;
   const cudaError_t e = cudaGetDeviceCount(&count);
   if (e != cudaSuccess) {
     cudaGetLastError();
-    if (reason) {
-      *reason = StrCat(cudaGetErrorString(e), " (", cudaGetErrorName(e),
-                       e == cudaErrorInsufficientDriver ? ": no NVIDIA driver, or one older than this CUDA runtime)"
-                                                        : ")");
-    }
+    if (reason) *reason = NoDeviceReason(e);
     return false;
   }
   if (count == 0) {
-    if (reason) *reason = "the CUDA runtime sees no device (check CUDA_VISIBLE_DEVICES)";
+    if (reason) *reason = NoDeviceReason(cudaErrorNoDevice);
     return false;
   }
   cudaDeviceProp prop;
@@ -314,6 +353,15 @@ bool ProbeCudaDevice(std::string* name, std::string* reason) {
   if (p != cudaSuccess) {
     cudaGetLastError();
     if (reason) *reason = StrCat("cudaGetDeviceProperties: ", cudaGetErrorString(p));
+    return false;
+  }
+  // Device 0 is the current device unless this process chose another; the kernels' image must
+  // load on it (this build: sm_90 code + PTX, so not on GPUs before Hopper).
+  if (const char* k = cuda::KernelImageError()) {
+    if (reason) {
+      *reason = StrCat("wrong arch: ", prop.name, " (compute capability ", prop.major, ".", prop.minor,
+                       ") cannot run this build's kernels, built for sm_90 and newer (", k, ")");
+    }
     return false;
   }
   if (name) *name = prop.name;

@@ -2,6 +2,8 @@
 // PERF_CUDA_CHECK, which throws perf's error types naming the call, the CUDA error and the source
 // location. Out of device memory is a ResourceError (the user can pick a smaller level or device);
 // anything else is an InternalError (a bug, a broken driver or a kernel fault).
+// A reported error is cleared from the runtime's last error (cudaGetLastError), so that the next
+// launch check does not blame an unrelated kernel for it (sticky errors cannot be cleared).
 // Host code only (g++ or nvcc's host pass); never used in destructors, which must not throw.
 #pragma once
 

@@ -73,9 +73,10 @@ RayStats MultiplyJtJ(const PassInput& in, const float* p, const float* free, flo
                      const StatsScratch& s);
 // Rays offset, offset + stride, ... only.
 RayStats Cost(const PassInput& in, int stride, int offset, const StatsScratch& s);
-// colour: [height, width, 3], opacity: [height, width] (device).
+// Rows y0 .. y0 + rows - 1 of an image `width` pixels wide; colour: [rows, width, 3], opacity:
+// [rows, width] (device), row y0 first.
 void Render(const VolumeView<float>& vol, const BoxFrame<float>& box, const PinholeCamera<float>& camera, int width,
-            int height, float stop_transmittance, float min_box_opacity, float* colour, float* opacity);
+            int y0, int rows, float stop_transmittance, float min_box_opacity, float* colour, float* opacity);
 
 // Vector operations on n floats (device pointers).
 void Fill(float* y, int64_t n, float value);
@@ -106,10 +107,17 @@ double MaxAbs(const float* a, int64_t n, const ReduceScratch& s);
 // PTX does not run on older GPUs): nullptr if so, else the CUDA error's description.
 const char* KernelImageError();
 
-// Training colours in [0, 1] to 8 bits, rounded to nearest (host side, before upload).
+// Device memory the driver reserves for the ray kernels' local memory (stack frames: the cell
+// merge buffers and per-shell arrays) once they run: the largest per-thread size of any of them
+// (or the stack size limit, if larger) for every thread the current device can hold at once.
+int64_t KernelLocalMemoryBytes();
+
+// Training colours in [0, 1] to 8 bits, rounded to nearest (host side, before upload); values
+// outside are clamped and NaN maps to 0 (a float-to-integer cast of NaN or of a value out of
+// range is undefined behaviour, so the comparisons, written to be false for NaN, come first).
 inline uint8_t ColourToByte(float c) {
-  const float v = Clamp(c, 0.f, 1.f) * 255.f + 0.5f;
-  return static_cast<uint8_t>(v);
+  const float v = c > 0.f ? (c < 1.f ? c : 1.f) : 0.f;
+  return static_cast<uint8_t>(v * 255.f + 0.5f);
 }
 PERF_HD_INLINE float ByteToColour(uint8_t b) { return static_cast<float>(b) / 255.f; }
 

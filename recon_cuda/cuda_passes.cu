@@ -14,10 +14,15 @@
 //   - the merged scatter adds 4 consecutive floats; on sm_90 that is one vector atomic (float4),
 //     elsewhere 4 scalar ones. Every Add4 index is a multiple of 4 (GridParam / ShellParam of
 //     channel 0) and cudaMalloc aligns to 256 bytes, so the float4 is aligned.
-// Resources (ptxas, CUDA 13.0, sm_90, no spills): Linearize with diag 251 registers + 1040 B
-// stack frame, Linearize for Adam and JtJp 167 + 720 B, Cost 64 + 280 B. The stack holds the
-// cell merge buffers and the per-shell arrays (indexed at run time); with 251 registers only 2
-// blocks of 128 fit an SM. The first thing to profile on a GPU (occupancy vs local memory).
+// Resources (ptxas -v, CUDA 13.0.88, sm_90, no spills; re-measure after changing the per-ray
+// code): Linearize with diag 253 registers + 1056 B stack frame, Linearize for Adam and JtJp
+// 167 + 736 B, Cost 64 + 280 B, Render 56 + 360 B. The stack holds the cell merge buffers and
+// the per-shell arrays (indexed at run time); the driver backs it for every thread the device
+// can hold (KernelLocalMemoryBytes: ~285 MB on an H100, part of the memory estimate). At 253
+// registers only 2 blocks of 128 threads fit an SM's 64 K registers: 12.5 % occupancy for
+// Gauss-Newton's Linearize. That is the first thing to profile on a GPU (Nsight Compute: is the
+// kernel latency-bound, what do __launch_bounds__ min-blocks or smaller merge buffers cost in
+// local memory traffic?); do not tune it blind.
 // Float atomics make the order of the additions, hence the last bits of g, diag and J^T J p,
 // vary from run to run; the cost and counts are summed per block with CUB in a fixed order.
 #include <cub/block/block_reduce.cuh>
@@ -77,17 +82,19 @@ struct ScatterVisitor {
   __device__ void Finish() { merger.Finish(*this); }
 };
 
-// u += J_ray p (a gather); free as in ScatterVisitor.
+// u += J_ray p (a gather); free as in ScatterVisitor. used: the grid samples gathered.
 struct JpVisitor {
   const float* p;
   const float* free;
   float u[4];
+  int used = 0;
   __device__ void Shell(int, const CubeCoord<float>&, const TexelSample<float>& ts, const ShellPartials<float>& sp) {
     AddJpShell(p, ts, sp, u);
   }
   __device__ void Sample(int, const MarchStep<float>&, const GridSample<float>& gs, const SamplePartials<float>& sp) {
     if (free && SkippableSample(gs, sp, free)) return;
     AddJpSample(p, gs, sp, u);
+    ++used;
   }
 };
 
@@ -168,7 +175,11 @@ __global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const fl
     Backward(in.vol, r.ray, r.jit, fwd, v);
     v.Finish();
     mine.rays = 1;
-    mine.samples = fwd.count;
+    // The samples that enter the product, as the CPU backend counts them when it records the
+    // Jacobian (after RestrictJacobian it visits only the samples it kept; recomputing, it counts
+    // every sample). The march itself visits fwd.count, so after RestrictJacobian J^T J p's
+    // samples/s is not a march rate.
+    mine.samples = jp.used;
   }
   WriteBlockStats(mine, partials);
 }
@@ -190,17 +201,19 @@ __global__ void __launch_bounds__(kRayThreads) CostKernel(PassInput in, int64_t 
 
 // The CPU backend's Render, pixel by pixel: no jitter, the box treated as empty where its
 // opacity along the ray is below min_box_opacity.
+// Rows y0 .. y0 + rows - 1; the outputs start at row y0.
 __global__ void RenderKernel(VolumeView<float> vol, BoxFrame<float> box, PinholeCamera<float> camera, int width,
-                             int height, float stop, float min_box_opacity, float* colour, float* opacity) {
-  const int x = blockIdx.x * blockDim.x + threadIdx.x, y = blockIdx.y * blockDim.y + threadIdx.y;
-  if (x >= width || y >= height) return;
+                             int y0, int rows, float stop, float min_box_opacity, float* colour, float* opacity) {
+  const int x = blockIdx.x * blockDim.x + threadIdx.x, row = blockIdx.y * blockDim.y + threadIdx.y;
+  if (x >= width || row >= rows) return;
+  const int y = y0 + row;
   const Jitter none{0, 0, false, false};
   const float zero[3] = {0, 0, 0};
   const BoxRay<float> ray = PixelBoxRay(camera, box, vol.n, x, y, none);
   const RayOutput<float> o = Forward(vol, ray, none, zero, 0.f, stop);
   const float a = 1 - o.t_box;
   const bool empty = a < min_box_opacity;
-  const int64_t i = static_cast<int64_t>(y) * width + x;
+  const int64_t i = static_cast<int64_t>(row) * width + x;
   for (int c = 0; c < 3; ++c) colour[3 * i + c] = empty ? o.shells[c] : o.h[c];
   opacity[i] = a;
 }
@@ -229,6 +242,26 @@ const char* KernelImageError() {
   if (e == cudaSuccess) return nullptr;
   cudaGetLastError();  // not sticky: clear it
   return cudaGetErrorString(e);
+}
+
+int64_t KernelLocalMemoryBytes() {
+  size_t per_thread = 0;
+  PERF_CUDA_CHECK(cudaDeviceGetLimit(&per_thread, cudaLimitStackSize));
+  auto at_least = [&](const void* kernel) {
+    cudaFuncAttributes attr;
+    PERF_CUDA_CHECK(cudaFuncGetAttributes(&attr, kernel));
+    per_thread = std::max(per_thread, attr.localSizeBytes);
+  };
+  at_least(reinterpret_cast<const void*>(LinearizeKernel<true>));
+  at_least(reinterpret_cast<const void*>(LinearizeKernel<false>));
+  at_least(reinterpret_cast<const void*>(JtJpKernel));
+  at_least(reinterpret_cast<const void*>(CostKernel));
+  at_least(reinterpret_cast<const void*>(RenderKernel));
+  int device = 0, sms = 0, threads = 0;
+  PERF_CUDA_CHECK(cudaGetDevice(&device));
+  PERF_CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
+  PERF_CUDA_CHECK(cudaDeviceGetAttribute(&threads, cudaDevAttrMaxThreadsPerMultiProcessor, device));
+  return static_cast<int64_t>(per_thread) * sms * threads;
 }
 
 int64_t PassBlocks(int64_t rays) { return (rays + kRayThreads - 1) / kRayThreads; }
@@ -280,11 +313,12 @@ RayStats Cost(const PassInput& in, int stride, int offset, const StatsScratch& s
 }
 
 void Render(const VolumeView<float>& vol, const BoxFrame<float>& box, const PinholeCamera<float>& camera, int width,
-            int height, float stop_transmittance, float min_box_opacity, float* colour, float* opacity) {
-  if (width <= 0 || height <= 0) return;
+            int y0, int rows, float stop_transmittance, float min_box_opacity, float* colour, float* opacity) {
+  if (width <= 0 || rows <= 0) return;
   const dim3 block(16, 8);
-  const dim3 grid((width + block.x - 1) / block.x, (height + block.y - 1) / block.y);
-  RenderKernel<<<grid, block>>>(vol, box, camera, width, height, stop_transmittance, min_box_opacity, colour, opacity);
+  const dim3 grid((width + block.x - 1) / block.x, (rows + block.y - 1) / block.y);
+  RenderKernel<<<grid, block>>>(vol, box, camera, width, y0, rows, stop_transmittance, min_box_opacity, colour,
+                                opacity);
   PERF_CUDA_CHECK_LAUNCH("RenderKernel");
 }
 

@@ -48,6 +48,13 @@ class DeviceBuffer {
     PERF_CHECK_MSG(static_cast<int64_t>(host.size()) == count_, "host ", host.size(), " vs device ", count_);
     if (count_ > 0) PERF_CUDA_CHECK(cudaMemcpy(host.data(), data_, Bytes(), cudaMemcpyDeviceToHost));
   }
+  // The first host.size() elements (at most size()).
+  void CopyPrefixToHost(std::span<T> host) const {
+    PERF_CHECK_MSG(static_cast<int64_t>(host.size()) <= count_, "host ", host.size(), " vs device ", count_);
+    if (!host.empty()) {
+      PERF_CUDA_CHECK(cudaMemcpy(host.data(), data_, host.size() * sizeof(T), cudaMemcpyDeviceToHost));
+    }
+  }
 
  private:
   T* data_ = nullptr;

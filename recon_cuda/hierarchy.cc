@@ -12,6 +12,7 @@ std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geomet
                                   const HierarchyOptions& o, int start, std::vector<float> x,
                                   const HierarchyCallbacks& cb) {
   for (int level = start; level < o.levels; ++level) {
+    if (cb.before_level && !cb.before_level(level)) break;
     HierarchyLevel h;
     h.level = level;
     h.levels = o.levels;

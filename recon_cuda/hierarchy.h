@@ -45,6 +45,8 @@ struct HierarchyLevel {
 };
 
 struct HierarchyCallbacks {
+  // Before a level is set up; false ends the hierarchy there (e.g. a time budget spent).
+  std::function<bool(int level)> before_level;
   // After SetLevel, before the first iteration.
   std::function<void(const HierarchyLevel&)> level_started;
   // After each iteration; false stops the level's solve there (and the hierarchy after it).

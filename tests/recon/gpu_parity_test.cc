@@ -1,7 +1,10 @@
 // CUDA backend against the CPU backend (STYLE.md "Tests": CUDA against CPU on the same rays):
 // the same problem, seed and rays on both, compared pass by pass (cost, J^T r, diag(J^T J),
 // J^T J p, the cost on a subset, renders, the vector operations) and over short solves (GN and
-// Adam). Skips with "no CUDA device: ..." where there is none (CI); label gpu.
+// Adam), plus one pass-level case at the benchmark's settings (~1e5 rays, early termination,
+// fixed shells, alpha). Skips with "no CUDA device: ..." where there is none (CI), and fails
+// instead with PERF_REQUIRE_GPU=1 (require_gpu.h; RequireGpuTest checks both ways on any
+// machine); label gpu.
 //
 // Tolerances. Both backends run the same float code, but not the same float operations:
 //   - scatters are float atomics on the GPU (any order) and per-thread sums on the CPU, so every
@@ -17,15 +20,20 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
+#include <limits>
 #include <random>
 #include <string>
 
 #include "common/errors.h"
+#include "common/subprocess.h"
 #include "recon_cuda/cpu_backend.h"
 #include "recon_cuda/cuda_backend.h"
+#include "recon_cuda/cuda_kernels.h"
 #include "recon_cuda/solver.h"
 #include "recon_cuda/volume.h"
 #include "tests/recon/recon_test_util.h"
+#include "tests/recon/require_gpu.h"
 #include "tests/recon/synthetic_scene.h"
 
 namespace perf::recon {
@@ -58,7 +66,7 @@ class GpuParityTest : public ::testing::Test {
  protected:
   void SetUp() override {
     std::string reason;
-    if (!ProbeCudaDevice(nullptr, &reason)) GTEST_SKIP() << "no CUDA device: " << reason;
+    PERF_SKIP_OR_FAIL_WITHOUT_GPU(ProbeCudaDevice(nullptr, &reason), reason);
     gpu = MakeCudaBackend({});
     CpuBackendOptions o;
     o.threads = 2;
@@ -213,6 +221,19 @@ TEST_F(GpuParityTest, Render) {
     }
     EXPECT_LE(flipped, 1);
   }
+  // Larger than one of the backend's render bands (2^20 pixels): drawn in two bands.
+  const int w = 1100, h = 1000;
+  const RenderOutput c = cpu->Render(kX, p.rays.cameras[1], w, h, 0.f);
+  const RenderOutput g = gpu->Render(kX, p.rays.cameras[1], w, h, 0.f);
+  ASSERT_EQ(g.colour.size(), c.colour.size());
+  ASSERT_EQ(g.opacity.size(), c.opacity.size());
+  double worst = 0;
+  size_t at = 0;
+  for (size_t i = 0; i < c.colour.size(); ++i) {
+    const double d = std::abs(g.colour[i] - c.colour[i]) + std::abs(g.opacity[i / 3] - c.opacity[i / 3]);
+    if (d > worst) worst = d, at = i / 3;
+  }
+  EXPECT_LT(worst, 2e-5) << "pixel " << at % w << ", " << at / w;
 }
 
 TEST_F(GpuParityTest, VectorOperations) {
@@ -325,6 +346,169 @@ TEST_F(GpuParityTest, ALevelThatDoesNotFitNamesTheLargestThatDoes) {
     EXPECT_NE(what.find("4^3 grid"), std::string::npos) << what;
   }
   EXPECT_NO_THROW(b->SetLevel(small, kVectors));
+}
+
+// The benchmark's settings at the pass level: ~1.3e5 rays (1000 blocks of 128, so the per-block
+// statistics go through CUB's multi-tile reduction, as the ~437 k partials of lego at 256^3 do;
+// the small problems above have ~20 blocks, one tile), early termination at 1e-4 (the backward
+// pass recomputes the transmittance as exp(-(D - sum)) on rays that stopped), fixed opaque
+// shells at a background colour, the alpha residual, rays through pixel centres. A 32^3 grid,
+// so that an entry of g sums ~1e3 terms; float atomics against per-thread sums then differ by
+// ~sqrt(1e3) eps of the terms' size, and rays that stop one sample apart (transmittance within
+// rounding of the threshold) change an entry by < 1e-4 of the colour: entries agree to 2e-4 of
+// the largest plus 1e-4 of their own size, costs to 1e-4.
+TEST_F(GpuParityTest, ManyRaysWithEarlyTerminationAndFixedShells) {
+  TinyProblem p(21, 32, 8, 20, 80, 80);
+  ASSERT_EQ(p.rays.size(), 128000);
+  std::mt19937 rng(21);
+  std::uniform_real_distribution<float> u(0.f, 1.f);
+  for (int64_t i = 0; i < p.rays.size(); ++i) p.rays.alphas.push_back(i % 5 == 0 ? 0.f : u(rng));
+  // Ten times the densities: rays through the box turn opaque about half way (the CPU here cuts
+  // the march from 2.40 M to 1.25 M samples).
+  for (int64_t i = 0; i < p.shape.ParamCount(); ++i) {
+    if (KindOf(p.shape, i) == ParamKind::kGridDensity) p.x[i] *= 10.f;
+  }
+  QuantiseColours(&p.rays);
+  const float background[3] = {1.f, 1.f, 1.f};
+  SetBackgroundShells(p.shape, background, p.x);
+  LevelProblem level = p.Level(0.3f, /*pixel_jitter=*/false);
+  level.fixed_shells = true;
+  level.residuals.stop_transmittance = 0.f;
+  cpu->SetLevel(level, kVectors);
+  cpu->Upload(kX, p.x);
+  const int64_t full_march = cpu->Cost(kX, 3).samples;
+  level.residuals.stop_transmittance = 1e-4f;
+  enum : VecId { kFree = kVectors };
+  SetLevel(level, p.x, kVectors + 1);
+  const PassStats cc = cpu->Cost(kX, 3), gc = gpu->Cost(kX, 3);
+  // The case exercises early termination: a good part of the march is cut.
+  EXPECT_LT(cc.samples, 0.7 * full_march) << "early termination cut " << full_march - cc.samples << " of "
+                                          << full_march << " samples";
+  EXPECT_NEAR(gc.cost, cc.cost, 1e-4 * cc.cost);
+  EXPECT_EQ(gc.rays, cc.rays);
+  EXPECT_NEAR(static_cast<double>(gc.samples), static_cast<double>(cc.samples), 1e-3 * cc.samples);
+
+  const PassStats cl = cpu->Linearize(kX, 3, kG, kD), gl = gpu->Linearize(kX, 3, kG, kD, RaySubset{4, 1});
+  EXPECT_NEAR(gl.cost, cl.cost, 1e-4 * cl.cost);
+  EXPECT_EQ(gl.rays, cl.rays);
+  const double subset = cpu->Cost(kX, 3, RaySubset{4, 1}).cost;
+  EXPECT_NEAR(gl.subset_cost, subset, 1e-4 * subset);
+  test::ExpectAllClose(Get(gpu.get(), kG), Get(cpu.get(), kG), 2e-4, 1e-4, "J^T r, 1e5 rays");
+  test::ExpectAllClose(Get(gpu.get(), kD), Get(cpu.get(), kD), 2e-4, 1e-4, "diag(J^T J), 1e5 rays");
+  // Reductions over ~1.3e5 parameters (several tiles) of the same vector.
+  for (Backend* b : {cpu.get(), gpu.get()}) b->Upload(kOut, Get(cpu.get(), kG));
+  EXPECT_NEAR(gpu->Dot(kOut, kOut), cpu->Dot(kOut, kOut), 1e-10 * cpu->Dot(kOut, kOut));
+  EXPECT_EQ(gpu->MaxAbs(kOut), cpu->MaxAbs(kOut));
+
+  // CG's product as the solver runs it: fixed shells held, J^T J p on the free parameters.
+  for (Backend* b : {cpu.get(), gpu.get()}) b->HoldParameters(kX, kG, kFree, true);
+  const std::vector<float> free = Get(cpu.get(), kFree);
+  EXPECT_EQ(Get(gpu.get(), kFree), free);
+  EXPECT_EQ(std::count(free.begin(), free.end(), 0.f), p.shape.ParamCount() - p.shape.GridParamCount());
+  std::normal_distribution<float> normal;
+  std::vector<float> pv(p.shape.ParamCount());
+  for (size_t i = 0; i < pv.size(); ++i) pv[i] = free[i] * normal(rng);
+  for (Backend* b : {cpu.get(), gpu.get()}) {
+    b->Upload(kP, pv);
+    b->RestrictJacobian(kFree);
+  }
+  const PassStats cj = cpu->MultiplyJtJ(kP, kOut), gj = gpu->MultiplyJtJ(kP, kOut);
+  EXPECT_EQ(gj.rays, cj.rays);
+  EXPECT_NEAR(static_cast<double>(gj.samples), static_cast<double>(cj.samples), 1e-3 * cj.samples);
+  for (Backend* b : {cpu.get(), gpu.get()}) b->Multiply(kOut, kFree);
+  test::ExpectAllClose(Get(gpu.get(), kOut), Get(cpu.get(), kOut), 2e-4, 1e-4, "restricted J^T J p, 1e5 rays");
+}
+
+// A cudaMalloc that fails leaves its error as the runtime's last error; the error path clears
+// it, so the next launch check does not report it against an unrelated kernel.
+TEST_F(GpuParityTest, AFailedAllocationLeavesNoErrorForTheNextLaunch) {
+  const TinyProblem p = Problem(10);
+  CudaBackendOptions o;
+  o.max_memory = int64_t{1} << 50;  // past the estimate's check: cudaMalloc itself must fail
+  auto b = MakeCudaBackend(o);
+  const LevelProblem huge{{4096, 8, 2}, p.geometry, &p.rays, {}};  // 1 TiB per solver vector
+  try {
+    b->SetLevel(huge, kVectors);
+    FAIL() << "expected ResourceError";
+  } catch (const ResourceError& e) {
+    EXPECT_NE(std::string(e.what()).find("out of GPU memory"), std::string::npos) << e.what();
+  }
+  b->SetLevel(p.Level(), kVectors);  // zero-fills its vectors with a kernel launch
+  b->Upload(kX, p.x);
+  EXPECT_NO_THROW(b->Cost(kX, 1));
+}
+
+// What a level's passes and renders take of the device stays within the level's estimate (its
+// vectors, rays, scratch, render band and the kernels' local memory); run first in its own
+// process (ctest runs every case alone), the local memory is reserved during this test.
+TEST_F(GpuParityTest, TheEstimateCoversWhatALevelUses) {
+  const TinyProblem p = Problem(12);
+  const int64_t local = cuda::KernelLocalMemoryBytes();
+  EXPECT_GT(local, int64_t{64} << 20) << "~1 KB x every thread the device holds";
+  const int64_t before = CudaMemoryInUse();
+  const MemoryEstimate e = gpu->SetLevel(p.Level(), kVectors);
+  EXPECT_GE(e.scratch, local);
+  gpu->Upload(kX, p.x);
+  gpu->Linearize(kX, 1, kG, kD);
+  gpu->Upload(kP, p.x);
+  gpu->MultiplyJtJ(kP, kOut);
+  gpu->Linearize(kX, 1, kG, kNoVector);
+  gpu->Cost(kX, 1);
+  gpu->Render(kX, p.rays.cameras[0], 2000, 1500, 0.f);
+  const int64_t used = CudaMemoryInUse() - before;
+  // Allocation granularity (2 MiB pages) and CUB's launch state.
+  EXPECT_LE(used, e.Total() + (int64_t{16} << 20)) << "used " << used << " B, estimated " << e.Total() << " B";
+}
+
+// The 8-bit upload of colours and alphas: rounded to nearest, clamped, NaN to 0 (a cast of NaN
+// to an integer is undefined). Host code: runs on every machine.
+TEST(ColourToByteTest, RoundsClampsAndMapsNanToZero) {
+  EXPECT_EQ(cuda::ColourToByte(0.f), 0);
+  EXPECT_EQ(cuda::ColourToByte(1.f), 255);
+  EXPECT_EQ(cuda::ColourToByte(0.5f), 128);
+  EXPECT_EQ(cuda::ColourToByte(100.f / 255.f), 100);
+  EXPECT_EQ(cuda::ColourToByte(-3.f), 0);
+  EXPECT_EQ(cuda::ColourToByte(7.f), 255);
+  EXPECT_EQ(cuda::ColourToByte(std::numeric_limits<float>::infinity()), 255);
+  EXPECT_EQ(cuda::ColourToByte(-std::numeric_limits<float>::infinity()), 0);
+  EXPECT_EQ(cuda::ColourToByte(std::numeric_limits<float>::quiet_NaN()), 0);
+  EXPECT_EQ(cuda::ColourToByte(-std::numeric_limits<float>::quiet_NaN()), 0);
+  for (int b = 0; b < 256; ++b) EXPECT_EQ(cuda::ColourToByte(cuda::ByteToColour(static_cast<uint8_t>(b))), b);
+}
+
+// PERF_REQUIRE_GPU turns "no CUDA device" from a skip into a failure. Runs this binary again on
+// one GPU case with the device hidden (CUDA_VISIBLE_DEVICES empty), so it checks both ways on any
+// machine, with or without a GPU.
+struct ChildRun {
+  ProcessResult result;
+  std::string output;
+};
+ChildRun RunOneGpuCaseWithoutDevice(const std::string& require_gpu) {
+  ChildRun run;
+  run.result = RunProcess(std::filesystem::read_symlink("/proc/self/exe"),
+                          {"--gtest_filter=GpuParityTest.DescribesTheDevice"},
+                          {"CUDA_VISIBLE_DEVICES=", "PERF_REQUIRE_GPU=" + require_gpu, "GTEST_OUTPUT="},
+                          [&](std::string_view chunk) { run.output += chunk; });
+  return run;
+}
+
+TEST(RequireGpuTest, WithoutADeviceGpuCasesSkipUnlessAGpuIsRequired) {
+  for (const std::string unset : {"", "0"}) {
+    const ChildRun skip = RunOneGpuCaseWithoutDevice(unset);
+    EXPECT_EQ(skip.result.signal, 0) << skip.output;
+    EXPECT_EQ(skip.result.exit_code, 0) << skip.output;
+    EXPECT_NE(skip.output.find("[  SKIPPED ] GpuParityTest.DescribesTheDevice"), std::string::npos) << skip.output;
+    EXPECT_NE(skip.output.find("no CUDA device: "), std::string::npos) << skip.output;
+  }
+  const ChildRun fail = RunOneGpuCaseWithoutDevice("1");
+  EXPECT_EQ(fail.result.signal, 0) << fail.output;
+  EXPECT_NE(fail.result.exit_code, 0) << fail.output;
+  EXPECT_NE(fail.output.find("[  FAILED  ] GpuParityTest.DescribesTheDevice"), std::string::npos) << fail.output;
+  EXPECT_NE(fail.output.find("PERF_REQUIRE_GPU is set"), std::string::npos) << fail.output;
+  // The reason: no driver here (a machine without one), no device where the driver hides it.
+  const bool reason = fail.output.find("driver not found") != std::string::npos ||
+                      fail.output.find("no device") != std::string::npos;
+  EXPECT_TRUE(reason) << fail.output;
 }
 
 }  // namespace

@@ -1,0 +1,153 @@
+#!/usr/bin/env bash
+# The first GPU run (issue 18), staged by bench/stage_gpu_run.sh: on the GPU machine, in order,
+# each step with its own time cap, everything under $OUT:
+#   device     nvidia-smi and the device name                          -> device.log
+#   decode     the staged PNGs into images.u8 / alpha.u8 (numpy, Pillow) -> decode.log
+#   parity     gpu_parity_test with PERF_REQUIRE_GPU=1 (no device is a failure), gtest XML
+#                                                                        -> parity.log, parity.xml
+#   memcheck   compute-sanitizer memcheck on a short filter of it        -> memcheck.log
+#   gn128      perf_bench_gpu, Gauss-Newton only, 32^3 .. 128^3         -> gn128.log, gn_128.json/.svg
+#   both256    perf_bench_gpu, GN then Adam, 32^3 .. 256^3, in the time left
+#                                                                        -> both256.log, gn_adam_256.json/.svg
+#   summary.txt: one line per step (exit status, seconds, cap) and a verdict that is PASS only if
+#   the parity tests ran (none skipped, none failed), memcheck found nothing and both benchmark
+#   runs wrote results. The script exits 0 only then.
+# The whole stays within BUDGET seconds (default 570: one 10-minute command with room to spare);
+# the benchmarks get --time-budget below their cap, so they stop themselves at an iteration and
+# write what they have; `timeout` (SIGTERM, which the benchmark also turns into a clean stop,
+# then SIGKILL 15 s later) is the backstop.
+#   usage: bash .data/gpu_run/gpu_check.sh      (OUT=folder, default ./gpu_check_out; BUDGET=s)
+set -u
+HERE=$(cd "$(dirname "$0")" && pwd)
+OUT=${OUT:-$PWD/gpu_check_out}
+BUDGET=${BUDGET:-570}
+mkdir -p "$OUT"
+OUT=$(cd "$OUT" && pwd)
+SUMMARY=$OUT/summary.txt
+: > "$SUMMARY"
+START=$(date +%s)
+COMMIT=$(cat "$HERE/COMMIT" 2>/dev/null || echo unknown)
+# Prepend: the driver's libcuda.so.1 must stay reachable (replacing LD_LIBRARY_PATH can hide it).
+export LD_LIBRARY_PATH="$HERE/bin${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+export PATH="$PATH:/usr/local/cuda/bin:/usr/local/cuda/compute-sanitizer"
+
+left() { echo $((BUDGET - ($(date +%s) - START))); }
+
+# step NAME CAP COMMAND...: runs COMMAND for at most min(CAP, time left - 10) seconds, output in
+# $OUT/NAME.log, one line in summary.txt. Sets STEP_RC (124: timed out; 99: not run, no time).
+step() {
+  local name=$1 cap=$2
+  shift 2
+  local l t t0 t1
+  l=$(left)
+  t=$((cap < l - 10 ? cap : l - 10))
+  if [ "$t" -lt 15 ]; then
+    STEP_RC=99
+    printf '%-9s not run: %d s left of the %d s budget\n' "$name" "$l" "$BUDGET" | tee -a "$SUMMARY"
+    return
+  fi
+  echo "== $name (cap $t s): $*"
+  t0=$(date +%s%N)
+  timeout -k 15 "$t" "$@" > "$OUT/$name.log" 2>&1
+  STEP_RC=$?
+  t1=$(date +%s%N)
+  printf '%-9s rc=%-3d %6.1f s (cap %d s)\n' "$name" "$STEP_RC" "$(((t1 - t0) / 1000000))e-3" "$t" | tee -a "$SUMMARY"
+  tail -n 4 "$OUT/$name.log" | sed 's/^/    /'
+}
+
+verdict=PASS
+fail() {
+  verdict=FAIL
+  echo "FAIL: $*" | tee -a "$SUMMARY"
+}
+
+echo "commit $COMMIT, budget $BUDGET s, results in $OUT" | tee -a "$SUMMARY"
+
+# 1. The device (~2 s).
+step device 30 bash -c 'nvidia-smi; echo; nvidia-smi --query-gpu=name,driver_version,memory.total,compute_cap --format=csv'
+[ "$STEP_RC" -eq 0 ] || fail "nvidia-smi (is there a driver?)"
+DEVICE=$(nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null | head -n 1)
+echo "device: ${DEVICE:-none}" | tee -a "$SUMMARY"
+
+# 2. The photos as bytes (~10 s); skipped when they are there already (a second run).
+if [ -s "$HERE/lego/images.u8" ] && [ -s "$HERE/lego/alpha.u8" ]; then
+  echo "decode    skipped: images.u8 and alpha.u8 exist" | tee -a "$SUMMARY"
+else
+  step decode 120 python3 "$HERE/decode_images.py" "$HERE/lego"
+  [ "$STEP_RC" -eq 0 ] || fail "decode_images.py"
+fi
+
+# 3. CUDA against the CPU backend; a missing device fails here instead of skipping (~30 s).
+step parity 180 env PERF_REQUIRE_GPU=1 "$HERE/bin/gpu_parity_test" --gtest_output="xml:$OUT/parity.xml"
+if [ -s "$OUT/parity.xml" ]; then
+  # tests / failures / errors / skipped of the whole run, from gtest's XML.
+  counts=$(python3 - "$OUT/parity.xml" <<'PY'
+import sys
+import xml.etree.ElementTree as E
+r = E.parse(sys.argv[1]).getroot()
+print(*(int(r.get(k, 0)) for k in ("tests", "failures", "errors", "skipped", "disabled")))
+PY
+)
+  read -r n_tests n_fail n_err n_skip n_dis <<< "$counts"
+  echo "parity    $n_tests tests, $n_fail failed, $n_err errors, $n_skip skipped, $n_dis disabled" | tee -a "$SUMMARY"
+  { [ "$n_tests" -gt 0 ] && [ "$n_fail" -eq 0 ] && [ "$n_err" -eq 0 ] && [ "$n_skip" -eq 0 ]; } ||
+    fail "parity tests (parity.log, parity.xml)"
+else
+  fail "parity: no gtest XML (parity.log)"
+fi
+[ "$STEP_RC" -eq 0 ] || fail "parity exit status $STEP_RC"
+
+# 4. memcheck on the small pass tests (~60 s; the sanitizer slows kernels 10-100x).
+SANITIZER=$(command -v compute-sanitizer || true)
+if [ -n "$SANITIZER" ]; then
+  filter='GpuParityTest.LinearizeCostGradientAndDiagonal:GpuParityTest.AlphaResidual'
+  filter+=':GpuParityTest.JtJpAtTheLinearisationPoint:GpuParityTest.RestrictedJtJpOnTheFreeEntries'
+  filter+=':GpuParityTest.CostOnSubsetsAndWithEarlyTermination:GpuParityTest.Render:GpuParityTest.VectorOperations'
+  step memcheck 180 env PERF_REQUIRE_GPU=1 "$SANITIZER" --tool memcheck --error-exitcode 86 \
+    "$HERE/bin/gpu_parity_test" --gtest_filter="$filter"
+  grep -E 'ERROR SUMMARY' "$OUT/memcheck.log" | tee -a "$SUMMARY"
+  [ "$STEP_RC" -eq 0 ] || fail "memcheck exit status $STEP_RC (86: errors found; memcheck.log)"
+else
+  echo "memcheck  not run: compute-sanitizer not found" | tee -a "$SUMMARY"
+  fail "memcheck: compute-sanitizer not found"
+fi
+
+# bench NAME CAP TAG ARGS...: the benchmark, stopping itself 25 s before its cap.
+bench() {
+  local name=$1 cap=$2 tag=$3
+  shift 3
+  local l t
+  l=$(left)
+  t=$((cap < l - 10 ? cap : l - 10))
+  step "$name" "$t" "$HERE/bin/perf_bench_gpu" --data "$HERE/lego" --commit "$COMMIT" --out-dir "$OUT" \
+    --tag "$tag" --time-budget $((t > 40 ? t - 25 : 15)) "$@"
+  if [ -s "$OUT/$tag.json" ]; then
+    python3 - "$OUT/$tag.json" "$name" <<'PY' | tee -a "$SUMMARY"
+import json
+import sys
+j = json.load(open(sys.argv[1]))
+for name, r in j.get("runs", {}).items():
+    line = f"{sys.argv[2]:9s} {name}: {len(r['points'])} points, {len(r['levels'])} levels"
+    if r["levels"]:
+        last = r["levels"][-1]
+        line += f" (last {last['n']}^3, {last['iterations']} iterations)"
+    line += f", {r['solver_seconds']:.1f} s, held-out {r['final_test_psnr']:.2f} dB"
+    if not r["complete"]:
+        line += f", stopped: {r['stopped']}"
+    print(line)
+PY
+  else
+    fail "$name wrote no $tag.json ($name.log)"
+  fi
+  [ "$STEP_RC" -eq 0 ] || fail "$name exit status $STEP_RC"
+}
+
+# 5. Gauss-Newton to 128^3: the first complete figure and the pass throughput (~2-3 min).
+bench gn128 200 gn_128 --solver gn --levels 3
+
+# 6. Gauss-Newton, then Adam, to 256^3 in what is left (GN the first half, Adam the second).
+bench both256 $(($(left) - 10)) gn_adam_256 --solver both --levels 4
+
+echo "total $(($(date +%s) - START)) s of $BUDGET s" | tee -a "$SUMMARY"
+echo "RESULT: $verdict" | tee -a "$SUMMARY"
+[ "$verdict" = PASS ]
