@@ -12,6 +12,7 @@
 #include "common/errors.h"
 #include "common/stopwatch.h"
 #include "common/system_memory.h"
+#include "recon_cuda/cpu_vectors.h"
 #include "recon_cuda/jacobian.h"
 
 namespace perf::recon {
@@ -20,7 +21,6 @@ namespace {
 
 
 constexpr int64_t kBlockRays = 1024;      // rays per task; fixes the cost's summation order
-constexpr int64_t kVectorChunk = 1 << 15;  // elements per task in vector operations
 
 // Plain adds into a per-thread buffer. Linearize keeps J^T r and the diagonal in one buffer,
 // interleaved in groups of 4 (element i of g at 2 (i - i % 4) + i % 4, of diag 4 further), so that
@@ -106,7 +106,7 @@ class CpuBackend final : public Backend {
   explicit CpuBackend(const CpuBackendOptions& o)
       : options_(o),
         threads_(o.threads > 0 ? o.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()))),
-        arena_(threads_) {}
+        vectors_(threads_) {}
 
   std::string Describe() const override { return StrCat("cpu (", threads_, " thread", threads_ == 1 ? "" : "s", ")"); }
 
@@ -124,7 +124,7 @@ class CpuBackend final : public Backend {
   MemoryEstimate SetLevel(const LevelProblem& p, int num_vectors) override {
     PERF_CHECK(p.rays != nullptr);
     PERF_CHECK(p.shape.num_shells == p.geometry.num_shells() && p.shape.num_shells <= kMaxShells);
-    vectors_.clear();
+    vectors_.Assign(0, 0);
     blocks_.clear();
     scratch_.clear();
     level_ = p;
@@ -138,7 +138,7 @@ class CpuBackend final : public Backend {
                                  " MiB are available; use fewer --levels, fewer --threads, or a larger --downscale"));
     }
     cache_ = options_.cache_jacobian && (e.available == 0 || needed + e.jacobian_cache <= e.available);
-    vectors_.assign(num_vectors, std::vector<float>(p.shape.ParamCount(), 0.f));
+    vectors_.Assign(num_vectors, p.shape.ParamCount());
     const int64_t nblocks = (p.rays->size() + kBlockRays - 1) / kBlockRays;
     if (cache_) blocks_.resize(nblocks);
     const float* size = &p.geometry.box.size.x;
@@ -152,108 +152,28 @@ class CpuBackend final : public Backend {
   const LevelProblem& level() const override { return level_; }
   bool CachesJacobian() const override { return cache_; }
 
-  void Upload(VecId v, std::span<const float> host) override {
-    PERF_CHECK(host.size() == vec(v).size());
-    std::copy(host.begin(), host.end(), vec(v).begin());
-  }
-  void Download(VecId v, std::span<float> host) const override {
-    PERF_CHECK(host.size() == vec(v).size());
-    std::copy(vec(v).begin(), vec(v).end(), host.begin());
-  }
-  void Fill(VecId v, float value) override {
-    float* a = vec(v).data();
-    ForChunks([&](int64_t b, int64_t e) { std::fill(a + b, a + e, value); });
-  }
-  void Copy(VecId dst, VecId src) override {
-    float* d = vec(dst).data();
-    const float* s = vec(src).data();
-    ForChunks([&](int64_t b, int64_t e) { std::copy(s + b, s + e, d + b); });
-  }
-  void Axpy(VecId y, double a, VecId x) override {
-    float* py = vec(y).data();
-    const float* px = vec(x).data();
-    const float af = static_cast<float>(a);
-    ForChunks([&](int64_t b, int64_t e) {
-      for (int64_t i = b; i < e; ++i) py[i] += af * px[i];
-    });
-  }
-  void Xpby(VecId y, VecId x, double bb) override {
-    float* py = vec(y).data();
-    const float* px = vec(x).data();
-    const float bf = static_cast<float>(bb);
-    ForChunks([&](int64_t b, int64_t e) {
-      for (int64_t i = b; i < e; ++i) py[i] = px[i] + bf * py[i];
-    });
-  }
-  void DivideClamped(VecId z, VecId r, VecId d, float floor) override {
-    float* pz = vec(z).data();
-    const float* pr = vec(r).data();
-    const float* pd = vec(d).data();
-    ForChunks([&](int64_t b, int64_t e) {
-      for (int64_t i = b; i < e; ++i) pz[i] = pr[i] / std::max(pd[i], floor);
-    });
-  }
-  void AxpyDiag(VecId y, double a, VecId d, VecId x) override {
-    float* py = vec(y).data();
-    const float* pd = vec(d).data();
-    const float* px = vec(x).data();
-    const float af = static_cast<float>(a);
-    ForChunks([&](int64_t b, int64_t e) {
-      for (int64_t i = b; i < e; ++i) py[i] += af * pd[i] * px[i];
-    });
-  }
-  double Dot(VecId a, VecId b) const override {
-    const float* pa = vec(a).data();
-    const float* pb = vec(b).data();
-    return ReduceChunks([&](int64_t lo, int64_t hi) {
-      double s = 0;
-      for (int64_t i = lo; i < hi; ++i) s += static_cast<double>(pa[i]) * pb[i];
-      return s;
-    }, [](double x, double y) { return x + y; });
-  }
-  double MaxAbs(VecId v) const override {
-    const float* p = vec(v).data();
-    return ReduceChunks([&](int64_t lo, int64_t hi) {
-      float m = 0;
-      for (int64_t i = lo; i < hi; ++i) m = std::max(m, std::abs(p[i]));
-      return static_cast<double>(m);
-    }, [](double x, double y) { return std::max(x, y); });
-  }
-  void Project(VecId x) override {
-    float* p = vec(x).data();
-    const VolumeShape shape = level_.shape;
-    ForChunks([&](int64_t b, int64_t e) {
-      for (int64_t i = b; i < e; ++i) p[i] = ProjectToValid(KindOf(shape, i), p[i]);
-    });
-  }
+  void Upload(VecId v, std::span<const float> host) override { vectors_.Upload(v, host); }
+  void Download(VecId v, std::span<float> host) const override { vectors_.Download(v, host); }
+  void Fill(VecId v, float value) override { vectors_.Fill(v, value); }
+  void Copy(VecId dst, VecId src) override { vectors_.Copy(dst, src); }
+  void Axpy(VecId y, double a, VecId x) override { vectors_.Axpy(y, a, x); }
+  void Xpby(VecId y, VecId x, double b) override { vectors_.Xpby(y, x, b); }
+  void DivideClamped(VecId z, VecId r, VecId d, float floor) override { vectors_.DivideClamped(z, r, d, floor); }
+  void AxpyDiag(VecId y, double a, VecId d, VecId x) override { vectors_.AxpyDiag(y, a, d, x); }
+  double Dot(VecId a, VecId b) const override { return vectors_.Dot(a, b); }
+  double MaxAbs(VecId v) const override { return vectors_.MaxAbs(v); }
+  void Project(VecId x) override { vectors_.Project(x, level_.shape); }
   void HoldParameters(VecId x, VecId g, VecId free, bool bounds) override {
-    const float* px = vec(x).data();
-    float* pg = vec(g).data();
-    float* pf = vec(free).data();
-    const VolumeShape shape = level_.shape;
-    const bool fixed_shells = level_.fixed_shells;
-    ForChunks([&](int64_t b, int64_t e) {
-      for (int64_t i = b; i < e; ++i) {
-        const bool held = HeldParameter(KindOf(shape, i), px[i], pg[i], fixed_shells, bounds);
-        pf[i] = held ? 0.f : 1.f;
-        if (held) pg[i] = 0.f;
-      }
-    });
+    vectors_.HoldParameters(x, g, free, level_.shape, level_.fixed_shells, bounds);
   }
-  void Multiply(VecId y, VecId m) override {
-    float* py = vec(y).data();
-    const float* pm = vec(m).data();
-    ForChunks([&](int64_t b, int64_t e) {
-      for (int64_t i = b; i < e; ++i) py[i] *= pm[i];
-    });
-  }
+  void Multiply(VecId y, VecId m) override { vectors_.Multiply(y, m); }
   // Drops the recorded samples that reach no free parameter with a non-zero value (jacobian.h
   // SkippableSample). In carved empty space this is most of the march.
   void RestrictJacobian(VecId free) override {
     if (!linearized_ || !recorded_) return;
     const float* pf = vec(free).data();
     const int n = level_.shape.n;
-    arena_.execute([&] {
+    vectors_.arena().execute([&] {
       tbb::parallel_for(int64_t{0}, static_cast<int64_t>(blocks_.size()), [&](int64_t b) {
         BlockJ& block = blocks_[b];
         uint32_t first = 0, kept = 0;
@@ -273,16 +193,7 @@ class CpuBackend final : public Backend {
   }
 
   void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) override {
-    float* px = vec(x).data();
-    const float* pg = vec(g).data();
-    float* pm = vec(m).data();
-    float* pv = vec(v).data();
-    const VolumeShape shape = level_.shape;
-    const AdamCoefficients a = AdamCoefficientsAt(s, t);
-    ForChunks([&](int64_t b, int64_t e) {
-      for (int64_t i = b; i < e; ++i) AdamUpdate(a, KindOf(shape, i), pg[i], &px[i], &pm[i], &pv[i]);
-    });
-    Project(x);
+    vectors_.AdamStep(x, g, m, v, s, t, level_.shape);
   }
 
   PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset) override {
@@ -395,7 +306,7 @@ class CpuBackend final : public Backend {
     r.colour.resize(static_cast<size_t>(width) * height * 3);
     r.opacity.resize(static_cast<size_t>(width) * height);
     const float zero[3] = {0, 0, 0};
-    arena_.execute([&] {
+    vectors_.arena().execute([&] {
       tbb::parallel_for(0, height, [&](int y) {
         for (int px = 0; px < width; ++px) {
           const Jitter none{0, 0, false, false};
@@ -428,14 +339,8 @@ class CpuBackend final : public Backend {
     }
   };
 
-  std::vector<float>& vec(VecId v) {
-    PERF_CHECK(v >= 0 && v < static_cast<int>(vectors_.size()));
-    return vectors_[v];
-  }
-  const std::vector<float>& vec(VecId v) const {
-    PERF_CHECK(v >= 0 && v < static_cast<int>(vectors_.size()));
-    return vectors_[v];
-  }
+  std::vector<float>& vec(VecId v) { return vectors_[v]; }
+  const std::vector<float>& vec(VecId v) const { return vectors_[v]; }
 
   template <bool kDiag>
   BlockStats LinearizeBlock(const VolumeView<float>& vol, uint32_t seed, RaySubset subset, int64_t begin,
@@ -505,7 +410,7 @@ class CpuBackend final : public Backend {
     const VolumeView<float> vol = MakeView(p.shape, p.geometry, nullptr);
     const int64_t n = p.rays->size();
     std::vector<int64_t> per_block((n + kBlockRays - 1) / kBlockRays, 0);
-    arena_.execute([&] {
+    vectors_.arena().execute([&] {
       tbb::parallel_for(int64_t{0}, static_cast<int64_t>(per_block.size()), [&](int64_t b) {
         int64_t count = 0;
         for (int64_t i = b * kBlockRays; i < std::min(n, (b + 1) * kBlockRays); ++i) {
@@ -534,7 +439,7 @@ class CpuBackend final : public Backend {
     const int64_t nblocks = (n + kBlockRays - 1) / kBlockRays;
     std::vector<BlockStats> per_block(nblocks);
     const int64_t params = level_.shape.ParamCount();
-    arena_.execute([&] {
+    vectors_.arena().execute([&] {
       tbb::parallel_for(tbb::blocked_range<int64_t>(0, nblocks, 1), [&](const tbb::blocked_range<int64_t>& r) {
         Scratch& s = scratch_.local();
         if (static_cast<int>(s.record.size()) < max_samples_) {
@@ -574,7 +479,7 @@ class CpuBackend final : public Backend {
   void ReduceInto(uint64_t pass, VecId out) {
     const std::vector<const float*> parts = SumsOf(pass);
     float* o = vec(out).data();
-    ForChunks([&](int64_t b, int64_t e) {
+    vectors_.ForChunks([&](int64_t b, int64_t e) {
       if (parts.empty()) {
         std::fill(o + b, o + e, 0.f);
         return;
@@ -592,7 +497,7 @@ class CpuBackend final : public Backend {
     const std::vector<const float*> parts = SumsOf(pass);
     float* og = vec(g).data();
     float* od = vec(diag).data();
-    ForChunks([&](int64_t b, int64_t e) {
+    vectors_.ForChunks([&](int64_t b, int64_t e) {
       for (int64_t i = b; i < e; ++i) {
         const int64_t at = 2 * (i - i % 4) + i % 4;
         og[i] = parts.empty() ? 0.f : parts[0][at];
@@ -605,33 +510,10 @@ class CpuBackend final : public Backend {
     });
   }
 
-  template <class Fn>
-  void ForChunks(Fn&& fn) const {
-    const int64_t n = level_.shape.ParamCount();
-    arena_.execute([&] {
-      tbb::parallel_for(int64_t{0}, (n + kVectorChunk - 1) / kVectorChunk,
-                        [&](int64_t c) { fn(c * kVectorChunk, std::min(n, (c + 1) * kVectorChunk)); });
-    });
-  }
-  // Per-chunk partial results combined in chunk order: the same answer for any thread count.
-  template <class Fn, class Combine>
-  double ReduceChunks(Fn&& fn, Combine&& combine) const {
-    const int64_t n = level_.shape.ParamCount();
-    std::vector<double> part((n + kVectorChunk - 1) / kVectorChunk, 0.0);
-    arena_.execute([&] {
-      tbb::parallel_for(int64_t{0}, static_cast<int64_t>(part.size()),
-                        [&](int64_t c) { part[c] = fn(c * kVectorChunk, std::min(n, (c + 1) * kVectorChunk)); });
-    });
-    double r = 0;
-    for (double p : part) r = combine(r, p);
-    return r;
-  }
-
   CpuBackendOptions options_;
   int threads_;
-  mutable tbb::task_arena arena_;
+  CpuVectors vectors_;  // and the arena every pass runs in
   LevelProblem level_;
-  std::vector<std::vector<float>> vectors_;
   std::vector<BlockJ> blocks_;
   tbb::enumerable_thread_specific<Scratch> scratch_;
   bool cache_ = false, linearized_ = false, recorded_ = false;

@@ -393,37 +393,4 @@ PERF_HD void Backward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitt
   }
 }
 
-// Adapts a per-parameter callable f(index, dr_r, dr_g, dr_b, dL) to Backward's visitor: each
-// call is one contribution to row entries J[r_c][index] (sum the calls for the row).
-template <class T, class F>
-struct PerParamVisitor {
-  F& f;
-  PERF_HD_INLINE void Shell(int, const CubeCoord<T>&, const TexelSample<T>& ts, const ShellPartials<T>& p) {
-    for (int q = 0; q < 4; ++q) {
-      const T w = ts.w[q];
-      f(ts.param[q] + 0, p.de * w, T(0), T(0), T(0));
-      f(ts.param[q] + 1, T(0), p.de * w, T(0), T(0));
-      f(ts.param[q] + 2, T(0), T(0), p.de * w, T(0));
-      if (!p.opaque) f(ts.param[q] + 3, p.da[0] * w, p.da[1] * w, p.da[2] * w, T(0));
-    }
-  }
-  PERF_HD_INLINE void Sample(int, const MarchStep<T>&, const GridSample<T>& gs, const SamplePartials<T>& p) {
-    for (int q = 0; q < 8; ++q) {
-      const T w = gs.w[q];
-      const int64_t base = GridParam(gs.cell[q], 0);
-      f(base + 0, p.dc * w, T(0), T(0), T(0));
-      f(base + 1, T(0), p.dc * w, T(0), T(0));
-      f(base + 2, T(0), T(0), p.dc * w, T(0));
-      f(base + 3, p.ds[0] * w, p.ds[1] * w, p.ds[2] * w, p.dl * w);
-    }
-  }
-};
-
-template <class T, class F>
-PERF_HD_INLINE void BackwardPerParam(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitter& jit,
-                                     const RayOutput<T>& fwd, F& f) {
-  PerParamVisitor<T, F> v{f};
-  Backward(vol, ray, jit, fwd, v);
-}
-
 }  // namespace perf::recon

@@ -8,6 +8,8 @@
 #include <random>
 #include <vector>
 
+#include "tests/recon/per_param_visitor.h"
+
 namespace perf::recon {
 namespace {
 

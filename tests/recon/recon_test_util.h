@@ -13,6 +13,7 @@
 
 #include "recon_cuda/backend.h"
 #include "recon_cuda/ray_math.h"
+#include "tests/recon/per_param_visitor.h"
 
 namespace perf::recon::test {
 
