@@ -14,6 +14,7 @@
 #include "common/system_memory.h"
 #include "recon_cuda/cpu_vectors.h"
 #include "recon_cuda/jacobian.h"
+#include "recon_cuda/training_ray.h"
 
 namespace perf::recon {
 
@@ -128,7 +129,8 @@ class CpuBackend final : public Backend {
     blocks_.clear();
     scratch_.clear();
     level_ = p;
-    alphas_ = UsesAlpha(p) ? p.rays->alphas.data() : nullptr;
+    rays_ = {p.rays->cameras.data(), p.rays->pixels.data(), p.rays->colours.data(),
+             UsesAlpha(p) ? p.rays->alphas.data() : nullptr, p.rays->size()};
     weight_ = OpacityResidualWeight(p);
     const MemoryEstimate e = EstimateMemory(p, num_vectors);
     const int64_t needed = e.vectors + e.scratch + e.rays;
@@ -233,7 +235,8 @@ class CpuBackend final : public Backend {
       BlockStats bs;
       AddSink sink{s.acc.data()};
       for (int64_t i = begin; i < end; ++i) {
-        const BoxRay<float> ray = RayOf(i, lin_seed_);
+        const TrainingRay tr = TrainingRayOf(i, lin_seed_);
+        const BoxRay<float>& ray = tr.ray;
         const SampleJ* samples;
         const ShellJ* shells;
         int count;
@@ -245,7 +248,7 @@ class CpuBackend final : public Backend {
           count = static_cast<int>(b.end[r] - first);
           shells = &b.shells[r * k_shells];
         } else {
-          RecomputeRow(vol, ray, i, s);
+          RecomputeRow(vol, tr, i, s);
           samples = s.row.samples.data();
           count = static_cast<int>(s.row.samples.size());
           shells = s.row.shells.data();
@@ -286,9 +289,9 @@ class CpuBackend final : public Backend {
       BlockStats bs;
       int64_t i = begin + ((subset.offset - begin % subset.stride) + subset.stride) % subset.stride;
       for (; i < end; i += subset.stride) {
-        const RayOutput<float> fwd =
-            Forward(vol, RayOf(i, seed), JitterOf(i, seed), &level_.rays->colours[3 * i],
-                    weight_, level_.residuals.stop_transmittance, nullptr, AlphaOf(i));
+        const TrainingRay tr = TrainingRayOf(i, seed);
+        const RayOutput<float> fwd = Forward(vol, tr.ray, tr.jit, &level_.rays->colours[3 * i], weight_,
+                                             level_.residuals.stop_transmittance, nullptr, AlphaOf(rays_, i));
         bs.Add(fwd);
       }
       return bs;
@@ -312,11 +315,8 @@ class CpuBackend final : public Backend {
           const Jitter none{0, 0, false, false};
           const BoxRay<float> ray = PixelBoxRay(camera, level_.geometry.box, vol.n, px, y, none);
           const RayOutput<float> o = Forward(vol, ray, none, zero, 0.f, level_.residuals.stop_transmittance);
-          const float opacity = 1 - o.t_box;
           const size_t i = static_cast<size_t>(y) * width + px;
-          const bool empty = opacity < min_box_opacity;
-          for (int c = 0; c < 3; ++c) r.colour[3 * i + c] = empty ? o.shells[c] : o.h[c];
-          r.opacity[i] = opacity;
+          RulePixel(o, min_box_opacity, &r.colour[3 * i], &r.opacity[i]);
         }
       });
     });
@@ -328,12 +328,10 @@ class CpuBackend final : public Backend {
     double cost = 0, colour_sse = 0, subset_cost = 0;
     int64_t rays = 0, samples = 0;
     void Add(const RayOutput<float>& o, bool in_subset = false) {
-      double sse = 0;
-      for (int c = 0; c < 3; ++c) sse += static_cast<double>(o.residual[c]) * o.residual[c];
-      colour_sse += sse;
-      const double ray_cost = 0.5 * (sse + static_cast<double>(o.residual[3]) * o.residual[3]);
-      cost += ray_cost;
-      if (in_subset) subset_cost += ray_cost;
+      const RayCost c = CostOf(o);
+      colour_sse += c.colour_sse;
+      cost += c.cost;
+      if (in_subset) subset_cost += c.cost;
       rays += 1;
       samples += o.count;
     }
@@ -347,10 +345,11 @@ class CpuBackend final : public Backend {
                             int64_t end, Scratch& s, BlockJ* out) const {
     BlockStats bs;
     for (int64_t i = begin; i < end; ++i) {
-      const BoxRay<float> ray = RayOf(i, seed);
-      const Jitter jit = JitterOf(i, seed);
+      const TrainingRay tr = TrainingRayOf(i, seed);
+      const BoxRay<float>& ray = tr.ray;
+      const Jitter& jit = tr.jit;
       const RayOutput<float> fwd = Forward(vol, ray, jit, &level_.rays->colours[3 * i], weight_,
-                                           level_.residuals.stop_transmittance, s.record.data(), AlphaOf(i));
+                                           level_.residuals.stop_transmittance, s.record.data(), AlphaOf(rays_, i));
       LinearizeVisitor<kDiag> v{{fwd.residual[0], fwd.residual[1], fwd.residual[2], fwd.residual[3]},
                                 AddSink{s.acc.data(), kDiag ? 1 : 0, 0},
                                 AddSink{kDiag ? s.acc.data() : nullptr, 1, 4},
@@ -365,17 +364,11 @@ class CpuBackend final : public Backend {
     return bs;
   }
 
-  // Ray i's alpha target (AuxResidual), or -1: the paper's auxiliary term.
-  float AlphaOf(int64_t i) const { return alphas_ ? alphas_[i] : -1.f; }
-  // Ray i's jitter in the iteration of `seed` (every pass of the iteration sees the same).
-  Jitter JitterOf(int64_t i, uint32_t seed) const {
-    return {seed, static_cast<uint32_t>(i), level_.residuals.jitter, level_.residuals.pixel_jitter};
-  }
-
-  BoxRay<float> RayOf(int64_t i, uint32_t seed) const {
-    const RayPixel& px = level_.rays->pixels[i];
-    return PixelBoxRay(level_.rays->cameras[px.camera], level_.geometry.box, level_.shape.n, px.x, px.y,
-                       JitterOf(i, seed));
+  // Ray i in the iteration of `seed` (training_ray.h, as the CUDA passes read it).
+  BoxRay<float> RayOf(int64_t i, uint32_t seed) const { return TrainingRayOf(i, seed).ray; }
+  TrainingRay TrainingRayOf(int64_t i, uint32_t seed) const {
+    return recon::RayOf(rays_, level_.geometry.box, level_.shape.n, i, seed, level_.residuals.jitter,
+                        level_.residuals.pixel_jitter);
   }
 
   void ClearBlock(BlockJ* b, int64_t rays) const {
@@ -385,11 +378,12 @@ class CpuBackend final : public Backend {
   }
 
   // The partials of ray i at the linearisation point, into s.row (no recorded Jacobian).
-  void RecomputeRow(const VolumeView<float>& vol, const BoxRay<float>& ray, int64_t i, Scratch& s) const {
-    const Jitter jit = JitterOf(i, lin_seed_);
+  void RecomputeRow(const VolumeView<float>& vol, const TrainingRay& tr, int64_t i, Scratch& s) const {
+    const BoxRay<float>& ray = tr.ray;
+    const Jitter& jit = tr.jit;
     ClearBlock(&s.row, 1);
     const RayOutput<float> fwd = Forward(vol, ray, jit, &level_.rays->colours[3 * i], weight_,
-                                         level_.residuals.stop_transmittance, s.record.data(), AlphaOf(i));
+                                         level_.residuals.stop_transmittance, s.record.data(), AlphaOf(rays_, i));
     RecordOnly visitor{&s.row};
     Backward(vol, ray, jit, fwd, visitor, s.record.data());
   }
@@ -518,7 +512,7 @@ class CpuBackend final : public Backend {
   tbb::enumerable_thread_specific<Scratch> scratch_;
   bool cache_ = false, linearized_ = false, recorded_ = false;
   int max_samples_ = 0;
-  const float* alphas_ = nullptr;  // the level's alpha targets (UsesAlpha), else nullptr
+  TrainingRays<float> rays_{};     // the level's rays (alphas: nullptr unless UsesAlpha)
   float weight_ = 0;               // OpacityResidualWeight
   VecId lin_x_ = kNoVector;
   uint32_t lin_seed_ = 0;

@@ -19,19 +19,14 @@
 
 #include "recon_cuda/param_ops.h"
 #include "recon_cuda/ray_math.h"
+#include "recon_cuda/training_ray.h"
 
 namespace perf::recon::cuda {
 
-// The training rays on the device. Colours are 8-bit (value / 255): a quarter of float's memory
-// and bandwidth; exact for 8-bit photos at full resolution, within 1/510 for the averaged
-// pixels of the image pyramid (below the photos' own quantisation).
-struct RaysView {
-  const PinholeCamera<float>* cameras;  // [num_cameras]
-  const RayPixel* pixels;               // [count]
-  const uint8_t* colours;               // [count, 3]
-  const uint8_t* alphas;                // [count], or nullptr: no alpha residual (backend.h UsesAlpha)
-  int64_t count;
-};
+// The training rays on the device (training_ray.h). Colours are 8-bit (value / 255): a quarter
+// of float's memory and bandwidth; exact for 8-bit photos at full resolution, within 1/510 for
+// the averaged pixels of the image pyramid (below the photos' own quantisation).
+using RaysView = TrainingRays<uint8_t>;
 
 // Everything a ray pass reads.
 struct PassInput {
@@ -119,6 +114,7 @@ inline uint8_t ColourToByte(float c) {
   const float v = c > 0.f ? (c < 1.f ? c : 1.f) : 0.f;
   return static_cast<uint8_t>(v * 255.f + 0.5f);
 }
-PERF_HD_INLINE float ByteToColour(uint8_t b) { return static_cast<float>(b) / 255.f; }
+// ColourToByte's inverse (training_ray.h ColourValue, as the passes read the rays).
+PERF_HD_INLINE float ByteToColour(uint8_t b) { return ColourValue(b); }
 
 }  // namespace perf::recon::cuda

@@ -105,12 +105,10 @@ struct SumStats {
   }
 };
 
-// The cost of one ray as the CPU backend sums it (BlockStats::Add): in double from the float
-// residuals.
+// The cost of one ray (training_ray.h CostOf, as the CPU backend sums it).
 __device__ __forceinline__ RayStats StatsOf(const RayOutput<float>& o) {
-  double sse = 0;
-  for (int c = 0; c < 3; ++c) sse += static_cast<double>(o.residual[c]) * o.residual[c];
-  return {0.5 * (sse + static_cast<double>(o.residual[3]) * o.residual[3]), sse, 1, o.count, 0.0};
+  const RayCost c = CostOf(o);
+  return {c.cost, c.colour_sse, 1, o.count, 0.0};
 }
 
 __device__ __forceinline__ void WriteBlockStats(const RayStats& mine, RayStats* partials) {
@@ -120,22 +118,9 @@ __device__ __forceinline__ void WriteBlockStats(const RayStats& mine, RayStats* 
   if (threadIdx.x == 0) partials[blockIdx.x] = sum;
 }
 
-// Ray i as every pass of the iteration of in.seed sees it (the CPU backend's RayOf / JitterOf).
-struct RayAt {
-  BoxRay<float> ray;
-  Jitter jit;
-};
-__device__ __forceinline__ RayAt MakeRay(const PassInput& in, int64_t i) {
-  const RayPixel px = in.rays.pixels[i];
-  const Jitter jit{in.seed, static_cast<uint32_t>(i), in.jitter, in.pixel_jitter};
-  return {PixelBoxRay(in.rays.cameras[px.camera], in.box, in.vol.n, px.x, px.y, jit), jit};
-}
-__device__ __forceinline__ void TargetOf(const PassInput& in, int64_t i, float target[3]) {
-  for (int c = 0; c < 3; ++c) target[c] = ByteToColour(in.rays.colours[3 * i + c]);
-}
-// The CPU backend's AlphaOf: the alpha target, or -1 for the paper's auxiliary term.
-__device__ __forceinline__ float AlphaOf(const PassInput& in, int64_t i) {
-  return in.rays.alphas ? ByteToColour(in.rays.alphas[i]) : -1.f;
+// Ray i as every pass of the iteration of in.seed sees it, its targets (training_ray.h).
+__device__ __forceinline__ TrainingRay MakeRay(const PassInput& in, int64_t i) {
+  return RayOf(in.rays, in.box, in.vol.n, i, in.seed, in.jitter, in.pixel_jitter);
 }
 
 template <bool kDiag>
@@ -144,11 +129,11 @@ __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, flo
   const int64_t i = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   RayStats mine;
   if (i < in.rays.count) {
-    const RayAt r = MakeRay(in, i);
+    const TrainingRay r = MakeRay(in, i);
     float target[3];
-    TargetOf(in, i, target);
+    TargetOf(in.rays, i, target);
     const RayOutput<float> fwd =
-        Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in, i));
+        Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in.rays, i));
     ScatterVisitor<kDiag> v{{fwd.residual[0], fwd.residual[1], fwd.residual[2], fwd.residual[3]}, {g}, {diag}, {}};
     Backward(in.vol, r.ray, r.jit, fwd, v);
     v.Finish();
@@ -163,12 +148,12 @@ __global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const fl
   const int64_t i = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   RayStats mine;
   if (i < in.rays.count) {
-    const RayAt r = MakeRay(in, i);
+    const TrainingRay r = MakeRay(in, i);
     // The partials depend on the forward's transmittances and colours, not on the target (and
     // on whether the ray has an alpha, not on its value).
     const float zero[3] = {0, 0, 0};
     const RayOutput<float> fwd =
-        Forward(in.vol, r.ray, r.jit, zero, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in, i));
+        Forward(in.vol, r.ray, r.jit, zero, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in.rays, i));
     JpVisitor jp{p, free, {0, 0, 0, 0}};
     Backward(in.vol, r.ray, r.jit, fwd, jp);
     ScatterVisitor<false> v{{jp.u[0], jp.u[1], jp.u[2], jp.u[3]}, {out}, {nullptr}, {}, free};
@@ -191,16 +176,15 @@ __global__ void __launch_bounds__(kRayThreads) CostKernel(PassInput in, int64_t 
   RayStats mine;
   if (j < count) {
     const int64_t i = offset + j * stride;
-    const RayAt r = MakeRay(in, i);
+    const TrainingRay r = MakeRay(in, i);
     float target[3];
-    TargetOf(in, i, target);
-    mine = StatsOf(Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in, i)));
+    TargetOf(in.rays, i, target);
+    mine = StatsOf(Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in.rays, i)));
   }
   WriteBlockStats(mine, partials);
 }
 
-// The CPU backend's Render, pixel by pixel: no jitter, the box treated as empty where its
-// opacity along the ray is below min_box_opacity.
+// The CPU backend's Render, pixel by pixel: no jitter, the render rule (training_ray.h RulePixel).
 // Rows y0 .. y0 + rows - 1; the outputs start at row y0.
 __global__ void RenderKernel(VolumeView<float> vol, BoxFrame<float> box, PinholeCamera<float> camera, int width,
                              int y0, int rows, float stop, float min_box_opacity, float* colour, float* opacity) {
@@ -211,11 +195,8 @@ __global__ void RenderKernel(VolumeView<float> vol, BoxFrame<float> box, Pinhole
   const float zero[3] = {0, 0, 0};
   const BoxRay<float> ray = PixelBoxRay(camera, box, vol.n, x, y, none);
   const RayOutput<float> o = Forward(vol, ray, none, zero, 0.f, stop);
-  const float a = 1 - o.t_box;
-  const bool empty = a < min_box_opacity;
   const int64_t i = static_cast<int64_t>(row) * width + x;
-  for (int c = 0; c < 3; ++c) colour[3 * i + c] = empty ? o.shells[c] : o.h[c];
-  opacity[i] = a;
+  RulePixel(o, min_box_opacity, &colour[3 * i], &opacity[i]);
 }
 
 // Sums the per-block partials in a fixed order and returns the total (synchronises).

@@ -1,0 +1,72 @@
+// The per-ray pieces both backends must read identically (DESIGN.md "One ray"): training ray i of
+// a level as every pass of one iteration sees it, its targets, its cost, and a rendered pixel
+// under the render rule. The ray set's colour type is a parameter: float on the CPU (RaySet),
+// 8-bit on the GPU (cuda_kernels.h).
+#pragma once
+
+#include <stdint.h>
+
+#include "recon_cuda/hd.h"
+#include "recon_cuda/ray_math.h"
+
+namespace perf::recon {
+
+PERF_HD_INLINE float ColourValue(float v) { return v; }
+PERF_HD_INLINE float ColourValue(uint8_t v) { return static_cast<float>(v) / 255.f; }
+
+// A level's training rays, flat (training_data.h RaySet, or its device copy).
+template <class Colour>
+struct TrainingRays {
+  const PinholeCamera<float>* cameras;  // [num_cameras]
+  const RayPixel* pixels;               // [count]
+  const Colour* colours;                // [count, 3]
+  const Colour* alphas;                 // [count], or nullptr: no alpha residual (backend.h UsesAlpha)
+  int64_t count;
+};
+
+struct TrainingRay {
+  BoxRay<float> ray;
+  Jitter jit;
+};
+
+// Ray i in the iteration of `seed`: every pass of the iteration sees the same ray and jitter.
+template <class Colour>
+PERF_HD_INLINE TrainingRay RayOf(const TrainingRays<Colour>& rays, const BoxFrame<float>& box, int n, int64_t i,
+                                 uint32_t seed, bool jitter, bool pixel_jitter) {
+  const RayPixel px = rays.pixels[i];
+  const Jitter jit{seed, static_cast<uint32_t>(i), jitter, pixel_jitter};
+  return {PixelBoxRay(rays.cameras[px.camera], box, n, px.x, px.y, jit), jit};
+}
+
+template <class Colour>
+PERF_HD_INLINE void TargetOf(const TrainingRays<Colour>& rays, int64_t i, float target[3]) {
+  for (int c = 0; c < 3; ++c) target[c] = ColourValue(rays.colours[3 * i + c]);
+}
+
+// The alpha target of ray i (AuxResidual), or -1: the paper's auxiliary term.
+template <class Colour>
+PERF_HD_INLINE float AlphaOf(const TrainingRays<Colour>& rays, int64_t i) {
+  return rays.alphas ? ColourValue(rays.alphas[i]) : -1.f;
+}
+
+// A ray's share of the cost, in double from the float residuals: 0.5 |r|^2 over the colour and
+// opacity residuals, and the colour part's squared error (for PSNR).
+struct RayCost {
+  double cost, colour_sse;
+};
+PERF_HD_INLINE RayCost CostOf(const RayOutput<float>& o) {
+  double sse = 0;
+  for (int c = 0; c < 3; ++c) sse += static_cast<double>(o.residual[c]) * o.residual[c];
+  return {0.5 * (sse + static_cast<double>(o.residual[3]) * o.residual[3]), sse};
+}
+
+// A rendered pixel under the render rule (render_rule.h): where the box's opacity along the ray
+// is below min_box_opacity the box is treated as empty and the pixel shows the shells.
+PERF_HD_INLINE void RulePixel(const RayOutput<float>& o, float min_box_opacity, float colour[3], float* opacity) {
+  const float a = 1 - o.t_box;
+  const bool empty = a < min_box_opacity;
+  for (int c = 0; c < 3; ++c) colour[c] = empty ? o.shells[c] : o.h[c];
+  *opacity = a;
+}
+
+}  // namespace perf::recon
