@@ -46,7 +46,7 @@ struct ResidualSettings {
 struct LevelProblem {
   VolumeShape shape;
   VolumeGeometry geometry;
-  const RaySet* rays = nullptr;  // must outlive the level
+  const RaySet* rays = nullptr;  // must outlive the level; nullptr: a render-only level (no rays)
   ResidualSettings residuals;
   // The shells are constants, not variables: a known background (scene.json's background
   // colour, which RGBA photos were composited over). Solvers leave them where they start.
@@ -123,10 +123,13 @@ struct RenderOutput {
   std::vector<float> opacity;  // [height, width]: 1 - T_box, the box's opacity along the ray
 };
 
+enum class BackendKind { kCpu, kCuda };
+
 class Backend {
  public:
   virtual ~Backend() = default;
 
+  virtual BackendKind kind() const = 0;
   // "cpu (2 threads)", "cuda (NVIDIA H100 80GB HBM3)".
   virtual std::string Describe() const = 0;
 

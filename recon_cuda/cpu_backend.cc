@@ -109,6 +109,7 @@ class CpuBackend final : public Backend {
         threads_(o.threads > 0 ? o.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()))),
         vectors_(threads_) {}
 
+  BackendKind kind() const override { return BackendKind::kCpu; }
   std::string Describe() const override { return StrCat("cpu (", threads_, " thread", threads_ == 1 ? "" : "s", ")"); }
 
   MemoryEstimate EstimateMemory(const LevelProblem& p, int num_vectors) const override {
@@ -122,8 +123,9 @@ class CpuBackend final : public Backend {
     return e;
   }
 
-  MemoryEstimate SetLevel(const LevelProblem& p, int num_vectors) override {
-    PERF_CHECK(p.rays != nullptr);
+  MemoryEstimate SetLevel(const LevelProblem& problem, int num_vectors) override {
+    LevelProblem p = problem;
+    if (!p.rays) p.rays = &NoRays();  // render-only
     PERF_CHECK(p.shape.num_shells == p.geometry.num_shells() && p.shape.num_shells <= kMaxShells);
     vectors_.Assign(0, 0);
     blocks_.clear();

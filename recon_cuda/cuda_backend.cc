@@ -102,6 +102,7 @@ class CudaBackend final : public Backend {
     }
   }
 
+  BackendKind kind() const override { return BackendKind::kCuda; }
   std::string Describe() const override { return StrCat("cuda (", name_, ")"); }
 
   MemoryEstimate EstimateMemory(const LevelProblem& p, int num_vectors) const override {
@@ -120,8 +121,9 @@ class CudaBackend final : public Backend {
     return e;
   }
 
-  MemoryEstimate SetLevel(const LevelProblem& p, int num_vectors) override {
-    PERF_CHECK(p.rays != nullptr);
+  MemoryEstimate SetLevel(const LevelProblem& problem, int num_vectors) override {
+    LevelProblem p = problem;
+    if (!p.rays) p.rays = &NoRays();  // render-only
     PERF_CHECK(p.shape.num_shells == p.geometry.num_shells() && p.shape.num_shells <= kMaxShells);
     PERF_CHECK(num_vectors >= 0);
     Release();

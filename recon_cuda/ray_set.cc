@@ -9,6 +9,11 @@
 
 namespace perf::recon {
 
+const RaySet& NoRays() {
+  static const RaySet none;
+  return none;
+}
+
 int64_t RaySet::Bytes() const {
   return static_cast<int64_t>(cameras.size() * sizeof(PinholeCamera<float>) + pixels.size() * sizeof(RayPixel) +
                               (colours.size() + alphas.size()) * sizeof(float));

@@ -81,7 +81,7 @@ void CheckMatchesScene(const Checkpoint& c, const Scene& scene, const fs::path& 
 
 }  // namespace
 
-int DefaultLevels(const std::string& backend_name) { return backend_name.rfind("cuda", 0) == 0 ? 4 : 2; }
+int DefaultLevels(BackendKind kind) { return kind == BackendKind::kCuda ? 4 : 2; }
 
 void ReconstructOptions::Check() const {
   if (workspace.empty()) Fail("WORKSPACE", "", "missing", "pass the workspace made by perf import");
@@ -176,7 +176,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   std::unique_ptr<Backend> backend = MakeBackend(o.device, o.threads);
   ReconstructResult result;
   result.backend = backend->Describe();
-  const int levels = o.levels > 0 ? o.levels : DefaultLevels(result.backend);
+  const int levels = o.levels > 0 ? o.levels : DefaultLevels(backend->kind());
   result.fixed_background = FixedBackground(o.background, scene);
   HierarchyOptions ho = ToHierarchy(o, levels);
   ho.fixed_background = result.fixed_background;

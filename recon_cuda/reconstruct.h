@@ -29,7 +29,7 @@ namespace perf::recon {
 // 64^3 Gauss-Newton iteration on 100x100 images in about a second and 128^3 in several: two
 // levels give a recognisable result in about a minute, and --levels 3 is there for more. GPU:
 // the paper's 4 levels (up to 256^3).
-int DefaultLevels(const std::string& backend_name);
+int DefaultLevels(BackendKind kind);
 
 struct ReconstructOptions {
   std::filesystem::path workspace;

@@ -21,9 +21,8 @@ LoadedCheckpoint LoadForRendering(const fs::path& workspace, const fs::path& che
     l.path = CheckpointPath(workspace, last);
   }
   l.checkpoint = ReadCheckpoint(l.path);
-  l.no_rays = std::make_unique<RaySet>();
   l.backend = MakeBackend(device, threads);
-  l.backend->SetLevel(LevelProblem{l.checkpoint.shape, GeometryOf(l.checkpoint), l.no_rays.get(), {}}, 1);
+  l.backend->SetLevel(LevelProblem{l.checkpoint.shape, GeometryOf(l.checkpoint), nullptr, {}}, 1);  // render-only
   l.backend->Upload(LoadedCheckpoint::kParams, l.checkpoint.params);
   return l;
 }

@@ -19,7 +19,6 @@ namespace perf::recon {
 struct LoadedCheckpoint {
   std::filesystem::path path;
   Checkpoint checkpoint;
-  std::unique_ptr<RaySet> no_rays;  // the level's (empty) ray set, which must outlive it
   std::unique_ptr<Backend> backend;
   static constexpr VecId kParams = 0;
 };

@@ -52,6 +52,9 @@ bool ImagesHaveAlpha(const std::vector<PosedImage>& images);
 
 RaySet MakeRaySet(const std::vector<PosedImage>& images);
 
+// No rays: what a render-only level (LevelProblem::rays == nullptr) passes see.
+const RaySet& NoRays();
+
 // The image pyramid's rule: the largest power-of-two downscale (at most `max_factor`) that keeps
 // a voxel of the n^3 grid at least one pixel wide in the median training view, measured at the
 // box centre.

@@ -243,6 +243,25 @@ TEST(CpuBackendTest, VectorOperations) {
   EXPECT_EQ(out[p.shape.GridParamCount() + 3], 1.f);
 }
 
+TEST(CpuBackendTest, ARenderOnlyLevelRendersAsATrainingLevelDoes) {
+  // SetLevel without rays (checkpoint rendering): the same image as with the training rays, and
+  // the ray passes see none.
+  const TinyProblem p(3);
+  auto train = Cpu(2), render = Cpu(2);
+  train->SetLevel(p.Level(), 1);
+  LevelProblem only = p.Level();
+  only.rays = nullptr;
+  render->SetLevel(only, 1);
+  EXPECT_EQ(render->kind(), BackendKind::kCpu);
+  train->Upload(0, p.x);
+  render->Upload(0, p.x);
+  const RenderOutput a = train->Render(0, p.rays.cameras[0], 6, 5, 0.f);
+  const RenderOutput b = render->Render(0, p.rays.cameras[0], 6, 5, 0.f);
+  EXPECT_EQ(a.colour, b.colour);
+  EXPECT_EQ(a.opacity, b.opacity);
+  EXPECT_EQ(render->Cost(0, 1).rays, 0);
+}
+
 TEST(CpuBackendTest, RenderSeesTheShellsThroughAnEmptyBox) {
   TinyProblem p(7);
   // Empty box: every pixel is the shells' colour, whatever the opacity rule.
