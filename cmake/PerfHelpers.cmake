@@ -33,7 +33,13 @@ function(perf_add_test name)
   # gtest_discover_tests splits list-valued PROPERTIES (LABELS "slow;integration"), so labels
   # and timeout are applied after discovery by a file CTest includes.
   set(props_file "${CMAKE_CURRENT_BINARY_DIR}/${name}_props.cmake")
+  set(env "")
+  if(PERF_SANITIZE)
+    # Library leaks we cannot fix (tests/sanitizers/lsan.supp); UBSan findings abort already
+    # (-fno-sanitize-recover).
+    set(env " ENVIRONMENT \"LSAN_OPTIONS=suppressions=${PROJECT_SOURCE_DIR}/tests/sanitizers/lsan.supp\"")
+  endif()
   file(WRITE "${props_file}"
-    "set_tests_properties(\${${name}_TESTS} PROPERTIES LABELS \"${ARG_LABELS}\" TIMEOUT ${ARG_TIMEOUT})\n")
+    "set_tests_properties(\${${name}_TESTS} PROPERTIES LABELS \"${ARG_LABELS}\" TIMEOUT ${ARG_TIMEOUT}${env})\n")
   set_property(DIRECTORY APPEND PROPERTY TEST_INCLUDE_FILES "${props_file}")
 endfunction()

@@ -91,8 +91,8 @@ Image ReadImage(const fs::path& path, ImageInfo* info) {
   // Decoders report truncated or corrupt data as errors or warnings; either refuses the image
   // (a truncated JPEG otherwise decodes as grey without a word).
   const bool ok = in->read_image(0, 0, 0, channels, OIIO::TypeDesc::FLOAT, image.pixels.data());
+  in->close();  // first: a decoder may report more while closing
   const std::string problem = in->has_error() ? in->geterror() : std::string();
-  in->close();
   if (!ok || !problem.empty()) {
     throw InputError(path.string(), "pixels", "", "cannot decode the image" + (problem.empty() ? "" : " (" + problem + ")"),
                      "the file may be truncated or corrupt; re-export it");
