@@ -12,6 +12,7 @@
 #include "common/errors.h"
 #include "common/stopwatch.h"
 #include "common/system_memory.h"
+#include "recon_cuda/cpu_jacobian_record.h"
 #include "recon_cuda/cpu_vectors.h"
 #include "recon_cuda/jacobian.h"
 #include "recon_cuda/training_ray.h"
@@ -20,87 +21,9 @@ namespace perf::recon {
 
 namespace {
 
+using namespace cpu;  // the sinks and the Jacobian record (cpu_jacobian_record.h)
 
 constexpr int64_t kBlockRays = 1024;      // rays per task; fixes the cost's summation order
-
-// Plain adds into a per-thread buffer. Linearize keeps J^T r and the diagonal in one buffer,
-// interleaved in groups of 4 (element i of g at 2 (i - i % 4) + i % 4, of diag 4 further), so that
-// a cell's flush touches one 32-byte block instead of two distant ones: shift 1, offset 0 or 4.
-struct AddSink {
-  float* a;
-  int shift = 0, offset = 0;
-  void Add4(int64_t i, float x, float y, float z, float w) {
-    float* p = a + (i << shift) + offset;
-    p[0] += x;
-    p[1] += y;
-    p[2] += z;
-    p[3] += w;
-  }
-};
-
-// One ray's Jacobian, as recorded by Linearize.
-struct SampleJ {
-  float t;
-  SamplePartials<float> sp;
-};
-struct ShellJ {
-  CubeCoord<float> coord;  // face -1: the ray misses this shell
-  ShellPartials<float> sp;
-};
-
-// The recorded Jacobian of one block of rays.
-struct BlockJ {
-  std::vector<SampleJ> samples;
-  std::vector<uint32_t> end;  // [rays]: one past the ray's last sample in `samples`
-  std::vector<ShellJ> shells;  // [rays, num_shells]
-};
-
-struct Scratch {
-  std::vector<SampleRecord<float>> record;  // [max samples a ray]
-  std::vector<GridSample<float>> weights;   // [max samples a ray]
-  BlockJ row;                               // one ray, when recomputing
-  std::vector<float> acc;                   // per-thread sums (Linearize: g and diag interleaved)
-  uint64_t pass = 0;                        // the pass acc was zeroed for
-};
-
-// Collects a ray's partials: the gradient (and diagonal) scatter, merged cell by cell along the
-// ray (jacobian.h), and optionally the record that MultiplyJtJ reuses.
-// With the diagonal, J^T r goes through the same merge as the diagonal's row entries (needed for
-// exactness there, and it halves the scatters); without (Adam), a direct scatter measured faster.
-template <bool kDiag>
-struct LinearizeVisitor {
-  static constexpr int K = 9;  // J^T r values, then the 5 row values of diag
-  float r[4];
-  AddSink g, d;
-  CellMerger<float, K> merger;
-  BlockJ* out;         // nullptr: nothing recorded
-  ShellJ* out_shells;  // [num_shells] of this ray
-
-  void Shell(int k, const CubeCoord<float>& c, const TexelSample<float>& ts, const ShellPartials<float>& sp) {
-    ScatterJtuShell(ts, sp, r, g);
-    if constexpr (kDiag) AddDiagShell(ts, sp, d);
-    if (out_shells) out_shells[k] = {c, sp};
-  }
-  void Sample(int, const MarchStep<float>& st, const GridSample<float>& gs, const SamplePartials<float>& sp) {
-    if constexpr (kDiag) {
-      float v[K];
-      JtuValues(sp, r, v);
-      RowValues(sp, v + 4);
-      merger.Sample(gs, v, *this);
-    } else {
-      ScatterJtuSample(gs, sp, r, g);
-    }
-    if (out) out->samples.push_back({st.t, sp});
-  }
-  // A cell's merged sums are complete.
-  void operator()(int64_t cell, const float* acc) {
-    g.Add4(GridParam(cell, 0), acc[0], acc[1], acc[2], acc[3]);
-    AddDiagFromRow(cell, acc + 4, d);
-  }
-  void Finish() {
-    if constexpr (kDiag) merger.Finish(*this);
-  }
-};
 
 class CpuBackend final : public Backend {
  public:

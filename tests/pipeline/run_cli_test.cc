@@ -55,7 +55,8 @@ TEST_F(RunCli, RunsEveryStageThenSkipsWhatIsUpToDate) {
   EXPECT_NE(r.output.find("preset preview"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("Held-out views: PSNR"), std::string::npos) << r.output;
   ExpectCompleteWorkspace(1);
-  for (const auto& s : RunJson()["stages"]) EXPECT_FALSE(s["skipped"].get<bool>()) << s;
+  const nlohmann::json initial = RunJson();  // kept: a range-for over a temporary's member dangles
+  for (const auto& s : initial["stages"]) EXPECT_FALSE(s["skipped"].get<bool>()) << s;
 
   r = RunCommand(Run("--levels 1 --iterations 3 --log-json " + (dir_ / "log.jsonl").string()));
   ASSERT_EQ(r.exit_code, 0) << r.output;
@@ -72,7 +73,8 @@ TEST_F(RunCli, RunsEveryStageThenSkipsWhatIsUpToDate) {
   r = RunCommand(Run("--levels 1 --iterations 3 --log-level quiet"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_EQ(r.output, "") << "quiet prints nothing";
-  for (const auto& s : RunJson()["stages"]) EXPECT_FALSE(s["skipped"].get<bool>()) << s;
+  const nlohmann::json fresh = RunJson();
+  for (const auto& s : fresh["stages"]) EXPECT_FALSE(s["skipped"].get<bool>()) << s;
 
   // Bad command lines are named.
   r = RunCommand(test::PerfBinary() + " run --workspace " + ws_.string());
