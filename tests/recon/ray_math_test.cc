@@ -314,8 +314,10 @@ TEST(RayMathTest, ZeroDensityShowsTheShells) {
   for (int64_t c = 0; c < 64; ++c) s.x[GridParam(c, 3)] = 0;
   const double e0[4] = {0.9, 0.2, 0.1, 0.3}, e1[4] = {0.1, 0.6, 0.8, 0.5};  // e1's a is ignored
   for (int64_t i = GridParamCount(4); i < static_cast<int64_t>(s.x.size()); ++i) {
-    const bool outer = i >= ShellParam(4, 4, 1, 0, 0, 0, 0);
-    s.x[i] = (outer ? e1 : e0)[i % 4];
+    // Not (outer ? e1 : e0)[i % 4]: GCC 12 with any UBSan arithmetic check reads that as
+    // element 0 (seen as a = 0.9 instead of 0.3 under -fsanitize=shift).
+    const double* e = i >= ShellParam(4, 4, 1, 0, 0, 0, 0) ? e1 : e0;
+    s.x[i] = e[i % 4];
   }
   const double target[3] = {0, 0, 0};
   for (int t = 0; t < 10; ++t) {
