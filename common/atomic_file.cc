@@ -36,13 +36,12 @@ void WriteAll(int fd, std::string_view data, const fs::path& target) {
 // fsync of a folder, so that a rename in it survives a power cut. Best effort: some file
 // systems refuse to fsync folders.
 void SyncDirectory(const fs::path& dir) {
-  const int fd = ::open(dir.empty() ? "." : dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (fd < 0) return;
-  ::fsync(fd);
-  ::close(fd);
+  const UniqueFd fd(::open(dir.empty() ? "." : dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC));
+  if (fd.valid()) ::fsync(fd.get());
 }
 
-// Moves the finished temporary into place (after the input check), then syncs the folder.
+// Moves the finished temporary into place unless the target is an input (the one place every
+// writer checks that), then syncs the folder.
 void Commit(const fs::path& tmp, const fs::path& target, Durability durability) {
   CheckNotInput(target);
   std::error_code ec;
@@ -87,7 +86,6 @@ fs::path TempPathFor(const fs::path& target) {
 }
 
 void WriteFileAtomically(const fs::path& target, std::string_view contents, Durability durability) {
-  CheckNotInput(target);
   const fs::path tmp = TempPathFor(target);
   UniqueFd fd(::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644));
   if (fd.get() < 0) throw IoError(target.string(), "cannot create the file: " + Errno(), kDiskHint);
@@ -111,7 +109,6 @@ void WriteStreamAtomically(const fs::path& target, const std::function<void(std:
 
 void WriteAtomically(const fs::path& target, const std::function<void(const fs::path&)>& write,
                      Durability durability) {
-  CheckNotInput(target);
   const fs::path tmp = TempPathFor(target);
   RemovingOnFailure(tmp, [&] {
     write(tmp);

@@ -1,7 +1,9 @@
 #include "common/system_memory.h"
 
+#include <algorithm>
 #include <cstdio>
 #include <fstream>
+#include <thread>
 
 #include "common/errors.h"
 
@@ -16,6 +18,8 @@ int64_t AvailableMemory() {
   }
   return 0;
 }
+
+int CoreCount() { return static_cast<int>(std::max(1u, std::thread::hardware_concurrency())); }
 
 std::string FormatByteCount(int64_t bytes) {
   const char* units[] = {"B", "KiB", "MiB", "GiB", "TiB"};

@@ -2,18 +2,14 @@
 #include "pipeline/commands.h"
 
 #include <CLI/CLI.hpp>
-#include <algorithm>
-#include <thread>
-
 #include "common/errors.h"
+#include "common/system_memory.h"
 #include "recon_cuda/render_rule.h"
 
 namespace perf {
 
-int MaxThreads() { return 8 * static_cast<int>(std::max(1u, std::thread::hardware_concurrency())); }
-
 void AddThreadsOption(CLI::App* cmd, int* threads, int all_cores) {
-  const int most = MaxThreads();
+  const int most = MaxWorkerThreads();
   cmd->add_option("-j,--threads", *threads, StrCat("Worker threads (", all_cores, ": all cores; at most ", most, ")"))
       ->check(CLI::Validator(
           [all_cores, most](std::string& v) -> std::string {

@@ -7,7 +7,6 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
-#include <thread>
 
 #include "common/errors.h"
 #include "common/stopwatch.h"
@@ -29,7 +28,7 @@ class CpuBackend final : public Backend {
  public:
   explicit CpuBackend(const CpuBackendOptions& o)
       : options_(o),
-        threads_(o.threads > 0 ? o.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()))),
+        threads_(o.threads > 0 ? o.threads : CoreCount()),
         vectors_(threads_) {}
 
   BackendKind kind() const override { return BackendKind::kCpu; }
@@ -448,7 +447,7 @@ class CpuBackend final : public Backend {
 
 std::unique_ptr<Backend> MakeCpuBackend(const CpuBackendOptions& options) {
   // TBB crashes destroying an arena of ~100000 slots (perf render -j 100000 died with SIGSEGV).
-  const int most = 8 * static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  const int most = MaxWorkerThreads();
   if (options.threads < 0 || options.threads > most) {
     throw InputError("command line", "-j/--threads", std::to_string(options.threads),
                      StrCat("must be 0 (all cores) or 1 to ", most, " (8 times this machine's cores)"));

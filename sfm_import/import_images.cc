@@ -48,12 +48,10 @@ void ProcessImage(const ImageJob& job, const ImportOptions& o, const fs::path& w
 int Concurrency(const ImportOptions& o, int64_t largest_decode) {
   const int threads = o.num_threads > 0 ? o.num_threads : tbb::info::default_concurrency();
   const int64_t per_job = 3 * largest_decode;
+  CheckFitsInMemory(per_job, "importing one photo", "downscale the photos first (e.g. with oiiotool --resize)");
   const int64_t available = AvailableMemory();
-  if (available <= 0 || per_job <= 0) return threads;
-  if (per_job > available) {
-    CheckFitsInMemory(per_job, "importing one photo", "downscale the photos first (e.g. with oiiotool --resize)");
-  }
-  return static_cast<int>(std::clamp<int64_t>(available / per_job, 1, threads));
+  return available > 0 && per_job > 0 ? static_cast<int>(std::clamp<int64_t>(available / per_job, 1, threads))
+                                      : threads;
 }
 
 }  // namespace

@@ -151,7 +151,6 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
   // Check each image's size against its camera: equal, or an exact integer downscale
   // (mip-NeRF 360's images_4/), which scales the intrinsics.
   std::map<uint32_t, std::vector<std::pair<fs::path, ImageInfo>>> by_camera;
-  std::map<uint32_t, std::pair<int, int>> disk_size;  // camera -> size of its images on disk
   PixelFormat source_format = PixelFormat::kUInt8;
   int64_t largest_decode = 0;
   for (const auto& [id, im] : rec.images) {
@@ -162,7 +161,6 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
     source_format = info.format;
     largest_decode = std::max(largest_decode, DecodedBytes(info));
     by_camera[im.camera_id].emplace_back(p, info);
-    disk_size.emplace(im.camera_id, std::make_pair(info.width, info.height));
   }
   for (const auto& [cam_id, infos] : by_camera) {
     CheckOneSize(infos, StrCat("camera ", cam_id), "images of one camera must all have one size");
@@ -184,11 +182,12 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
 
   // Cameras: scale to the size on disk, undistort to pinhole, then apply --downscale.
   std::map<uint32_t, Undistorter> undistorters;
-  for (const auto& [cam_id, size] : disk_size) {
+  for (const auto& [cam_id, infos] : by_camera) {  // one size each (CheckOneSize)
+    const ImageInfo& size = infos.front().second;
     colmap::Camera cam = rec.cameras.at(cam_id);
     const auto* model = colmap::FindCameraModel(cam.model_id);
-    const double sx = static_cast<double>(size.first) / cam.width;
-    const double sy = static_cast<double>(size.second) / cam.height;
+    const double sx = static_cast<double>(size.width) / cam.width;
+    const double sy = static_cast<double>(size.height) / cam.height;
     if (sx != 1.0 || sy != 1.0) {
       // COLMAP's pixel convention (corner at 0) makes scaling f and c by the size ratio exact.
       if (colmap::NumFocalParams(model->id) == 3) {
@@ -201,8 +200,8 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
         cam.params[2] *= sx;
         cam.params[3] *= sy;
       }
-      cam.width = static_cast<uint64_t>(size.first);
-      cam.height = static_cast<uint64_t>(size.second);
+      cam.width = static_cast<uint64_t>(size.width);
+      cam.height = static_cast<uint64_t>(size.height);
     }
     Undistorter u = Undistorter::Create(cam, StrCat((model_dir / "cameras").string(), " camera ", cam_id));
     const PinholeIntrinsics& pin = u.pinhole();
