@@ -21,8 +21,8 @@
 #include "common/errors.h"
 #include "recon_cuda/training_data.h"
 #include "recon_cuda/volume.h"
-#include "sfm_import/image_io.h"
-#include "sfm_import/scene.h"
+#include "workspace/image_io.h"
+#include "workspace/scene.h"
 
 using namespace perf;
 using namespace perf::recon;

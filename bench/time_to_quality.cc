@@ -230,10 +230,11 @@ void RunHierarchy(Backend* backend, const BenchData& d, SolverType type, const B
     elapsed += level_seconds;
     run->seconds = elapsed;
     // Throughput at this level's solution (not counted as solver time; skipped when the run is
-    // stopping). Every vector but h.params is free after the level's solve.
+    // stopping), in the solver's scratch vectors.
     json passes = json::object();
     if (stopped.empty()) {
-      const VecId a = h.params + 1, b = h.params + 2, c = h.params + 3;
+      const std::vector<VecId> scratch = VectorsOf(type).scratch;
+      const VecId a = scratch.at(0), b = scratch.at(1), c = scratch.at(2);
       passes["cost"] = MeasurePass([&] { return backend->Cost(h.params, 7); });
       if (type == SolverType::kGaussNewton) {
         passes["linearize"] = MeasurePass([&] { return backend->Linearize(h.params, 7, a, b); });

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "export/metrics.h"
+#include "recon_cuda/device_choice.h"
 #include "recon_cuda/render_rule.h"
 
 namespace perf::exporter {
@@ -24,7 +25,7 @@ struct EvalOptions {
   double mask_threshold = 0.7;
   float min_box_opacity = recon::kDefaultMinBoxOpacity;  // renders: the render rule (render_rule.h)
   bool html = true;
-  std::string device = "auto";
+  recon::DeviceChoice device = recon::DeviceChoice::kAuto;
   int threads = 0;
   std::function<void(const std::string& step, int done, int total)> progress;
 };

@@ -14,7 +14,7 @@
 #include "recon_cuda/evaluation.h"
 #include "recon_cuda/render_views.h"
 #include "recon_cuda/training_data.h"
-#include "sfm_import/image_io.h"
+#include "workspace/image_io.h"
 
 namespace perf::exporter {
 

@@ -21,6 +21,7 @@
 #include "export/mesh_export.h"
 #include "export/orbit.h"
 #include "export/vdb_export.h"
+#include "recon_cuda/device_choice.h"
 #include "recon_cuda/render_rule.h"
 
 namespace perf::exporter {
@@ -38,7 +39,7 @@ struct ExportOptions {
   MeshOptions mesh_options;
   OrbitOptions orbit;           // frames = 0: no orbit
   float min_box_opacity = recon::kDefaultMinBoxOpacity; // renders: the render rule (render_rule.h)
-  std::string device = "auto";
+  recon::DeviceChoice device = recon::DeviceChoice::kAuto;
   int threads = 0;
   // Called as work proceeds: step ("masks", "volume", "mesh", "renders"), done, total.
   std::function<void(const std::string& step, int done, int total)> progress;

@@ -7,8 +7,8 @@
 #include <vector>
 
 #include "recon_cuda/backend.h"
-#include "sfm_import/image.h"
-#include "sfm_import/scene.h"
+#include "workspace/image.h"
+#include "workspace/scene.h"
 
 namespace perf::exporter {
 

@@ -6,7 +6,7 @@
 
 #include <cstdint>
 
-#include "sfm_import/image.h"
+#include "workspace/image.h"
 
 namespace perf::exporter {
 

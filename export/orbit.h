@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "recon_cuda/ray_math.h"
-#include "sfm_import/scene.h"
+#include "workspace/scene.h"
 
 namespace perf::exporter {
 

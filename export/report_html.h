@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "export/metrics.h"
-#include "sfm_import/image.h"
+#include "workspace/image.h"
 
 namespace perf::exporter {
 

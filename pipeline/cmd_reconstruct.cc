@@ -3,6 +3,7 @@
 #include <iostream>
 
 #include "common/errors.h"
+#include "pipeline/cli_choice.h"
 #include "pipeline/commands.h"
 #include "pipeline/stage_progress.h"
 #include "recon_cuda/reconstruct.h"
@@ -69,10 +70,12 @@ void AddReconstructCommand(CLI::App& app) {
   cmd->add_option("--init-opacity", o.init.box_opacity,
                   "Opacity of the box across its shortest side at the start")->capture_default_str();
   cmd->add_flag("--init-shells-mean", o.init_shells_from_photos, "Shells start at the photos' mean colour (else random)");
-  cmd->add_option("--background", o.background,
+  using recon::BackgroundChoice;
+  AddChoiceOption(cmd, "--background", &o.background,
+                  {{"auto", BackgroundChoice::kAuto}, {"fixed", BackgroundChoice::kFixed},
+                   {"learn", BackgroundChoice::kLearn}},
                   "Shells: learn them, or keep them fixed at scene.json's background colour (auto: fixed when "
-                  "every photo had alpha)")
-      ->capture_default_str();
+                  "every photo had alpha)");
   cmd->add_flag("--no-alpha", args->no_alpha,
                 "Ignore the photos' alpha: the opacity residual is the paper's auxiliary term (default: where every "
                 "photo had alpha, the box opacity fits it)");
@@ -117,7 +120,9 @@ void AddRenderCommand(CLI::App& app) {
   CLI::App* cmd = app.add_subcommand(
       "render", "Render cameras of a reconstructed workspace (held-out views by default) and score them against the photos.");
   cmd->add_option("workspace", args->workspace, "Workspace folder")->required();
-  cmd->add_option("--split", o.split, "test, train or all")->capture_default_str();
+  using recon::ViewSplit;
+  AddChoiceOption(cmd, "--split", &o.split, {{"test", ViewSplit::kTest}, {"train", ViewSplit::kTrain}, {"all", ViewSplit::kAll}},
+                  "Which photos: test, train or all");
   cmd->add_option("--view", o.names, "Only this image (a scene.json name); repeatable");
   cmd->add_option("--checkpoint", args->checkpoint, "Checkpoint to render (default: the last level in WORKSPACE/recon)");
   cmd->add_option("-o,--out", args->out, "Output folder (default: WORKSPACE/renders)");

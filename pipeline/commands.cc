@@ -4,6 +4,7 @@
 #include <CLI/CLI.hpp>
 #include "common/errors.h"
 #include "common/system_memory.h"
+#include "pipeline/cli_choice.h"
 #include "recon_cuda/render_rule.h"
 
 namespace perf {
@@ -33,8 +34,11 @@ std::unique_ptr<WorkspaceLock> LockWorkspace(const std::filesystem::path& worksp
   return lock;
 }
 
-void AddDeviceOptions(CLI::App* cmd, std::string* device, int* threads) {
-  cmd->add_option("--device", *device, "cpu, cuda or auto")->capture_default_str();
+void AddDeviceOptions(CLI::App* cmd, recon::DeviceChoice* device, int* threads) {
+  using recon::DeviceChoice;
+  AddChoiceOption(cmd, "--device", device,
+                  {{"auto", DeviceChoice::kAuto}, {"cpu", DeviceChoice::kCpu}, {"cuda", DeviceChoice::kCuda}},
+                  "Backend: cpu, cuda, or auto (cuda when a device is visible)");
   AddThreadsOption(cmd, threads, 0);
 }
 

@@ -8,6 +8,7 @@
 #include <string_view>
 
 #include "common/workspace_lock.h"
+#include "recon_cuda/device_choice.h"
 
 namespace CLI {
 class App;
@@ -34,7 +35,7 @@ std::unique_ptr<WorkspaceLock> LockWorkspace(const std::filesystem::path& worksp
                                              bool create = false);
 
 // --device and -j,--threads: the same for every command that runs a backend.
-void AddDeviceOptions(CLI::App* cmd, std::string* device, int* threads);
+void AddDeviceOptions(CLI::App* cmd, recon::DeviceChoice* device, int* threads);
 
 // --min-box-opacity: the render rule (recon_cuda/render_rule.h) for what `use` names.
 void AddMinBoxOpacityOption(CLI::App* cmd, float* min_box_opacity, const std::string& use);

@@ -16,12 +16,14 @@
 #include <string>
 #include <vector>
 
+#include "recon_cuda/device_choice.h"
+
 namespace perf {
 
 struct RunOptions {
   std::filesystem::path images, colmap, nerf, workspace;
   std::string preset = "default";  // preview, default, high
-  std::string device = "auto";
+  recon::DeviceChoice device = recon::DeviceChoice::kAuto;
   int threads = 0;
   bool force = false;
   // Overrides of the preset (0: the preset's).

@@ -18,18 +18,15 @@ bool CudaDeviceAvailable(std::string* name, std::string* reason) {
 #endif
 }
 
-std::unique_ptr<Backend> MakeBackend(const std::string& device, int threads) {
-  if (device != "cpu" && device != "cuda" && device != "auto") {
-    throw InputError("command line", "--device", device, "unknown device", "use cpu, cuda or auto");
-  }
-  if (device != "cpu") {
+std::unique_ptr<Backend> MakeBackend(DeviceChoice device, int threads) {
+  if (device != DeviceChoice::kCpu) {
     std::string reason;
     if (CudaDeviceAvailable(nullptr, &reason)) {
 #ifdef PERF_WITH_CUDA
       return MakeCudaBackend(CudaBackendOptions{});
 #endif
     }
-    if (device == "cuda") {
+    if (device == DeviceChoice::kCuda) {
       throw ResourceError(StrCat("--device cuda: no CUDA device: ", reason,
                                  "; use --device cpu (or --device auto, which falls back to the CPU)"));
     }

@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "recon_cuda/device_choice.h"
 #include "recon_cuda/training_data.h"
 #include "recon_cuda/volume.h"
 
@@ -187,9 +188,9 @@ class Backend {
                               float min_box_opacity) = 0;
 };
 
-// "cpu", "cuda" or "auto" (cuda when a device is visible). threads: CPU worker threads, 0 = all.
-// "cuda" without a usable device (or in a build without CUDA) throws ResourceError saying so.
-std::unique_ptr<Backend> MakeBackend(const std::string& device, int threads);
+// threads: CPU worker threads, 0 = all. kCuda without a usable device (or in a build without
+// CUDA) throws ResourceError saying so.
+std::unique_ptr<Backend> MakeBackend(DeviceChoice device, int threads);
 
 // Whether the CUDA backend can run here: built with CUDA and a device visible to the runtime.
 // Never throws and is safe without a driver. name: the device's name when true; reason: why not

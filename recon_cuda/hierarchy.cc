@@ -29,6 +29,7 @@ std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geomet
     h.solver = o.solver;
     h.solver.max_iterations = o.iterations;
     h.solver.seed = Hash(o.init.seed, static_cast<uint32_t>(level), 0x1e7e1u);
+    h.params = VectorsOf(o.solver.type).params;
     if (cb.level_started) cb.level_started(h);
 
     bool stopped = false;

@@ -41,7 +41,7 @@ struct HierarchyLevel {
   SolverOptions solver;  // as run at this level
   // The backend vector holding the current parameters while the level runs and after it is done
   // (render or score from it in a callback).
-  VecId params = kSolverX;
+  VecId params = 0;
 };
 
 struct HierarchyCallbacks {

@@ -16,7 +16,7 @@
 #include "recon_cuda/evaluation.h"
 #include "recon_cuda/hierarchy.h"
 #include "recon_cuda/previous_run.h"
-#include "sfm_import/image_io.h"
+#include "workspace/image_io.h"
 
 namespace perf::recon {
 namespace {
@@ -100,9 +100,6 @@ void ReconstructOptions::Check() const {
   if (!(init.box_opacity >= 0 && init.box_opacity < 1)) {
     Fail("--init-opacity", StrCat(init.box_opacity), "must be in [0, 1)", "0.99 is the default; 0.05 a nearly clear start");
   }
-  if (background != "auto" && background != "fixed" && background != "learn") {
-    Fail("--background", background, "must be auto, fixed or learn");
-  }
   if (!(min_box_opacity >= 0 && min_box_opacity <= 1)) {
     Fail("--min-box-opacity", StrCat(min_box_opacity), "must be in [0, 1]");
   }
@@ -155,8 +152,8 @@ void MeanColour(const std::vector<PosedImage>& images, float colour[3]) {
 
 }  // namespace
 
-bool FixedBackground(const std::string& background, const Scene& scene) {
-  return background == "auto" ? EveryImageHasAlpha(scene) : background == "fixed";
+bool FixedBackground(BackgroundChoice background, const Scene& scene) {
+  return background == BackgroundChoice::kAuto ? EveryImageHasAlpha(scene) : background == BackgroundChoice::kFixed;
 }
 
 ReconstructResult Reconstruct(const ReconstructOptions& o) {
@@ -237,7 +234,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                                          : "the paper's auxiliary term (0 or 1)"));
   say(result.fixed_background
           ? StrCat("background: fixed at (", scene.background[0], ", ", scene.background[1], ", ", scene.background[2],
-                   ")", o.background == "auto" ? ", the colour every photo's alpha was composited over" : "")
+                   ")", o.background == BackgroundChoice::kAuto ? ", the colour every photo's alpha was composited over" : "")
           : std::string("background: learned (environment shells)"));
 
   if (start == 0 && o.init_shells_from_photos) MeanColour(train, ho.init.shell_colour);

@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "recon_cuda/device_choice.h"
 #include "recon_cuda/solver.h"
 #include "recon_cuda/render_rule.h"
 
@@ -33,7 +34,7 @@ int DefaultLevels(BackendKind kind);
 
 struct ReconstructOptions {
   std::filesystem::path workspace;
-  std::string device = "auto";  // cpu, cuda or auto
+  DeviceChoice device = DeviceChoice::kAuto;
   int threads = 0;              // CPU worker threads, 0: all cores
   int levels = 0;               // 0: DefaultLevels
   int start_resolution = 32;
@@ -41,11 +42,8 @@ struct ReconstructOptions {
   SolverOptions solver;         // max_iterations and seed are set per level
   InitOptions init;
   bool init_shells_from_photos = false;  // shells start at the training photos' mean colour
-  // The shells: "learn" them (the paper), or keep them "fixed" at scene.json's background, the
-  // colour RGBA photos were composited over on import; "auto" is fixed when every photo had an
-  // alpha channel (e.g. NeRF synthetic), learn otherwise. A known background is information
-  // (+0.7 dB on lego, docs/tuning.md).
-  std::string background = "auto";
+  // The shells (device_choice.h); a known background is information (+0.7 dB on lego, docs/tuning.md).
+  BackgroundChoice background = BackgroundChoice::kAuto;
   ResidualSettings residuals;
   // Coarse levels fit downscaled photos: the largest power-of-two downscale that keeps a voxel
   // at least one pixel wide in the median view (fewer rays, same information at that level).
@@ -78,8 +76,8 @@ struct LevelReport {
   std::string status;
 };
 
-// Whether `background` ("auto", "fixed" or "learn") fixes the shells for this scene.
-bool FixedBackground(const std::string& background, const Scene& scene);
+// Whether `background` fixes the shells for this scene.
+bool FixedBackground(BackgroundChoice background, const Scene& scene);
 
 struct ReconstructResult {
   std::string backend;

@@ -3,13 +3,13 @@
 #include "common/atomic_file.h"
 #include "common/errors.h"
 #include "recon_cuda/checkpoint.h"
-#include "sfm_import/image_io.h"
+#include "workspace/image_io.h"
 
 namespace perf::recon {
 
 namespace fs = std::filesystem;
 
-LoadedCheckpoint LoadForRendering(const fs::path& workspace, const fs::path& checkpoint, const std::string& device,
+LoadedCheckpoint LoadForRendering(const fs::path& workspace, const fs::path& checkpoint, DeviceChoice device,
                                   int threads) {
   LoadedCheckpoint l;
   l.path = checkpoint;
@@ -28,9 +28,6 @@ LoadedCheckpoint LoadForRendering(const fs::path& workspace, const fs::path& che
 }
 
 RenderViewsResult RenderViews(const RenderViewsOptions& o) {
-  if (o.split != "test" && o.split != "train" && o.split != "all") {
-    throw InputError("command line", "--split", o.split, "unknown split", "use test, train or all");
-  }
   const Scene scene = ReadScene(o.workspace / "scene.json");
   LoadedCheckpoint loaded = LoadForRendering(o.workspace, o.checkpoint, o.device, o.threads);
   RenderViewsResult result;
@@ -38,7 +35,9 @@ RenderViewsResult RenderViews(const RenderViewsOptions& o) {
 
   std::vector<PosedImage> views;
   for (Split s : {Split::kTrain, Split::kTest}) {
-    if ((s == Split::kTrain && o.split == "test") || (s == Split::kTest && o.split == "train")) continue;
+    if ((s == Split::kTrain && o.split == ViewSplit::kTest) || (s == Split::kTest && o.split == ViewSplit::kTrain)) {
+      continue;
+    }
     std::vector<PosedImage> part = LoadImages(scene, o.workspace, s);
     for (PosedImage& v : part) {
       if (o.names.empty() || std::find(o.names.begin(), o.names.end(), v.name) != o.names.end()) {
@@ -48,7 +47,7 @@ RenderViewsResult RenderViews(const RenderViewsOptions& o) {
   }
   for (const std::string& name : o.names) {
     if (std::none_of(views.begin(), views.end(), [&](const PosedImage& v) { return v.name == name; })) {
-      throw InputError("command line", "--view", name, StrCat("no image of that name in the ", o.split, " split"),
+      throw InputError("command line", "--view", name, o.split == ViewSplit::kAll ? "no image of that name" : StrCat("no image of that name in the ", o.split == ViewSplit::kTest ? "test" : "train", " split"),
                        "use a name from scene.json's images");
     }
   }

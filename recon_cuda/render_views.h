@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "recon_cuda/checkpoint.h"
+#include "recon_cuda/device_choice.h"
 #include "recon_cuda/evaluation.h"
 #include "recon_cuda/render_rule.h"
 
@@ -26,17 +27,17 @@ struct LoadedCheckpoint {
 // `checkpoint`, or the highest level in WORKSPACE/recon when empty; IoError saying to run perf
 // reconstruct when there is none, and the reader's errors for a missing or damaged file.
 LoadedCheckpoint LoadForRendering(const std::filesystem::path& workspace, const std::filesystem::path& checkpoint,
-                                  const std::string& device, int threads);
+                                  DeviceChoice device, int threads);
 
 struct RenderViewsOptions {
   std::filesystem::path workspace;
   std::filesystem::path checkpoint;  // empty: the highest level in recon/
   std::filesystem::path out_dir;     // empty: WORKSPACE/renders
-  std::string split = "test";        // test, train or all
+  ViewSplit split = ViewSplit::kTest;
   std::vector<std::string> names;    // only these images (scene.json names); empty: the split
   float min_box_opacity = kDefaultMinBoxOpacity;  // render_rule.h
   bool write_opacity = false;        // also <name>_opacity.png (1 - T_box)
-  std::string device = "auto";
+  DeviceChoice device = DeviceChoice::kAuto;
   int threads = 0;
   std::function<void(int done, int total)> progress;
 };

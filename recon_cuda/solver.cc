@@ -11,11 +11,9 @@
 namespace perf::recon {
 namespace {
 
-
 // Vector ids of the Gauss-Newton solver.
 // kFree: 1 for the parameters that are variables of this iteration, 0 for held ones.
-enum : VecId { kX = kSolverX, kG, kDiag, kStep, kResidual, kZ, kDir, kAp, kTrial, kFree, kGnVectors };
-static_assert(kStep == kSolverStep);
+enum : VecId { kX, kG, kDiag, kStep, kResidual, kZ, kDir, kAp, kTrial, kFree, kGnVectors };
 // Adam reuses kX and kG; its moments and free mask live in three more.
 enum : VecId { kAdamM = 2, kAdamV = 3, kAdamFree = 4, kAdamVectors = 5 };
 
@@ -43,6 +41,16 @@ const char* StatusName(SolverStatus s) {
 
 int RequiredVectors(SolverType type) {
   return type == SolverType::kGaussNewton ? static_cast<int>(kGnVectors) : static_cast<int>(kAdamVectors);
+}
+
+SolverVectors VectorsOf(SolverType type) {
+  SolverVectors v;
+  v.params = kX;
+  if (type == SolverType::kGaussNewton) v.last_step = kStep;
+  for (VecId i = 0; i < RequiredVectors(type); ++i) {
+    if (i != kX) v.scratch.push_back(i);
+  }
+  return v;
 }
 
 void SolverOptions::Check() const {

@@ -125,10 +125,12 @@ void Solve(const SolverOptions& options, Backend* backend, std::vector<float>* x
 
 int RequiredVectors(SolverType type);
 
-// The backend vector that holds x during and after Solve (for renders from a callback).
-inline constexpr VecId kSolverX = 0;
-// Gauss-Newton: the backend vector holding the last iteration's PCG step d (before the line
-// search scales it), for inspection after Solve.
-inline constexpr VecId kSolverStep = 3;
+// Where Solve keeps its state among the backend's first RequiredVectors(type) vectors.
+struct SolverVectors {
+  VecId params = 0;              // x, during and after Solve (render or score it from a callback)
+  VecId last_step = kNoVector;   // Gauss-Newton: the last PCG step d, before the line search scaled it
+  std::vector<VecId> scratch;    // the others: free once Solve has returned
+};
+SolverVectors VectorsOf(SolverType type);
 
 }  // namespace perf::recon

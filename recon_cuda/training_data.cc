@@ -5,7 +5,7 @@
 #include <atomic>
 
 #include "common/errors.h"
-#include "sfm_import/image_io.h"
+#include "workspace/image_io.h"
 
 namespace perf::recon {
 

@@ -12,8 +12,8 @@
 
 #include "recon_cuda/ray_math.h"
 #include "recon_cuda/volume.h"
-#include "sfm_import/image.h"
-#include "sfm_import/scene.h"
+#include "workspace/image.h"
+#include "workspace/scene.h"
 
 namespace perf::recon {
 

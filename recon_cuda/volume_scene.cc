@@ -1,7 +1,7 @@
 // The parts of volume.h that read a Scene (scene.json): kept apart so that the solver, the
 // backends and the GPU benchmark link without the importer's libraries.
 #include "recon_cuda/volume.h"
-#include "sfm_import/scene.h"
+#include "workspace/scene.h"
 
 namespace perf::recon {
 

@@ -17,7 +17,7 @@
 #include <string>
 #include <vector>
 
-#include "sfm_import/scene.h"
+#include "workspace/scene.h"
 
 namespace perf {
 

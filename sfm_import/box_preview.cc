@@ -4,7 +4,7 @@
 #include <limits>
 
 #include "common/atomic_file.h"
-#include "sfm_import/image_io.h"
+#include "workspace/image_io.h"
 
 namespace fs = std::filesystem;
 

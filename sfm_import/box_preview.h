@@ -6,8 +6,8 @@
 #include <filesystem>
 #include <vector>
 
-#include "sfm_import/image.h"
-#include "sfm_import/scene.h"
+#include "workspace/image.h"
+#include "workspace/scene.h"
 
 namespace perf {
 

@@ -11,7 +11,7 @@
 #include "common/atomic_file.h"
 #include "common/errors.h"
 #include "common/system_memory.h"
-#include "sfm_import/scene.h"
+#include "workspace/scene.h"
 
 namespace fs = std::filesystem;
 

@@ -9,8 +9,8 @@
 #include <utility>
 #include <vector>
 
-#include "sfm_import/image.h"
-#include "sfm_import/image_io.h"
+#include "workspace/image.h"
+#include "workspace/image_io.h"
 #include "sfm_import/importer.h"
 #include "sfm_import/undistort.h"
 

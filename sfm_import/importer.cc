@@ -14,7 +14,7 @@
 #include "common/errors.h"
 #include "sfm_import/camera_models.h"
 #include "sfm_import/colmap_model.h"
-#include "sfm_import/image_io.h"
+#include "workspace/image_io.h"
 #include "sfm_import/import_images.h"
 #include "sfm_import/nerf_reader.h"
 #include "sfm_import/undistort.h"

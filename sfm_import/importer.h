@@ -3,7 +3,7 @@
 // a train/test split, the box and shells, all described by scene.json.
 //
 // Workspace layout written here:
-//   scene.json            the scene (sfm_import/scene.h, docs/scene-json.md), written last
+//   scene.json            the scene (workspace/scene.h, docs/scene-json.md), written last
 //   images/<name>.<ext>   undistorted, downscaled photos (PNG 8/16-bit, EXR for float sources)
 //   alpha/<name>.png      the source alpha, when the photos had one (NeRF-synthetic)
 #pragma once
@@ -16,7 +16,7 @@
 #include <vector>
 
 #include "sfm_import/bounds.h"
-#include "sfm_import/scene.h"
+#include "workspace/scene.h"
 
 namespace perf {
 

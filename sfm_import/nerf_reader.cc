@@ -7,7 +7,7 @@
 #include <utility>
 
 #include "common/errors.h"
-#include "sfm_import/image_io.h"
+#include "workspace/image_io.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;

@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "sfm_import/colmap_model.h"
-#include "sfm_import/image.h"
+#include "workspace/image.h"
 
 namespace perf {
 

@@ -10,7 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "common/atomic_file.h"
-#include "sfm_import/image_io.h"
+#include "workspace/image_io.h"
 #include "tests/pipeline/synthetic_workspace.h"
 #include "tests/test_util.h"
 

@@ -8,7 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "recon_cuda/checkpoint.h"
-#include "sfm_import/image_io.h"
+#include "workspace/image_io.h"
 #include "tests/pipeline/synthetic_workspace.h"
 #include "tests/test_util.h"
 
@@ -202,8 +202,14 @@ TEST_F(ReconstructCli, BadInputsAreNamed) {
   r = RunCommand(Perf("reconstruct " + ws_.string() + " --solver sgd"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("--solver"), std::string::npos) << r.output;
-  r = RunCommand(Perf("reconstruct " + ws_.string() + " --device tpu"));
+  for (const std::string choice : {"--device tpu", "--background sky", "--device CPU"}) {
+    r = RunCommand(Perf("reconstruct " + ws_.string() + " " + choice));
+    EXPECT_EQ(r.exit_code, 2) << choice << ": " << r.output;
+    EXPECT_NE(r.output.find(choice.substr(0, choice.find(' '))), std::string::npos) << r.output;
+  }
+  r = RunCommand(Perf("render " + ws_.string() + " --split val"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("--split"), std::string::npos) << r.output;
   r = RunCommand(Perf("reconstruct " + ws_.string() + " --levels 9"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("--levels"), std::string::npos) << r.output;

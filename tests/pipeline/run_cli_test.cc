@@ -13,7 +13,7 @@
 
 #include "common/atomic_file.h"
 #include "recon_cuda/checkpoint.h"
-#include "sfm_import/scene.h"
+#include "workspace/scene.h"
 #include "tests/pipeline/synthetic_workspace.h"
 #include "tests/test_util.h"
 

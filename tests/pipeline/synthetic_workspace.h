@@ -10,7 +10,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
-#include "sfm_import/image_io.h"
+#include "workspace/image_io.h"
 #include "tests/recon/synthetic_scene.h"
 #include "tests/test_util.h"
 

@@ -70,7 +70,7 @@ TEST_F(ConvergenceTest, GaussNewtonRecoversAKnownScene) {
       shape = shape.Doubled();
     }
   }
-  const double psnr = MeanPsnr(ScoreViews(backend.get(), kSolverX, scene.test, 0.f));
+  const double psnr = MeanPsnr(ScoreViews(backend.get(), VectorsOf(so.type).params, scene.test, 0.f));
   std::printf("held-out PSNR: %.2f dB from a random start at %.2f dB\n", psnr, start_psnr);
   // The truth is exactly representable at the final level (32^3), so the bar is the issue's
   // 30 dB (RMS error ~3 %), leaving ~6 dB for the 15 + 15 iterations and the jitter.
@@ -137,7 +137,7 @@ TEST_F(SolverTest, CallbackStopsAndSummaryReports) {
   EXPECT_GE(summary.cost_passes, 3 * 2 + 1);
   EXPECT_LE(summary.cost_passes, 3 * so.max_line_search_steps + 1);
   // initial_cost and final_cost are both the cost of all rays (not a rescaled subset).
-  EXPECT_DOUBLE_EQ(summary.final_cost, backend->Cost(kSolverX, Hash(so.seed, 2, 0)).cost);
+  EXPECT_DOUBLE_EQ(summary.final_cost, backend->Cost(VectorsOf(so.type).params, Hash(so.seed, 2, 0)).cost);
   const std::string report = summary.BriefReport();
   EXPECT_NE(report.find("3 iterations"), std::string::npos) << report;
   EXPECT_NE(report.find("stopped by the caller"), std::string::npos) << report;

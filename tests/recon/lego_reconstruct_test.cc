@@ -33,7 +33,7 @@ class LegoTest : public ::testing::Test {
     RunImport(io);
     ReconstructOptions o;
     o.workspace = io.workspace;
-    o.device = "cpu";
+    o.device = DeviceChoice::kCpu;
     o.levels = 2;
     o.iterations = 8;
     result_ = new ReconstructResult(Reconstruct(o));
@@ -74,7 +74,7 @@ TEST_F(LegoTest, HeldOutPsnrAt50Pixels) {
 TEST_F(LegoTest, ExportAndMasksAgainstAlpha) {
   exporter::ExportOptions eo;
   eo.workspace = Workspace();
-  eo.device = "cpu";
+  eo.device = DeviceChoice::kCpu;
   eo.orbit.frames = 4;
   const exporter::ExportResult x = exporter::RunExport(eo);
   EXPECT_EQ(x.masks, 100);  // every photo, train and held out
@@ -82,7 +82,7 @@ TEST_F(LegoTest, ExportAndMasksAgainstAlpha) {
   EXPECT_GT(x.mesh_triangles, 1000);
   exporter::EvalOptions vo;
   vo.workspace = Workspace();
-  vo.device = "cpu";
+  vo.device = DeviceChoice::kCpu;
   const exporter::EvalResult e = exporter::RunEval(vo);
   std::printf("lego 50x50: held-out PSNR %.2f dB, SSIM %.3f; masks vs alpha: IoU %.3f, precision %.3f, recall %.3f; "
               "vdb %lld voxels, %lld KiB; mesh %lld triangles\n",

@@ -2,6 +2,7 @@
 // (LevelProblem::fixed_shells), against dense double-precision algebra on the tiny problem.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -74,6 +75,24 @@ TEST(HoldParametersTest, MarksBoundsAndFixedShells) {
 
 // One Gauss-Newton iteration with CG run to convergence: the step is 0 on the held parameters
 // and solves the free parameters' normal equations J_F^T J_F d_F = -g_F (dense, double).
+TEST(SolverVectorsTest, ParamsStepAndScratchAreDistinct) {
+  for (SolverType type : {SolverType::kGaussNewton, SolverType::kAdam}) {
+    const SolverVectors v = VectorsOf(type);
+    std::vector<VecId> all = v.scratch;
+    all.push_back(v.params);
+    std::sort(all.begin(), all.end());
+    EXPECT_EQ(std::adjacent_find(all.begin(), all.end()), all.end()) << SolverName(type);
+    ASSERT_EQ(static_cast<int>(all.size()), RequiredVectors(type)) << SolverName(type);
+    EXPECT_EQ(all.front(), 0);
+    EXPECT_EQ(all.back(), RequiredVectors(type) - 1);
+    if (type == SolverType::kGaussNewton) {
+      EXPECT_NE(std::find(v.scratch.begin(), v.scratch.end(), v.last_step), v.scratch.end());
+    } else {
+      EXPECT_EQ(v.last_step, kNoVector);
+    }
+  }
+}
+
 TEST(SolverBoundsTest, StepSolvesTheFreeParametersSystem) {
   const TinyProblem p = AtBounds(11);
   const int64_t n = p.shape.ParamCount();
@@ -95,7 +114,7 @@ TEST(SolverBoundsTest, StepSolvesTheFreeParametersSystem) {
     SolverSummary summary;
     Solve(o, b.get(), &x, {}, &summary);
     std::vector<float> d(n);
-    b->Download(kSolverStep, d);
+    b->Download(VectorsOf(o.type).last_step, d);
 
     std::vector<char> held(n);
     int num_held = 0;

@@ -7,7 +7,7 @@
 #include <cmath>
 
 #include "common/errors.h"
-#include "sfm_import/scene.h"
+#include "workspace/scene.h"
 
 namespace perf::recon {
 namespace {

@@ -11,7 +11,7 @@
 #include <string>
 
 #include "sfm_import/colmap_model.h"
-#include "sfm_import/image_io.h"
+#include "workspace/image_io.h"
 #include "sfm_import/importer.h"
 #include "tests/test_util.h"
 

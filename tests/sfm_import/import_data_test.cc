@@ -4,7 +4,7 @@
 #include <algorithm>
 
 #include "sfm_import/box_preview.h"
-#include "sfm_import/image_io.h"
+#include "workspace/image_io.h"
 #include "sfm_import/importer.h"
 #include "tests/test_util.h"
 

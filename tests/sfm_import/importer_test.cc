@@ -10,7 +10,7 @@
 #include "common/atomic_file.h"
 #include "common/errors.h"
 #include "sfm_import/colmap_model.h"
-#include "sfm_import/image_io.h"
+#include "workspace/image_io.h"
 #include "tests/sfm_import/colmap_fixture.h"
 #include "tests/test_util.h"
 

@@ -1,4 +1,4 @@
-#include "sfm_import/scene.h"
+#include "workspace/scene.h"
 
 #include <Eigen/LU>
 #include <algorithm>

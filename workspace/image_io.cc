@@ -1,4 +1,4 @@
-#include "sfm_import/image_io.h"
+#include "workspace/image_io.h"
 
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imagebufalgo.h>

@@ -7,7 +7,7 @@
 #include <cstdint>
 #include <filesystem>
 
-#include "sfm_import/image.h"
+#include "workspace/image.h"
 
 namespace perf {
 
