@@ -98,7 +98,7 @@ class CpuBackend final : public Backend {
   void RestrictJacobian(VecId free) override {
     if (!linearized_ || !recorded_) return;
     const float* pf = vec(free).data();
-    const int n = level_.shape.n;
+    const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, nullptr);
     vectors_.arena().execute([&] {
       tbb::parallel_for(int64_t{0}, static_cast<int64_t>(blocks_.size()), [&](int64_t b) {
         BlockJ& block = blocks_[b];
@@ -107,7 +107,7 @@ class CpuBackend final : public Backend {
           const BoxRay<float> ray = RayOf(b * kBlockRays + static_cast<int64_t>(r), lin_seed_);
           for (uint32_t j = first; j < block.end[r]; ++j) {
             const SampleJ& sj = block.samples[j];
-            if (SkippableSample(TrilinearWeights(n, ray.GridPoint(sj.t)), sj.sp, pf)) continue;
+            if (SkippableSample(TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(sj.t)), sj.sp, pf)) continue;
             block.samples[kept++] = sj;
           }
           first = block.end[r];
@@ -181,12 +181,12 @@ class CpuBackend final : public Backend {
         TexelSample<float> ts[kMaxShells];
         for (int k = 0; k < k_shells; ++k) {
           if (shells[k].coord.face < 0) continue;
-          ts[k] = BilinearWeights(vol.n, vol.m, k, shells[k].coord);
+          ts[k] = TexelWeights(vol.GridParams(), vol.m, k, shells[k].coord);
           AddJpShell(pp, ts[k], shells[k].sp, u);
         }
         GridSample<float>* w = s.weights.data();
         for (int j = 0; j < count; ++j) {
-          w[j] = TrilinearWeights(vol.n, ray.GridPoint(samples[j].t));
+          w[j] = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(samples[j].t));
           AddJpSample(pp, w[j], samples[j].sp, u);
         }
         for (int k = 0; k < k_shells; ++k) {

@@ -37,7 +37,7 @@ template <class T>
 PERF_HD_INLINE bool SkippableSample(const GridSample<T>& gs, const SamplePartials<T>& sp, const float* free) {
   if (sp.dc != T(0)) return false;
   for (int q = 0; q < 8; ++q) {
-    if (free[GridParam(gs.cell[q], 3)] != 0.f) return false;
+    if (gs.cell[q] >= 0 && free[GridParam(gs.cell[q], 3)] != 0.f) return false;
   }
   return true;
 }
@@ -59,6 +59,7 @@ PERF_HD_INLINE void ScatterJtuSample(const GridSample<T>& gs, const SamplePartia
   T v[4];
   JtuValues(sp, u, v);
   for (int q = 0; q < 8; ++q) {
+    if (gs.cell[q] < 0) continue;  // an inactive brick's cell: no parameter
     const T w = gs.w[q];
     sink.Add4(GridParam(gs.cell[q], 0), w * v[0], w * v[1], w * v[2], w * v[3]);
   }
@@ -87,7 +88,8 @@ PERF_HD_INLINE void ScatterJtuShell(const TexelSample<T>& ts, const ShellPartial
 // sample: fewer dependent read-modify-writes on the CPU, fewer atomics on the GPU.
 //
 // CellMerger<T, K> accumulates, per cell, K sums of w * v[k] (w: the sample's trilinear weight of
-// that cell, v: the sample's K values) and calls flush(cell, const T acc[K]) when a cell is done.
+// that cell, v: the sample's K values) and calls flush(cell, const T acc[K]) when a cell is done;
+// never for a cell of an inactive brick (-1), whose sums are dropped.
 template <class T, int K>
 class CellMerger {
  public:
@@ -112,7 +114,7 @@ class CellMerger {
         if (shared) used[p] = true;
       }
       for (int p = 0; p < 8; ++p) {
-        if (!used[p]) flush(cell_[p], acc_[p]);
+        if (!used[p]) Emit(flush, cell_[p], acc_[p]);
       }
       Store(gs, next, 8);
       return;
@@ -135,7 +137,7 @@ class CellMerger {
       int j = 0;
       while (j < count && cell[j] != cell_[i]) ++j;
       if (j == count) {
-        flush(cell_[i], acc_[i]);
+        Emit(flush, cell_[i], acc_[i]);
         continue;
       }
       for (int k = 0; k < K; ++k) acc[j][k] += acc_[i][k];
@@ -147,12 +149,16 @@ class CellMerger {
   // Call once per ray after its last sample.
   template <class Flush>
   PERF_HD_INLINE void Finish(Flush& flush) {
-    for (int i = 0; i < count_; ++i) flush(cell_[i], acc_[i]);
+    for (int i = 0; i < count_; ++i) Emit(flush, cell_[i], acc_[i]);
     count_ = 0;
     distinct_ = false;
   }
 
  private:
+  template <class Flush>
+  PERF_HD_INLINE static void Emit(Flush& flush, int64_t cell, const T (&acc)[K]) {
+    if (cell >= 0) flush(cell, acc);
+  }
   // Keeps `count` entries; with 8 distinct cells they are in corner order (entry q = corner q).
   PERF_HD_INLINE void Store(const GridSample<T>& gs, const T (&acc)[8][K], int count) {
     for (int j = 0; j < count; ++j)

@@ -38,13 +38,22 @@ struct BoxFrame {
 // Everything the ray math reads; trivially copyable (kernels take it by value).
 template <class T>
 struct VolumeView {
-  const T* params;  // [ParamCount(n, m, num_shells)]: grid [n^3, 4] then shells [K, 6, m, m, 4]
+  const T* params;  // grid [n^3, 4] (or its active bricks) then shells [K, 6, m, m, 4]
   int n;            // grid cells per axis
   Vec3<T> size;     // box size, world units (same as BoxFrame::size)
   int num_shells;   // K <= kMaxShells; the outermost (K - 1) is opaque
   int m;            // texels per face side
   Vec3<T> shell_center;            // box-local frame: R^T (shells.center - box.center)
   T shell_radii[kMaxShells];       // world units, increasing
+  // A brick-sparse grid (ray_types.h): its brick table [(n/8)^3] and stored bricks. nullptr:
+  // the grid is dense.
+  const int32_t* brick_slot = nullptr;
+  int64_t active_bricks = 0;
+
+  // Where the shells start in params.
+  PERF_HD_INLINE int64_t GridParams() const {
+    return brick_slot ? SparseGridParams(active_bricks) : GridParamCount(n);
+  }
 };
 
 // A ray in two coordinate systems sharing one parameter t, which is world distance from the
@@ -148,6 +157,45 @@ PERF_HD_INLINE MarchStep<T> StepAt(const March<T>& m, int k, const Jitter& jit) 
   return {start + u * len, len};
 }
 
+// The march index of the first sample at or after k (dir +1), or at or before k (dir -1), that a
+// brick-sparse grid cannot skip, with its step in *st; march.count (or -1) when none is left. A
+// sample inside a kSkipBrick brick reads only inactive cells (zeros): it adds exact zeros to every
+// sum of Forward and Backward, so skipping it changes nothing, and the march jumps to the sample
+// whose segment holds the point where the ray leaves (enters) that brick. The samples that are
+// taken keep their index, hence their jitter: the sparse march equals the dense one wherever the
+// skipped space is empty. Dense grids: k.
+template <class T>
+PERF_HD_INLINE int TakeSample(const VolumeView<T>& vol, const BoxRay<T>& ray, const March<T>& m, int k, int dir,
+                              const Jitter& jit, MarchStep<T>* st) {
+  const int nb = vol.n / kBrickSide;
+  while (k >= 0 && k < m.count) {
+    *st = StepAt(m, k, jit);
+    if (!vol.brick_slot) return k;
+    const Vec3<T> g = ray.GridPoint(st->t);
+    int b[3];
+    for (int a = 0; a < 3; ++a) {
+      const T c = Clamp(g[a] * (T(1) / T(kBrickSide)), T(0), T(nb - 1));
+      b[a] = static_cast<int>(c);  // c >= 0: truncation is floor
+    }
+    if (vol.brick_slot[BrickOf(nb, b[0], b[1], b[2])] != kSkipBrick) return k;
+    T t_edge = dir > 0 ? T(3.0e38) : T(-3.0e38);
+    for (int a = 0; a < 3; ++a) {
+      const T d = ray.grid_dir[a];
+      if (d == 0) continue;
+      const T face = T(kBrickSide) * T(b[a] + ((d > 0) == (dir > 0) ? 1 : 0));
+      const T t = (face - ray.grid_origin[a]) / d;
+      t_edge = dir > 0 ? Min(t_edge, t) : Max(t_edge, t);
+    }
+    const T seg = (t_edge - m.t_min) / m.delta;
+    if (dir > 0) {
+      k = seg >= T(m.count) ? m.count : Max(k + 1, static_cast<int>(Floor(Max(seg, T(0)))));
+    } else {
+      k = seg < T(0) ? -1 : Min(k - 1, static_cast<int>(Floor(seg)));
+    }
+  }
+  return k;
+}
+
 // Shell lookups along one ray, innermost first; a missed shell is transparent (a = 0).
 template <class T>
 struct ShellStack {
@@ -176,7 +224,7 @@ PERF_HD_INLINE void EvalShells(const VolumeView<T>& vol, const BoxRay<T>& ray, c
     }
     st->coord[k] = DirectionToCube(ray.origin + ray.dir * t - vol.shell_center);
     T v[4];
-    GatherTexels(vol.params, BilinearWeights(vol.n, vol.m, k, st->coord[k]), v);
+    GatherTexels(vol.params, TexelWeights(vol.GridParams(), vol.m, k, st->coord[k]), v);
     st->a[k] = k == vol.num_shells - 1 ? T(1) : v[3];
     for (int c = 0; c < 3; ++c) {
       st->e[k][c] = v[c];
@@ -225,7 +273,8 @@ struct RayOutput {
   T shells[3];    // S, the shells' colour before the box's transmittance
   T residual[4];  // H - C (3), then L (AuxResidual)
   T dl_dt;        // dL / dT_box
-  int count;      // samples composited (the march may stop early, see Forward)
+  int count;      // samples composited (the march may stop early, and skip empty bricks)
+  int end;        // the march index after the last sample considered (Backward walks back from it)
 };
 
 // T in a non-deduced context (so that a nullptr record argument does not block deduction).
@@ -256,7 +305,7 @@ PERF_HD_INLINE void AuxResidual(T t_box, T lambda, T alpha, T* l, T* dl_dt) {
 // stop: the march ends once T_i < stop (early ray termination; 0 marches the whole box). What is
 // left behind then weighs less than `stop`, and the derivatives are those of the truncated sum.
 // record: optional [MakeMarch(vol, ray).count] scratch that Backward can read instead of
-// recomputing. alpha: the photo's alpha at the pixel, or < 0 when unknown (AuxResidual).
+// recomputing (the first `count` entries are written). alpha: the photo's alpha at the pixel, or < 0 when unknown (AuxResidual).
 template <class T>
 PERF_HD RayOutput<T> Forward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitter& jit, const T* target,
                              T lambda, T stop = T(0), typename Identity<SampleRecord<T>>::type* record = nullptr,
@@ -265,23 +314,28 @@ PERF_HD RayOutput<T> Forward(const VolumeView<T>& vol, const BoxRay<T>& ray, con
   const March<T> march = MakeMarch(vol, ray);
   T depth = 0, trans = 1;
   for (int c = 0; c < 3; ++c) out.h[c] = 0;
-  int k = 0;
-  while (k < march.count) {
-    const MarchStep<T> st = StepAt(march, k, jit);
+  int taken = 0;
+  out.end = march.count;
+  MarchStep<T> st{};
+  for (int k = TakeSample(vol, ray, march, 0, 1, jit, &st); k < march.count;
+       k = TakeSample(vol, ray, march, k + 1, 1, jit, &st)) {
     T v[4];
-    const GridSample<T> gs = TrilinearWeights(vol.n, ray.GridPoint(st.t));
+    const GridSample<T> gs = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(st.t));
     GatherGrid(vol.params, gs, v);
     const T od = v[3] * st.delta;
     const T keep = Exp(-od);
     const T weight = trans * (1 - keep);
     for (int c = 0; c < 3; ++c) out.h[c] += weight * v[c];
-    if (record) record[k] = {gs, st.t, st.delta, {v[0], v[1], v[2], v[3]}, trans, keep};
+    if (record) record[taken] = {gs, st.t, st.delta, {v[0], v[1], v[2], v[3]}, trans, keep};
+    ++taken;
     depth += od;
     trans *= keep;
-    ++k;
-    if (trans < stop) break;
+    if (trans < stop) {
+      out.end = k + 1;
+      break;
+    }
   }
-  out.count = k;
+  out.count = taken;
   out.depth = depth;
   out.t_box = Exp(-depth);
   ShellStack<T> shells;
@@ -356,7 +410,7 @@ PERF_HD void Backward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitt
     sp.de = tb * shells.p[k] * a;
     sp.opaque = k == vol.num_shells - 1;
     for (int c = 0; c < 3; ++c) sp.da[c] = tb * shells.p[k] * (e[c] - behind[c]);
-    visit.Shell(k, shells.coord[k], BilinearWeights(vol.n, vol.m, k, shells.coord[k]), sp);
+    visit.Shell(k, shells.coord[k], TexelWeights(vol.GridParams(), vol.m, k, shells.coord[k]), sp);
     for (int c = 0; c < 3; ++c) behind[c] = a * e[c] + (1 - a) * behind[c];
   }
 
@@ -364,8 +418,9 @@ PERF_HD void Backward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitt
   for (int c = 0; c < 3; ++c) g[c] = tb * fwd.shells[c];
   const T dl_per_delta = -fwd.dl_dt * tb;
   T v_depth = fwd.depth;
-  for (int k = fwd.count - 1; k >= 0; --k) {
-    MarchStep<T> st;
+  MarchStep<T> st{};
+  for (int k = record ? fwd.count - 1 : TakeSample(vol, ray, march, fwd.end - 1, -1, jit, &st); k >= 0;
+       k = record ? k - 1 : TakeSample(vol, ray, march, k - 1, -1, jit, &st)) {
     T v[4], ti, keep;
     GridSample<T> gs;
     if (record) {
@@ -376,8 +431,7 @@ PERF_HD void Backward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitt
       ti = r.trans;
       keep = r.keep;
     } else {
-      st = StepAt(march, k, jit);
-      gs = TrilinearWeights(vol.n, ray.GridPoint(st.t));
+      gs = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(st.t));
       GatherGrid(vol.params, gs, v);
       const T od = v[3] * st.delta;
       v_depth -= od;

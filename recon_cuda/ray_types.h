@@ -113,12 +113,38 @@ PERF_HD_INLINE int64_t GridCell(int n, int i, int j, int k) {
 }
 PERF_HD_INLINE int64_t GridParam(int64_t cell, int ch) { return 4 * cell + ch; }
 PERF_HD_INLINE int64_t GridParamCount(int n) { return 4 * static_cast<int64_t>(n) * n * n; }
+// grid_params: where the shells start (GridParamCount(n) for a dense grid, SparseGridParams).
+PERF_HD_INLINE int64_t ShellParamAt(int64_t grid_params, int m, int shell, int face, int u, int v, int ch) {
+  return grid_params + 4 * ((static_cast<int64_t>(shell) * 6 + face) * m * m + static_cast<int64_t>(v) * m + u) + ch;
+}
 PERF_HD_INLINE int64_t ShellParam(int n, int m, int shell, int face, int u, int v, int ch) {
-  return GridParamCount(n) +
-         4 * ((static_cast<int64_t>(shell) * 6 + face) * m * m + static_cast<int64_t>(v) * m + u) + ch;
+  return ShellParamAt(GridParamCount(n), m, shell, face, u, v, ch);
 }
 PERF_HD_INLINE int64_t ParamCount(int n, int m, int num_shells) {
   return GridParamCount(n) + 4 * static_cast<int64_t>(num_shells) * 6 * m * m;
+}
+
+// Brick-sparse grids (DESIGN.md "Representation"; issue 15): the N^3 cells are grouped in bricks
+// of 8^3 (OpenVDB's leaf), N a multiple of 8. Only active bricks hold parameters: brick slot s
+// holds its cells at s 512 + (z 8 + y) 8 + x (local coordinates), each cell 4 values as in the
+// dense layout, and the shells follow the last slot. The brick table [(N/8)^3] gives each brick's
+// slot, or one of two marks for inactive bricks, which read as 0 in every channel:
+//   kEmptyBrick: an active brick is among its 26 neighbours, so samples inside it are taken
+//                (their trilinear support can reach stored cells);
+//   kSkipBrick:  no active neighbour either: no sample inside it reads a stored cell, and the
+//                march steps over it (ray_math.h NextSampleToTake).
+inline constexpr int kBrickSide = 8;
+inline constexpr int kBrickCells = kBrickSide * kBrickSide * kBrickSide;
+inline constexpr int32_t kEmptyBrick = -1;
+inline constexpr int32_t kSkipBrick = -2;
+
+PERF_HD_INLINE int64_t SparseGridParams(int64_t active_bricks) { return 4 * kBrickCells * active_bricks; }
+PERF_HD_INLINE int64_t BrickOf(int nb, int bi, int bj, int bk) { return (static_cast<int64_t>(bk) * nb + bj) * nb + bi; }
+// The stored cell of grid cell (i, j, k) in a brick-sparse grid, or -1 when its brick is inactive.
+PERF_HD_INLINE int64_t SparseCell(const int32_t* brick_slot, int nb, int i, int j, int k) {
+  const int32_t slot = brick_slot[BrickOf(nb, i >> 3, j >> 3, k >> 3)];
+  if (slot < 0) return -1;
+  return static_cast<int64_t>(slot) * kBrickCells + (((k & 7) * kBrickSide + (j & 7)) * kBrickSide + (i & 7));
 }
 
 }  // namespace perf::recon

@@ -73,8 +73,9 @@ struct TexelSample {
   T w[4];            // bilinear weights, sum to 1
 };
 
+// grid_params: where the shells start in x (ShellParamAt).
 template <class T>
-PERF_HD_INLINE TexelSample<T> BilinearWeights(int n, int m, int shell, CubeCoord<T> c) {
+PERF_HD_INLINE TexelSample<T> TexelWeights(int64_t grid_params, int m, int shell, CubeCoord<T> c) {
   int ulo, uhi, vlo, vhi;
   T fu, fv;
   LinearCoord(c.u * T(m), m, &ulo, &uhi, &fu);
@@ -82,7 +83,7 @@ PERF_HD_INLINE TexelSample<T> BilinearWeights(int n, int m, int shell, CubeCoord
   TexelSample<T> s;
   for (int k = 0; k < 4; ++k) {
     const int du = k & 1, dv = k >> 1;
-    s.param[k] = ShellParam(n, m, shell, c.face, du ? uhi : ulo, dv ? vhi : vlo, 0);
+    s.param[k] = ShellParamAt(grid_params, m, shell, c.face, du ? uhi : ulo, dv ? vhi : vlo, 0);
     s.w[k] = (du ? fu : 1 - fu) * (dv ? fv : 1 - fv);
   }
   return s;

@@ -22,6 +22,7 @@ struct PerParamVisitor {
   }
   PERF_HD_INLINE void Sample(int, const MarchStep<T>&, const GridSample<T>& gs, const SamplePartials<T>& p) {
     for (int q = 0; q < 8; ++q) {
+      if (gs.cell[q] < 0) continue;  // an inactive brick's cell
       const T w = gs.w[q];
       const int64_t base = GridParam(gs.cell[q], 0);
       f(base + 0, p.dc * w, T(0), T(0), T(0));

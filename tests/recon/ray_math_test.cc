@@ -229,7 +229,7 @@ TEST(RayMathTest, TrilinearReproducesALinearField) {
   std::uniform_real_distribution<double> u(0.5, n - 0.5);
   for (int t = 0; t < 200; ++t) {
     const V3 p{u(rng), u(rng), u(rng)};
-    const GridSample<double> gs = TrilinearWeights(n, p);
+    const GridSample<double> gs = TrilinearWeights(n, nullptr, p);
     double v[4], wsum = 0;
     GatherGrid(grid.data(), gs, v);
     for (double w : gs.w) wsum += w;
@@ -237,8 +237,8 @@ TEST(RayMathTest, TrilinearReproducesALinearField) {
     for (int ch = 0; ch < 4; ++ch) EXPECT_NEAR(v[ch], field(p, ch), 1e-13);
   }
   double a[4], b[4];  // clamped: outside the centres' hull the border value holds
-  GatherGrid(grid.data(), TrilinearWeights(n, V3{-1, 2, 4}), a);
-  GatherGrid(grid.data(), TrilinearWeights(n, V3{0.5, 2, 3.5}), b);
+  GatherGrid(grid.data(), TrilinearWeights(n, nullptr, V3{-1, 2, 4}), a);
+  GatherGrid(grid.data(), TrilinearWeights(n, nullptr, V3{0.5, 2, 3.5}), b);
   for (int ch = 0; ch < 4; ++ch) EXPECT_NEAR(a[ch], b[ch], 1e-14);
 }
 
@@ -267,7 +267,7 @@ TEST(RayMathTest, CubeMapRoundTripAndContinuity) {
             f(Normalized(CubeToDirection(CubeCoord<double>{face, (u + 0.5) / m, (v + 0.5) / m})));
   auto lookup = [&](V3 d) {
     double out[4];
-    GatherTexels(x.data(), BilinearWeights(n, m, 0, DirectionToCube(d)), out);
+    GatherTexels(x.data(), TexelWeights(GridParamCount(n), m, 0, DirectionToCube(d)), out);
     return out[0];
   };
   double worst_edge = 0;

@@ -1,0 +1,66 @@
+// The layout of a brick-sparse grid on the host (ray_types.h "Brick-sparse grids"): which 8^3
+// bricks of an N^3 grid hold parameters, the table the ray math reads, and the moves between the
+// dense and the sparse storage of the grid's values.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "recon_cuda/ray_types.h"
+
+namespace perf::recon {
+
+struct BrickGrid {
+  int n = 0;                    // cells per axis, a multiple of kBrickSide
+  std::vector<int32_t> slot;    // [(n/8)^3], x fastest: the brick's slot, kEmptyBrick or kSkipBrick
+  std::vector<int64_t> bricks;  // the active bricks (BrickOf index) in slot order
+
+  int nb() const { return n / kBrickSide; }
+  int64_t ActiveBricks() const { return static_cast<int64_t>(bricks.size()); }
+  int64_t ActiveCells() const { return ActiveBricks() * kBrickCells; }
+  int64_t GridParams() const { return SparseGridParams(ActiveBricks()); }
+  bool operator==(const BrickGrid&) const = default;
+};
+
+// active: [(n/8)^3] flags, x fastest. Slots follow the brick order; an inactive brick is
+// kEmptyBrick when one of its 26 neighbours is active, kSkipBrick otherwise. Throws InputError
+// when n is not a positive multiple of 8 or `active` has the wrong size.
+BrickGrid MakeBrickGrid(int n, const std::vector<uint8_t>& active);
+
+// Every brick active: the dense grid's cells, stored brick by brick.
+BrickGrid FullBrickGrid(int n);
+
+// The grid part of x between the layouts: dense [n^3, 4] to sparse [active cells, 4] (the values
+// of inactive bricks are dropped), and back (inactive cells 0).
+template <class T>
+std::vector<T> PackGrid(const BrickGrid& b, std::span<const T> dense) {
+  std::vector<T> out(static_cast<size_t>(b.GridParams()));
+  for (int k = 0; k < b.n; ++k) {
+    for (int j = 0; j < b.n; ++j) {
+      for (int i = 0; i < b.n; ++i) {
+        const int64_t cell = SparseCell(b.slot.data(), b.nb(), i, j, k);
+        if (cell < 0) continue;
+        for (int ch = 0; ch < 4; ++ch) out[GridParam(cell, ch)] = dense[GridParam(GridCell(b.n, i, j, k), ch)];
+      }
+    }
+  }
+  return out;
+}
+
+template <class T>
+std::vector<T> UnpackGrid(const BrickGrid& b, std::span<const T> sparse) {
+  std::vector<T> out(static_cast<size_t>(GridParamCount(b.n)), T(0));
+  for (int k = 0; k < b.n; ++k) {
+    for (int j = 0; j < b.n; ++j) {
+      for (int i = 0; i < b.n; ++i) {
+        const int64_t cell = SparseCell(b.slot.data(), b.nb(), i, j, k);
+        if (cell < 0) continue;
+        for (int ch = 0; ch < 4; ++ch) out[GridParam(GridCell(b.n, i, j, k), ch)] = sparse[GridParam(cell, ch)];
+      }
+    }
+  }
+  return out;
+}
+
+}  // namespace perf::recon
