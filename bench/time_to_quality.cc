@@ -274,7 +274,7 @@ void RunHierarchy(Backend* backend, const BenchData& d, SolverType type, const B
     run->complete = stopped.empty() && h.level + 1 == s.levels;
     update();
   };
-  SolveHierarchy(backend, d.geometry, views, ho, 0, {}, cb);
+  SolveHierarchy(backend, d.geometry, views, ho, HierarchyStart{}, cb);
   run->final_psnr = run->curve.empty() ? 0 : run->curve.back().second;
 }
 

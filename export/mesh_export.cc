@@ -37,7 +37,9 @@ double Dot(const Vec3d& a, const Vec3d& b) { return a[0] * b[0] + a[1] * b[1] + 
 Vec3d ToDouble(const std::array<float, 3>& p) { return {p[0], p[1], p[2]}; }
 
 // Opacity of a cell across CellLength.
+// cell: a stored cell, or -1 (an inactive brick's: empty).
 double CellOpacity(const recon::Checkpoint& c, int64_t cell, double length) {
+  if (cell < 0) return 0.0;
   const double sigma = c.params[recon::GridParam(cell, 3)];
   return sigma > 0 ? -std::expm1(-sigma * length) : 0.0;
 }
@@ -59,10 +61,10 @@ std::array<float, 3> SampleColour(const recon::Checkpoint& c, const openvdb::Vec
       idx[a] = up ? hi[a] : lo[a];
       w *= up ? f[a] : 1 - f[a];
     }
-    const int64_t cell = recon::GridCell(n, idx[0], idx[1], idx[2]);
+    const int64_t cell = recon::StoredCell(c.shape, idx[0], idx[1], idx[2]);
     const double wa = w * CellOpacity(c, cell, length);
     for (int ch = 0; ch < 3; ++ch) {
-      const double v = std::clamp(static_cast<double>(c.params[recon::GridParam(cell, ch)]), 0.0, 1.0);
+      const double v = cell < 0 ? 0.0 : std::clamp(static_cast<double>(c.params[recon::GridParam(cell, ch)]), 0.0, 1.0);
       weighted[ch] += wa * v;
       plain[ch] += w * v;
     }
@@ -97,7 +99,6 @@ class UnionFind {
 Mesh ExtractMesh(const recon::Checkpoint& c, const MeshOptions& options) {
   CheckExportable(c);
   openvdb::initialize();
-  const int n = c.shape.n;
   const double length = CellLength(c);
 
   // Opacity per cell in index space (identity transform; positions go to world below, in double).
@@ -108,16 +109,12 @@ Mesh ExtractMesh(const recon::Checkpoint& c, const MeshOptions& options) {
   bool reaches_iso = false;
   {
     openvdb::FloatGrid::Accessor acc = opacity->getAccessor();
-    for (int k = 0; k < n; ++k) {
-      for (int j = 0; j < n; ++j) {
-        for (int i = 0; i < n; ++i) {
-          const double a = CellOpacity(c, recon::GridCell(n, i, j, k), length);
-          if (a <= 0) continue;
-          acc.setValue(openvdb::Coord(i, j, k), static_cast<float>(a));
-          reaches_iso = reaches_iso || a >= options.iso_opacity;
-        }
-      }
-    }
+    recon::ForEachStoredCell(c.shape, [&](int i, int j, int k, int64_t cell) {
+      const double a = CellOpacity(c, cell, length);
+      if (a <= 0) return;
+      acc.setValue(openvdb::Coord(i, j, k), static_cast<float>(a));
+      reaches_iso = reaches_iso || a >= options.iso_opacity;
+    });
   }
   Mesh mesh;
   if (!reaches_iso) return mesh;

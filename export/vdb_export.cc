@@ -16,9 +16,9 @@ namespace fs = std::filesystem;
 void CheckExportable(const recon::Checkpoint& c) {
   const int n = c.shape.n;
   if (n < 1) throw InputError("checkpoint", "n", StrCat(n), "the grid has no cells");
-  if (static_cast<int64_t>(c.params.size()) < recon::GridParamCount(n)) {
+  if (static_cast<int64_t>(c.params.size()) < c.shape.GridParamCount()) {
     throw InputError("checkpoint", "parameters", StrCat(c.params.size()),
-                     StrCat("fewer than the ", recon::GridParamCount(n), " values of a ", n, "^3 grid"));
+                     StrCat("fewer than the ", c.shape.GridParamCount(), " values of its ", n, "^3 grid"));
   }
   const double* s = c.placement.box_size;
   if (!(std::min({s[0], s[1], s[2]}) > 0) || !std::isfinite(s[0] + s[1] + s[2])) {
@@ -91,24 +91,20 @@ VdbStats WriteVdb(const recon::Checkpoint& c, const fs::path& path, const VdbOpt
   {
     openvdb::FloatGrid::Accessor d = density->getAccessor();
     openvdb::Vec3SGrid::Accessor col = colour->getAccessor();
-    for (int k = 0; k < n; ++k) {
-      for (int j = 0; j < n; ++j) {
-        for (int i = 0; i < n; ++i) {
-          const int64_t cell = recon::GridCell(n, i, j, k);
-          const float sigma = c.params[recon::GridParam(cell, 3)];
-          if (!(sigma > 0) || sigma < min_sigma) continue;
-          const openvdb::Coord xyz(i, j, k);
-          d.setValue(xyz, sigma);
-          openvdb::Vec3s rgb;
-          for (int ch = 0; ch < 3; ++ch) {
-            const double v = std::clamp(static_cast<double>(c.params[recon::GridParam(cell, ch)]), 0.0, 1.0);
-            rgb[ch] = static_cast<float>(SrgbToLinear(v));
-          }
-          col.setValue(xyz, rgb);
-          ++stats.active_voxels;
-        }
+    // The stored cells only: a sparse grid's 8^3 bricks land on OpenVDB's 8^3 leaves.
+    recon::ForEachStoredCell(c.shape, [&](int i, int j, int k, int64_t cell) {
+      const float sigma = c.params[recon::GridParam(cell, 3)];
+      if (!(sigma > 0) || sigma < min_sigma) return;
+      const openvdb::Coord xyz(i, j, k);
+      d.setValue(xyz, sigma);
+      openvdb::Vec3s rgb;
+      for (int ch = 0; ch < 3; ++ch) {
+        const double v = std::clamp(static_cast<double>(c.params[recon::GridParam(cell, ch)]), 0.0, 1.0);
+        rgb[ch] = static_cast<float>(SrgbToLinear(v));
       }
-    }
+      col.setValue(xyz, rgb);
+      ++stats.active_voxels;
+    });
   }
   density->setName(stats.density_grid);
   density->setGridClass(openvdb::GRID_FOG_VOLUME);

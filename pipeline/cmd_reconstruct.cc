@@ -52,6 +52,9 @@ void AddReconstructCommand(CLI::App& app) {
                   "End a ray's march once its transmittance is below this (0: march the whole box)")
       ->capture_default_str();
   cmd->add_flag("--no-pyramid", args->no_pyramid, "Fit full-resolution photos at every level");
+  cmd->add_flag("--dense", o.dense,
+                "Keep every level's grid dense (default: levels after the first store only the 8^3 bricks near "
+                "what the level before fitted)");
   cmd->add_option("--max-cg-iterations", o.solver.max_cg_iterations, "PCG iterations per Gauss-Newton step at most")
       ->capture_default_str();
   cmd->add_option("--cg-exit-ratio", o.solver.cg_exit_ratio, "PCG leaves when |r|^2 falls by less than this factor (paper: 0.85; default inf: never)")

@@ -17,12 +17,13 @@ namespace {
 static_assert(std::endian::native == std::endian::little, "checkpoints are written little-endian");
 
 constexpr char kMagic[8] = {'P', 'E', 'R', 'F', 'V', 'O', 'L', '\0'};
-constexpr uint32_t kHeaderBytes = 8 + 4 + 4 + 6 * 4 + (3 + 9 + 3 + 3 + kMaxShells) * 8 + 8 + 8;
-static_assert(kHeaderBytes == 264);
+constexpr uint32_t kHeaderBytesV1 = 8 + 4 + 4 + 6 * 4 + (3 + 9 + 3 + 3 + kMaxShells) * 8 + 8 + 8;
+static_assert(kHeaderBytesV1 == 264);
+constexpr uint32_t kHeaderBytes = kHeaderBytesV1 + 8;  // + the brick count
 
-uint64_t Fnv1a(const void* data, size_t n) {
+constexpr uint64_t kFnvBasis = 0xcbf29ce484222325ull;
+uint64_t Fnv1a(const void* data, size_t n, uint64_t h = kFnvBasis) {
   const auto* p = static_cast<const unsigned char*>(data);
-  uint64_t h = 0xcbf29ce484222325ull;
   for (size_t i = 0; i < n; ++i) {
     h ^= p[i];
     h *= 0x100000001b3ull;
@@ -81,32 +82,47 @@ std::optional<uint64_t> BytesLeft(std::istream& in) {
                                                   count * sizeof(float), " bytes after the header", found));
 }
 
-// Checks the header's parameter count against the bytes that follow it, before anything is
-// allocated for them. False where the stream cannot tell (ReadParams then bounds the memory).
-bool CheckParamBytes(Reader& r, uint64_t count) {
+// Checks the header's counts (parameters, and `bricks` u32 before them) against the bytes that
+// follow it, before anything is allocated for them. False where the stream cannot tell (ReadArray
+// then bounds the memory).
+bool CheckParamBytes(Reader& r, uint64_t count, uint64_t bricks) {
   const std::optional<uint64_t> left = BytesLeft(r.in());
   if (!left) return false;
-  const uint64_t needed = count * sizeof(float);
+  const uint64_t needed = count * sizeof(float) + bricks * sizeof(uint32_t);
   if (*left < needed) ParamsTruncated(r, count, StrCat(", the file has ", *left));
   if (*left > needed) r.Bad("size", StrCat(*left - needed, " bytes"), "trailing bytes after the parameters");
   return true;
 }
 
-// The `count` floats of the parameter block. Unless `checked` (CheckParamBytes found them all
-// there), read in chunks, so that a stream that ends early costs no more memory than it held.
-std::vector<float> ReadParams(Reader& r, uint64_t count, bool checked) {
-  constexpr uint64_t kChunk = uint64_t{1} << 22;  // floats (16 MiB)
-  std::vector<float> params;
-  if (checked) params.reserve(count);
+// `count` values of T. Unless `checked` (CheckParamBytes found them all there), read in chunks,
+// so that a stream that ends early costs no more memory than it held.
+template <class T>
+std::vector<T> ReadArray(Reader& r, uint64_t count, bool checked) {
+  constexpr uint64_t kChunk = uint64_t{1} << 22;  // values (16 MiB of floats)
+  std::vector<T> out;
+  if (checked) out.reserve(count);
   for (uint64_t done = 0; done < count;) {
     const uint64_t n = std::min(kChunk, count - done);
-    params.resize(done + n);
-    if (!r.in().read(reinterpret_cast<char*>(params.data() + done), static_cast<std::streamsize>(n * sizeof(float)))) {
+    out.resize(done + n);
+    if (!r.in().read(reinterpret_cast<char*>(out.data() + done), static_cast<std::streamsize>(n * sizeof(T)))) {
       ParamsTruncated(r, count, "");
     }
     done += n;
   }
-  return params;
+  return out;
+}
+
+// The brick grid of a version 2 checkpoint's list (ascending indices below nb^3).
+std::shared_ptr<const BrickGrid> BricksFromList(Reader& r, int n, const std::vector<uint32_t>& list) {
+  const int64_t nb = n / kBrickSide, total = nb * nb * nb;
+  std::vector<uint8_t> active(static_cast<size_t>(total), 0);
+  for (size_t i = 0; i < list.size(); ++i) {
+    if (list[i] >= total || (i > 0 && list[i] <= list[i - 1])) {
+      r.Bad("bricks", StrCat(list[i]), StrCat("brick indices must ascend and be below ", total));
+    }
+    active[list[i]] = 1;
+  }
+  return std::make_shared<const BrickGrid>(MakeBrickGrid(n, active));
 }
 
 }  // namespace
@@ -125,10 +141,14 @@ void WriteCheckpoint(std::ostream& out, const Checkpoint& c) {
   for (double v : p.box_size) Put(&h, v);
   for (double v : p.shell_center) Put(&h, v);
   for (int k = 0; k < kMaxShells; ++k) Put(&h, k < c.shape.num_shells ? p.shell_radii[k] : 0.0);
+  std::vector<uint32_t> bricks;
+  if (c.shape.bricks) bricks.assign(c.shape.bricks->bricks.begin(), c.shape.bricks->bricks.end());
   Put(&h, static_cast<uint64_t>(c.params.size()));
-  Put(&h, Fnv1a(c.params.data(), c.params.size() * sizeof(float)));
+  Put(&h, Fnv1a(c.params.data(), c.params.size() * sizeof(float), Fnv1a(bricks.data(), bricks.size() * sizeof(uint32_t))));
+  Put(&h, static_cast<int64_t>(c.shape.bricks ? static_cast<int64_t>(bricks.size()) : -1));
   PERF_CHECK(h.size() == kHeaderBytes);
   out.write(h.data(), static_cast<std::streamsize>(h.size()));
+  out.write(reinterpret_cast<const char*>(bricks.data()), static_cast<std::streamsize>(bricks.size() * sizeof(uint32_t)));
   out.write(reinterpret_cast<const char*>(c.params.data()), static_cast<std::streamsize>(c.params.size() * sizeof(float)));
 }
 
@@ -138,13 +158,14 @@ Checkpoint ReadCheckpoint(std::istream& in, const std::string& name) {
   if (!in.read(magic, 8)) r.Truncated("magic");
   if (std::memcmp(magic, kMagic, 8) != 0) r.Bad("magic", std::string(magic, strnlen(magic, 8)), "not a PERF volume checkpoint");
   const uint32_t version = r.Get<uint32_t>("version");
-  if (version != kCheckpointVersion) {
+  if (version != 1 && version != kCheckpointVersion) {
     throw InputError(name, "version", std::to_string(version),
-                     StrCat("this perf reads checkpoint version ", kCheckpointVersion),
+                     StrCat("this perf reads checkpoint versions 1 to ", kCheckpointVersion),
                      "re-run perf reconstruct with this version of perf");
   }
   const uint32_t header = r.Get<uint32_t>("header bytes");
-  if (header != kHeaderBytes) r.Bad("header bytes", std::to_string(header), StrCat("expected ", kHeaderBytes));
+  const uint32_t expected_header = version == 1 ? kHeaderBytesV1 : kHeaderBytes;
+  if (header != expected_header) r.Bad("header bytes", std::to_string(header), StrCat("expected ", expected_header));
   Checkpoint c;
   c.level = r.Get<int32_t>("level");
   c.shape.n = r.Get<int32_t>("n");
@@ -182,12 +203,29 @@ Checkpoint ReadCheckpoint(std::istream& in, const std::string& name) {
     }
   }
   const uint64_t count = r.Get<uint64_t>("parameter count");
-  if (count != static_cast<uint64_t>(c.shape.ParamCount())) {
-    r.Bad("parameter count", std::to_string(count), StrCat("expected ", c.shape.ParamCount(), " for the shape"));
-  }
   const uint64_t checksum = r.Get<uint64_t>("checksum");
-  c.params = ReadParams(r, count, CheckParamBytes(r, count));
-  if (Fnv1a(c.params.data(), count * sizeof(float)) != checksum) {
+  const int64_t num_bricks = version == 1 ? -1 : r.Get<int64_t>("bricks");
+  if (num_bricks >= 0) {
+    const int64_t nb = c.shape.n / kBrickSide;
+    if (c.shape.n % kBrickSide != 0) {
+      r.Bad("n", std::to_string(c.shape.n), StrCat("a sparse grid's size must be a multiple of ", kBrickSide));
+    }
+    if (num_bricks > nb * nb * nb) r.Bad("bricks", StrCat(num_bricks), StrCat("more than the grid's ", nb * nb * nb));
+  } else if (num_bricks != -1) {
+    r.Bad("bricks", StrCat(num_bricks), "must be -1 (dense) or a brick count");
+  }
+  // The parameter count the shape implies, before the brick list is read (it needs only B).
+  const int64_t grid_params = num_bricks >= 0 ? SparseGridParams(num_bricks) : GridParamCount(c.shape.n);
+  const int64_t expected = grid_params + (c.shape.ParamCount() - c.shape.GridParamCount());
+  if (count != static_cast<uint64_t>(expected)) {
+    r.Bad("parameter count", std::to_string(count), StrCat("expected ", expected, " for the shape"));
+  }
+  const uint64_t list_size = num_bricks >= 0 ? static_cast<uint64_t>(num_bricks) : 0;
+  const bool checked = CheckParamBytes(r, count, list_size);
+  const std::vector<uint32_t> list = ReadArray<uint32_t>(r, list_size, checked);
+  if (num_bricks >= 0) c.shape.bricks = BricksFromList(r, c.shape.n, list);
+  c.params = ReadArray<float>(r, count, checked);
+  if (Fnv1a(c.params.data(), count * sizeof(float), Fnv1a(list.data(), list.size() * sizeof(uint32_t))) != checksum) {
     r.Bad("checksum", "", "the parameters do not match the checksum");
   }
   if (in.peek() != std::char_traits<char>::eof()) r.Bad("size", "", "trailing bytes after the parameters");

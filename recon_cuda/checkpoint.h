@@ -2,16 +2,18 @@
 // self-describing so that export and render need nothing else (the box and shells in world
 // units travel with the values).
 //
-// Format (version 1, little-endian):
+// Format (version 2, little-endian):
 //   char[8]  magic "PERFVOL\0"
-//   u32      version (1)
-//   u32      header bytes (this fixed header, 264)
+//   u32      version (2; version 1 files, always dense, are still read)
+//   u32      header bytes (this fixed header: 272; version 1: 264)
 //   i32      level, n, m, num_shells, iterations (GN iterations or Adam steps run at the level)
 //   i32      solver (0 Gauss-Newton, 1 Adam)
 //   f64[3]   box centre, f64[9] box rotation (world_from_box, row-major), f64[3] box size
 //   f64[3]   shell centre (world), f64[8] shell radii (unused ones 0)
-//   u64      parameter count (= ParamCount(n, m, num_shells))
-//   u64      FNV-1a 64 of the parameter bytes
+//   u64      parameter count (= VolumeShape::ParamCount)
+//   u64      FNV-1a 64 of the brick list's bytes then the parameter bytes
+//   i64      B: -1 for a dense grid, else the number of active bricks (not in version 1)
+//   u32[B]   the active bricks' indices (ray_types.h BrickOf), ascending: their slot order
 //   f32[count] parameters, layout of ray_types.h
 // The reader checks every field and names the file and field on any mismatch, and checks the
 // parameter count against the bytes the file holds before allocating; writes are atomic.
@@ -26,7 +28,7 @@
 
 namespace perf::recon {
 
-inline constexpr uint32_t kCheckpointVersion = 1;
+inline constexpr uint32_t kCheckpointVersion = 2;
 
 struct Checkpoint {
   int level = 0;

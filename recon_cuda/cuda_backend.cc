@@ -135,6 +135,10 @@ class CudaBackend final : public Backend {
       vectors_.emplace_back(p.shape.ParamCount());
       cuda::Fill(vectors_.back().data(), p.shape.ParamCount(), 0.f);
     }
+    if (p.shape.bricks) {
+      bricks_ = DeviceBuffer<int32_t>(static_cast<int64_t>(p.shape.bricks->slot.size()));
+      bricks_.CopyFromHost(p.shape.bricks->slot);
+    }
     rays_ = std::make_unique<DeviceRays>(*p.rays, UsesAlpha(p));
     scratch_ = std::make_unique<Scratch>(p.rays->size(), p.shape.ParamCount());
     held_ = e.Total();
@@ -211,7 +215,7 @@ class CudaBackend final : public Backend {
     for (int y0 = 0; y0 < height; y0 += band) {
       const int rows = std::min(band, height - y0);
       const int64_t first = static_cast<int64_t>(y0) * width, count = static_cast<int64_t>(rows) * width;
-      cuda::Render(MakeView(level_.shape, level_.geometry, ptr(x)), level_.geometry.box, camera, width, y0, rows,
+      cuda::Render(View(ptr(x)), level_.geometry.box, camera, width, y0, rows,
                    level_.residuals.stop_transmittance, min_box_opacity, scratch_->render_colour.data(),
                    scratch_->render_opacity.data());
       scratch_->render_colour.CopyPrefixToHost(std::span<float>(r.colour).subspan(3 * first, 3 * count));
@@ -223,6 +227,7 @@ class CudaBackend final : public Backend {
  private:
   void Release() {
     vectors_.clear();
+    bricks_ = DeviceBuffer<int32_t>();
     rays_.reset();
     scratch_.reset();
     held_ = 0;
@@ -260,8 +265,15 @@ class CudaBackend final : public Backend {
                   ", a larger --downscale, or --device cpu");
   }
 
+  // The level's volume at x as the kernels read it: a sparse grid's brick table on the device.
+  VolumeView<float> View(const float* x) const {
+    VolumeView<float> v = MakeView(level_.shape, level_.geometry, x);
+    if (v.brick_slot) v.brick_slot = bricks_.data();
+    return v;
+  }
+
   cuda::PassInput Input(VecId x, uint32_t seed) const {
-    return {MakeView(level_.shape, level_.geometry, ptr(x)),
+    return {View(ptr(x)),
             level_.geometry.box,
             rays_->View(),
             OpacityResidualWeight(level_),
@@ -298,6 +310,7 @@ class CudaBackend final : public Backend {
   std::string name_;
   LevelProblem level_;
   std::vector<DeviceBuffer<float>> vectors_;
+  DeviceBuffer<int32_t> bricks_;  // a sparse level's brick table (VolumeView::brick_slot)
   std::unique_ptr<DeviceRays> rays_;
   std::unique_ptr<Scratch> scratch_;
   int64_t held_ = 0;  // bytes of the current level (EstimateMemory's Total)

@@ -8,15 +8,24 @@ VolumeShape LevelShape(const HierarchyOptions& o, int num_shells, int level) {
   return VolumeShape{o.start_resolution << level, o.start_resolution << level, num_shells};
 }
 
+VolumeShape NextLevelShape(const HierarchyOptions& o, const VolumeGeometry& geometry, const VolumeShape& shape,
+                           std::span<const float> x) {
+  const VolumeShape next = shape.Doubled();
+  if (!o.sparse || next.n % kBrickSide != 0) return next;
+  return next.WithBricks(OccupiedBricks(shape, geometry, x, next.n, o.occupancy));
+}
+
 std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geometry, const TrainingViews& train,
-                                  const HierarchyOptions& o, int start, std::vector<float> x,
-                                  const HierarchyCallbacks& cb) {
-  for (int level = start; level < o.levels; ++level) {
+                                  const HierarchyOptions& o, HierarchyStart start, const HierarchyCallbacks& cb) {
+  std::vector<float> x = std::move(start.x);
+  VolumeShape shape = x.empty() ? LevelShape(o, geometry.num_shells(), start.level) : start.shape;
+  PERF_CHECK(static_cast<int64_t>(x.size()) == (x.empty() ? 0 : shape.ParamCount()));
+  for (int level = start.level; level < o.levels; ++level) {
     if (cb.before_level && !cb.before_level(level)) break;
     HierarchyLevel h;
     h.level = level;
     h.levels = o.levels;
-    h.shape = LevelShape(o, geometry.num_shells(), level);
+    h.shape = shape;
     if (x.empty()) {  // level 0 of a fresh start
       x = InitialParams(h.shape, geometry, o.init);
       if (o.fixed_background) SetBackgroundShells(h.shape, o.background.data(), x);
@@ -46,7 +55,10 @@ std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geomet
     }
     if (cb.level_done) cb.level_done(h, summary, x);
     if (stopped) break;
-    if (level + 1 < o.levels) x = Resample(h.shape, x, LevelShape(o, geometry.num_shells(), level + 1));
+    if (level + 1 < o.levels) {
+      shape = NextLevelShape(o, geometry, h.shape, x);
+      x = Resample(h.shape, x, shape);
+    }
   }
   return x;
 }

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "recon_cuda/backend.h"
+#include "recon_cuda/occupancy.h"
 #include "recon_cuda/solver.h"
 #include "recon_cuda/training_data.h"
 #include "recon_cuda/volume.h"
@@ -26,10 +27,19 @@ struct HierarchyOptions {
   bool fixed_background = false;              // the shells are constants in `background`
   std::array<float, 3> background{1, 1, 1};  // (scene.json's background)
   bool pyramid = true;  // coarse levels fit downscaled photos (PyramidFactor)
+  // Levels after the first store only the bricks near what the level before fitted (occupancy.h);
+  // false keeps every level dense (--dense).
+  bool sparse = true;
+  OccupancyOptions occupancy;
 };
 
-// The grid and shells of `level`.
+// The resolutions of `level`, its grid dense.
 VolumeShape LevelShape(const HierarchyOptions& options, int num_shells, int level);
+
+// The shape of the level after the fitted one (shape, x): resolutions doubled, and with
+// options.sparse (and a grid a multiple of 8 cells across) only the occupied bricks.
+VolumeShape NextLevelShape(const HierarchyOptions& options, const VolumeGeometry& geometry, const VolumeShape& shape,
+                           std::span<const float> x);
 
 // What the callbacks see of the level being solved.
 struct HierarchyLevel {
@@ -62,11 +72,18 @@ struct TrainingViews {
   std::function<RaySet(int factor)> rays;
 };
 
-// Runs levels [start, levels) on `backend`. `x` holds the parameters at level `start` (empty:
-// a fresh start from InitialParams). Returns the last level's solution. Throws Error when the
-// solver fails, and whatever a callback throws.
+// Where a hierarchy starts: level 0 from InitialParams (x empty), or a later level from the
+// parameters carried into it (NextLevelShape and Resample of the level before).
+struct HierarchyStart {
+  int level = 0;
+  VolumeShape shape;     // x's shape
+  std::vector<float> x;  // empty: a fresh start
+};
+
+// Runs levels [start.level, levels) on `backend`. Returns the last level's solution. Throws Error
+// when the solver fails, and whatever a callback throws.
 std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geometry, const TrainingViews& train,
-                                  const HierarchyOptions& options, int start, std::vector<float> x,
+                                  const HierarchyOptions& options, HierarchyStart start,
                                   const HierarchyCallbacks& callbacks);
 
 }  // namespace perf::recon

@@ -111,7 +111,9 @@ namespace {
 // Every level's solver memory is checked before anything is allocated or loaded: a level that
 // cannot fit fails now, not after the levels before it (--start-resolution 1024 wants ~17 GB).
 void CheckLevelsFit(const Backend& backend, const VolumeGeometry& geometry, const HierarchyOptions& ho, int start) {
-  for (int level = start; level < ho.levels; ++level) {
+  // A sparse level's size is known only once the level before it is fitted: SetLevel checks it.
+  const int last = ho.sparse ? std::min(start + 1, ho.levels) : ho.levels;
+  for (int level = start; level < last; ++level) {
     const LevelProblem problem{LevelShape(ho, geometry.num_shells(), level), geometry, nullptr, ho.residuals, false};
     const MemoryEstimate e = backend.EstimateMemory(problem, RequiredVectors(ho.solver.type));
     // The host also holds the parameters and their resampled copy between levels.
@@ -134,6 +136,7 @@ HierarchyOptions ToHierarchy(const ReconstructOptions& o, int levels) {
   h.init = o.init;
   h.residuals = o.residuals;
   h.pyramid = o.pyramid;
+  h.sparse = !o.dense;
   return h;
 }
 
@@ -183,14 +186,15 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
 
   EnsureWritableDirectory(o.workspace / "recon");
   RecoverPreviousRun(o.workspace);
-  int start = 0;
-  std::vector<float> x;
+  HierarchyStart start;
   const int last = LastCheckpointLevel(o.workspace);
   if (o.resume && last >= 0) {
     const fs::path path = CheckpointPath(o.workspace, last);
     Checkpoint c = ReadCheckpoint(path);
     CheckMatchesScene(c, scene, path);
-    if (c.shape != shape_of(last) || c.level != last) {
+    const VolumeShape expected = shape_of(last);
+    if (c.shape.n != expected.n || c.shape.m != expected.m || c.shape.num_shells != expected.num_shells ||
+        c.level != last) {
       throw InputError(path.string(), "n", std::to_string(c.shape.n),
                        StrCat("level ", last, " of this run would be ", shape_of(last).n, "^3"),
                        "resume with the same --start-resolution, or run without --resume");
@@ -201,14 +205,15 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
       say(StrCat("all ", levels, " levels are done (", path.string(), "); nothing to resume"));
       return result;
     }
-    start = last + 1;
-    x = Resample(c.shape, c.params, shape_of(start));
+    start.level = last + 1;
+    start.shape = NextLevelShape(ho, geometry, c.shape, c.params);
+    start.x = Resample(c.shape, c.params, start.shape);
     // Constants of this run, whatever an earlier run (perhaps with learned shells) left there.
-    if (result.fixed_background) SetBackgroundShells(shape_of(start), ho.background.data(), x);
+    if (result.fixed_background) SetBackgroundShells(start.shape, ho.background.data(), start.x);
     say(StrCat("resuming after level ", last, " (", path.string(), ")"));
   }
 
-  CheckLevelsFit(*backend, geometry, ho, start);
+  CheckLevelsFit(*backend, geometry, ho, start.level);
   say("loading images");
   const std::vector<PosedImage> train = LoadImages(scene, o.workspace, Split::kTrain);
   const std::vector<PosedImage> test = LoadImages(scene, o.workspace, Split::kTest);
@@ -219,9 +224,9 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   // A fresh start: an earlier run's checkpoints would be mistaken for this one's. They stay aside
   // until this run has a level of its own, and come back if it fails before.
   std::optional<PreviousRun> previous;
-  if (start == 0) previous.emplace(o.workspace);
-  JsonLog log(o.workspace / "recon" / "log.jsonl", start > 0, "reconstruction log");
-  if (start > 0) log.Write({{"event", "resume"}, {"level", start}});
+  if (start.level == 0) previous.emplace(o.workspace);
+  JsonLog log(o.workspace / "recon" / "log.jsonl", start.level > 0, "reconstruction log");
+  if (start.level > 0) log.Write({{"event", "resume"}, {"level", start.level}});
   const std::vector<PosedImage>& preview_views = test.empty() ? train : test;
   say(StrCat("backend: ", result.backend, "; ", train.size(), " training and ", test.size(), " held-out views; ",
              levels, " levels from ", o.start_resolution, "^3"));
@@ -237,7 +242,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                    ")", o.background == BackgroundChoice::kAuto ? ", the colour every photo's alpha was composited over" : "")
           : std::string("background: learned (environment shells)"));
 
-  if (start == 0 && o.init_shells_from_photos) MeanColour(train, ho.init.shell_colour);
+  if (start.level == 0 && o.init_shells_from_photos) MeanColour(train, ho.init.shell_colour);
   TrainingViews views;
   for (const PosedImage& im : train) views.cameras.push_back(im.camera);
   views.rays = [&train](int factor) {
@@ -341,7 +346,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     t_level = WallClock::now();
     eval_seconds = 0;
   };
-  SolveHierarchy(backend.get(), geometry, views, ho, start, std::move(x), cb);
+  SolveHierarchy(backend.get(), geometry, views, ho, std::move(start), cb);
 
   json levels_json = json::array();
   for (const LevelReport& l : result.levels) {

@@ -48,6 +48,7 @@ struct ReconstructOptions {
   // Coarse levels fit downscaled photos: the largest power-of-two downscale that keeps a voxel
   // at least one pixel wide in the median view (fewer rays, same information at that level).
   bool pyramid = true;
+  bool dense = false;  // every level's grid dense (else levels after the first keep the occupied bricks)
   bool resume = false;          // continue after the last checkpoint instead of starting over
   int preview_every = 0;        // write a held-out preview every K iterations (0: never)
   int eval_every = 0;           // held-out PSNR every K iterations (0: at the end of each level)

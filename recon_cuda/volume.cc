@@ -46,6 +46,11 @@ VolumeView<float> MakeView(const VolumeShape& shape, const VolumeGeometry& geome
   v.m = shape.m;
   v.shell_center = geometry.shell_center;
   for (int k = 0; k < kMaxShells; ++k) v.shell_radii[k] = k < shape.num_shells ? geometry.shell_radii[k] : 0.f;
+  if (shape.bricks) {
+    PERF_CHECK(shape.bricks->n == shape.n);
+    v.brick_slot = shape.bricks->slot.data();
+    v.active_bricks = shape.bricks->ActiveBricks();
+  }
   return v;
 }
 
@@ -106,22 +111,18 @@ std::vector<float> Resample(const VolumeShape& from, std::span<const float> para
   PERF_CHECK(from.num_shells == to.num_shells);
   std::vector<float> out(static_cast<size_t>(to.ParamCount()));
   const std::vector<Axis> g = AxisWeights(from.n, to.n);
-  for (int k = 0; k < to.n; ++k) {
-    for (int j = 0; j < to.n; ++j) {
-      for (int i = 0; i < to.n; ++i) {
-        double v[4] = {0, 0, 0, 0};
-        for (int c = 0; c < 8; ++c) {
-          const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
-          const double w = (dx ? g[i].f : 1 - g[i].f) * (dy ? g[j].f : 1 - g[j].f) * (dz ? g[k].f : 1 - g[k].f);
-          if (w == 0) continue;
-          const int64_t cell = GridCell(from.n, dx ? g[i].hi : g[i].lo, dy ? g[j].hi : g[j].lo, dz ? g[k].hi : g[k].lo);
-          for (int ch = 0; ch < 4; ++ch) v[ch] += w * params[GridParam(cell, ch)];
-        }
-        const int64_t cell = GridCell(to.n, i, j, k);
-        for (int ch = 0; ch < 4; ++ch) out[GridParam(cell, ch)] = static_cast<float>(v[ch]);
-      }
+  ForEachStoredCell(to, [&](int i, int j, int k, int64_t to_cell) {
+    double v[4] = {0, 0, 0, 0};
+    for (int c = 0; c < 8; ++c) {
+      const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+      const double w = (dx ? g[i].f : 1 - g[i].f) * (dy ? g[j].f : 1 - g[j].f) * (dz ? g[k].f : 1 - g[k].f);
+      if (w == 0) continue;
+      const int64_t cell = StoredCell(from, dx ? g[i].hi : g[i].lo, dy ? g[j].hi : g[j].lo, dz ? g[k].hi : g[k].lo);
+      if (cell < 0) continue;  // an inactive brick: zeros
+      for (int ch = 0; ch < 4; ++ch) v[ch] += w * params[GridParam(cell, ch)];
     }
-  }
+    for (int ch = 0; ch < 4; ++ch) out[GridParam(to_cell, ch)] = static_cast<float>(v[ch]);
+  });
   const std::vector<Axis> t = AxisWeights(from.m, to.m);
   for (int s = 0; s < to.num_shells; ++s) {
     for (int face = 0; face < 6; ++face) {
@@ -132,10 +133,11 @@ std::vector<float> Resample(const VolumeShape& from, std::span<const float> para
             const int du = c & 1, dv = c >> 1;
             const double w = (du ? t[u].f : 1 - t[u].f) * (dv ? t[v].f : 1 - t[v].f);
             if (w == 0) continue;
-            const int64_t p = ShellParam(from.n, from.m, s, face, du ? t[u].hi : t[u].lo, dv ? t[v].hi : t[v].lo, 0);
+            const int64_t p = ShellParamAt(from.GridParamCount(), from.m, s, face, du ? t[u].hi : t[u].lo,
+                                           dv ? t[v].hi : t[v].lo, 0);
             for (int ch = 0; ch < 4; ++ch) acc[ch] += w * params[p + ch];
           }
-          const int64_t p = ShellParam(to.n, to.m, s, face, u, v, 0);
+          const int64_t p = ShellParamAt(to.GridParamCount(), to.m, s, face, u, v, 0);
           for (int ch = 0; ch < 4; ++ch) out[p + ch] = static_cast<float>(acc[ch]);
         }
       }
@@ -152,7 +154,12 @@ void ProjectToValidRange(const VolumeShape& shape, std::span<float> x) {
 
 std::string DescribeShape(const VolumeShape& shape) {
   std::ostringstream s;
-  s << shape.n << "^3 grid, " << shape.num_shells << " shell" << (shape.num_shells == 1 ? "" : "s") << " of 6 x "
+  s << shape.n << "^3 grid";
+  if (shape.bricks) {
+    const int64_t nb = shape.bricks->nb();
+    s << " (" << shape.bricks->ActiveBricks() << " of " << nb * nb * nb << " bricks)";
+  }
+  s << ", " << shape.num_shells << " shell" << (shape.num_shells == 1 ? "" : "s") << " of 6 x "
     << shape.m << "^2 texels (";
   const double p = static_cast<double>(shape.ParamCount());
   if (p >= 1e6) {

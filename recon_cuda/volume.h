@@ -6,10 +6,12 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
 
+#include "recon_cuda/brick_grid.h"
 #include "recon_cuda/param_ops.h"
 #include "recon_cuda/ray_math.h"
 
@@ -19,17 +21,29 @@ struct Scene;
 
 namespace perf::recon {
 
-// Resolutions of one level.
+// Resolutions of one level, and which of its grid's bricks hold parameters.
 struct VolumeShape {
   int n = 32;          // grid cells per axis
   int m = 32;          // texels per cube-map face side
   int num_shells = 0;  // <= kMaxShells
+  std::shared_ptr<const BrickGrid> bricks;  // a brick-sparse grid (brick_grid.h); nullptr: dense
 
-  int64_t ParamCount() const { return recon::ParamCount(n, m, num_shells); }
-  int64_t GridParamCount() const { return recon::GridParamCount(n); }
-  // The next level of the hierarchy: every resolution doubled.
+  VolumeShape() = default;
+  VolumeShape(int n_, int m_, int num_shells_, std::shared_ptr<const BrickGrid> bricks_ = nullptr)
+      : n(n_), m(m_), num_shells(num_shells_), bricks(std::move(bricks_)) {}
+
+  bool sparse() const { return bricks != nullptr; }
+  // Where the shells start: 4 n^3, or 4 values per cell of the active bricks.
+  int64_t GridParamCount() const { return bricks ? bricks->GridParams() : recon::GridParamCount(n); }
+  int64_t ParamCount() const { return GridParamCount() + 4 * static_cast<int64_t>(num_shells) * 6 * m * m; }
+  // The next level of the hierarchy: every resolution doubled, the grid dense.
   VolumeShape Doubled() const { return {2 * n, 2 * m, num_shells}; }
-  bool operator==(const VolumeShape&) const = default;
+  // The same resolutions with these bricks active (nullptr: dense).
+  VolumeShape WithBricks(std::shared_ptr<const BrickGrid> b) const { return {n, m, num_shells, std::move(b)}; }
+  bool operator==(const VolumeShape& o) const {
+    return n == o.n && m == o.m && num_shells == o.num_shells &&
+           (bricks == o.bricks || (bricks && o.bricks && *bricks == *o.bricks));
+  }
 };
 
 // Where the box and the shells are in the world, in double precision and the world frame, as
@@ -56,7 +70,8 @@ struct VolumeGeometry {
   int num_shells() const { return static_cast<int>(shell_radii.size()); }
 };
 
-// The view the ray math reads: params must outlive it.
+// The view the ray math reads: params (and shape.bricks) must outlive it. A sparse shape's view
+// points at the host's brick table (a device backend puts its own copy in its place).
 VolumeView<float> MakeView(const VolumeShape& shape, const VolumeGeometry& geometry, const float* params);
 
 struct InitOptions {
@@ -88,10 +103,39 @@ std::vector<float> Resample(const VolumeShape& from, std::span<const float> para
 // The valid range (DESIGN.md "Gauss-Newton step"): sigma >= 0, colours and opacities in [0, 1].
 void ProjectToValidRange(const VolumeShape& shape, std::span<float> params);
 
+// The stored cell of grid cell (i, j, k): its index in the dense layout, or in the active bricks
+// (-1 when its brick is inactive).
+inline int64_t StoredCell(const VolumeShape& shape, int i, int j, int k) {
+  return shape.bricks ? SparseCell(shape.bricks->slot.data(), shape.bricks->nb(), i, j, k) : GridCell(shape.n, i, j, k);
+}
+
+// Calls f(i, j, k, stored cell) for every stored cell (dense: all n^3, x fastest; sparse: brick by
+// brick in slot order).
+template <class F>
+void ForEachStoredCell(const VolumeShape& shape, F&& f) {
+  if (!shape.bricks) {
+    for (int k = 0; k < shape.n; ++k)
+      for (int j = 0; j < shape.n; ++j)
+        for (int i = 0; i < shape.n; ++i) f(i, j, k, GridCell(shape.n, i, j, k));
+    return;
+  }
+  const int nb = shape.bricks->nb();
+  for (int64_t slot = 0; slot < shape.bricks->ActiveBricks(); ++slot) {
+    const int64_t brick = shape.bricks->bricks[slot];
+    const int bi = static_cast<int>(brick % nb) * kBrickSide, bj = static_cast<int>(brick / nb % nb) * kBrickSide,
+              bk = static_cast<int>(brick / (int64_t{nb} * nb)) * kBrickSide;
+    int64_t cell = slot * kBrickCells;
+    for (int z = 0; z < kBrickSide; ++z)
+      for (int y = 0; y < kBrickSide; ++y)
+        for (int x = 0; x < kBrickSide; ++x) f(bi + x, bj + y, bk + z, cell++);
+  }
+}
+
 // Which of the 4 channels of parameter i is what (param_ops.h).
 inline ParamKind KindOf(const VolumeShape& shape, int64_t i) { return KindOfParam(shape.GridParamCount(), i); }
 
-// "128^3 grid, 4 shells of 6 x 128^2 texels (33.8 M parameters)".
+// "128^3 grid, 4 shells of 6 x 128^2 texels (33.8 M parameters)"; a sparse grid says
+// "128^3 grid (310 of 4096 bricks), ...".
 std::string DescribeShape(const VolumeShape& shape);
 
 }  // namespace perf::recon

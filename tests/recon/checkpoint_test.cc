@@ -70,7 +70,7 @@ std::string FieldOfError(const std::string& bytes) {
 TEST(CheckpointTest, RoundTripsThroughStreamAndFile) {
   const Checkpoint c = Sample();
   const std::string bytes = Bytes(c);
-  EXPECT_EQ(bytes.size(), 264 + 4 * c.params.size());
+  EXPECT_EQ(bytes.size(), 272 + 4 * c.params.size());
   std::istringstream in(bytes);
   ExpectEqual(ReadCheckpoint(in, "mem"), c);
   test::TempDir dir;
@@ -120,15 +120,69 @@ TEST(CheckpointTest, DamageIsNamed) {
   EXPECT_EQ(FieldOfError(shells), "num_shells");
 }
 
-// The sample's 264-byte header claiming an n^3 grid and m^2 texels per face (two shells), with
+// The sample's 272-byte header claiming an n^3 grid and m^2 texels per face (two shells), with
 // the matching parameter count, and no parameters after it.
 std::string HugeHeader(int32_t n, int32_t m) {
-  std::string h = Bytes(Sample()).substr(0, 264);
+  std::string h = Bytes(Sample()).substr(0, 272);
   std::memcpy(&h[20], &n, 4);
   std::memcpy(&h[24], &m, 4);
   const uint64_t count = static_cast<uint64_t>(ParamCount(n, m, 2));
   std::memcpy(&h[248], &count, 8);
   return h;
+}
+
+// A sparse 16^3 grid: 3 of its 8 bricks active.
+Checkpoint SparseSample() {
+  Checkpoint c = Sample();
+  std::vector<uint8_t> active(8, 0);
+  active[1] = active[4] = active[7] = 1;
+  c.shape = VolumeShape{16, 2, 2}.WithBricks(std::make_shared<const BrickGrid>(MakeBrickGrid(16, active)));
+  c.params.resize(c.shape.ParamCount());
+  for (size_t i = 0; i < c.params.size(); ++i) c.params[i] = 0.001f * static_cast<float>(i);
+  return c;
+}
+
+TEST(CheckpointTest, SparseGridsRoundTripAndVersion1StillReads) {
+  const Checkpoint c = SparseSample();
+  const std::string bytes = Bytes(c);
+  EXPECT_EQ(bytes.size(), 272 + 3 * 4 + 4 * c.params.size());
+  std::istringstream in(bytes);
+  const Checkpoint back = ReadCheckpoint(in, "mem");
+  ExpectEqual(back, c);
+  ASSERT_TRUE(back.shape.sparse());
+  EXPECT_EQ(back.shape.bricks->bricks, (std::vector<int64_t>{1, 4, 7}));
+  EXPECT_EQ(back.shape.ParamCount(), 3 * 512 * 4 + 2 * 6 * 2 * 2 * 4);
+
+  // A version 1 file (dense, no brick count): what version 1 wrote for the dense sample.
+  std::string v1 = Bytes(Sample());
+  v1.erase(264, 8);
+  const uint32_t one = 1, header = 264;
+  std::memcpy(&v1[8], &one, 4);
+  std::memcpy(&v1[12], &header, 4);
+  std::istringstream in1(v1);
+  ExpectEqual(ReadCheckpoint(in1, "v1"), Sample());
+}
+
+TEST(CheckpointTest, DamagedBrickListsAreNamed) {
+  const std::string good = Bytes(SparseSample());
+  std::string order = good;
+  const uint32_t four = 4;
+  std::memcpy(&order[272 + 8], &four, 4);  // bricks 1, 4, 4
+  EXPECT_EQ(FieldOfError(order), "bricks");
+  std::string beyond = good;
+  const uint32_t eight = 8;
+  std::memcpy(&beyond[272 + 8], &eight, 4);  // brick 8 of 8
+  EXPECT_EQ(FieldOfError(beyond), "bricks");
+  std::string count = good;
+  const int64_t nine = 9;
+  std::memcpy(&count[264], &nine, 8);  // more bricks than the grid has
+  EXPECT_EQ(FieldOfError(count), "bricks");
+  std::string flipped = good;
+  flipped[272] ^= 0x02;  // brick 1 becomes 3: still ascending, but not what the checksum covers
+  EXPECT_EQ(FieldOfError(flipped), "checksum");
+  std::string odd = good;
+  odd[20] = 12;  // n = 12: not a multiple of 8
+  EXPECT_EQ(FieldOfError(odd), "n");
 }
 
 // A stream that cannot seek (like a pipe): the reader cannot ask how many bytes are left.

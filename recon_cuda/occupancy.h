@@ -1,0 +1,27 @@
+// Occupancy between levels (DESIGN.md "Hierarchy"; issue 15): after a level is fitted, the next
+// level stores only the bricks near cells that hold something, so that its cost follows the
+// occupied space instead of the box volume.
+#pragma once
+
+#include <memory>
+#include <span>
+
+#include "recon_cuda/volume.h"
+
+namespace perf::recon {
+
+struct OccupancyOptions {
+  // A fitted cell is occupied when its opacity across one cell, 1 - exp(-sigma * cell side),
+  // reaches this (docs/tuning.md: chosen on lego by held-out PSNR against the dense solve).
+  float min_opacity = 0.01f;
+  // Occupied cells grow by this many cells of the fitted level before bricks are chosen, so that
+  // surfaces can still move and trilinear samples near them keep real neighbours.
+  int dilation = 2;
+};
+
+// The bricks of an n_next^3 grid (a multiple of 8) that cover the occupied cells of the fitted
+// level (shape, x), dilated.
+std::shared_ptr<const BrickGrid> OccupiedBricks(const VolumeShape& shape, const VolumeGeometry& geometry,
+                                                std::span<const float> x, int n_next, const OccupancyOptions& options);
+
+}  // namespace perf::recon
