@@ -4,6 +4,8 @@
 // the free parameters (HoldParameters, RestrictJacobian), where it visits fewer samples.
 //
 //   perf_bench_cpu --workspace WS [--checkpoint FILE] [--n 64] [--threads 2] [--repeat 3]
+//   perf_bench_cpu --workspace WS --levels 2 [--start-resolution 32] [--iterations 10] [--modes both]
+//     (the hierarchy sparse and dense side by side: bench/cpu_hierarchy.h)
 //
 // WS is a workspace made by perf import (e.g. lego --downscale 16); the volume is the checkpoint
 // (resampled to --n) when given, else the random start. Prints one line per pass and, with
@@ -14,6 +16,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "bench/cpu_hierarchy.h"
 #include "common/errors.h"
 #include "recon_cuda/checkpoint.h"
 #include "recon_cuda/cpu_backend.h"
@@ -32,8 +35,33 @@ int main(int argc, char** argv) {
   app.add_option("--threads", threads, "Worker threads (0: all cores)")->capture_default_str();
   app.add_option("--repeat", repeat, "Runs per pass (the best is reported)")->capture_default_str();
   app.add_option("--json", json_path, "Also write the figures here");
+  bool as_dense = false;
+  app.add_flag("--as-dense", as_dense, "A sparse checkpoint's volume in the dense layout (the same values)");
+  bench::CpuHierarchySettings hs;
+  std::string modes = "both";
+  app.add_option("--levels", hs.levels,
+                 "Run perf reconstruct's hierarchy with this many levels instead, sparse and dense side by side "
+                 "(0: the pass throughput only)")
+      ->default_val(0);
+  app.add_option("--start-resolution", hs.start, "Hierarchy: grid cells per axis at level 1")->capture_default_str();
+  app.add_option("--iterations", hs.iterations, "Hierarchy: GN iterations a level")->capture_default_str();
+  app.add_option("--min-occupancy", hs.occupancy.min_opacity, "Hierarchy: occupied cell opacity (occupancy.h)")
+      ->capture_default_str();
+  app.add_option("--dilation", hs.occupancy.dilation, "Hierarchy: occupied cells grow by this many cells")
+      ->capture_default_str();
+  app.add_option("--modes", modes, "Hierarchy: both, sparse or dense")->check(CLI::IsMember({"both", "sparse", "dense"}))
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   try {
+    if (hs.levels > 0) {
+      hs.workspace = workspace;
+      hs.threads = threads;
+      hs.sparse = modes != "dense";
+      hs.dense = modes != "sparse";
+      const nlohmann::json out = bench::RunCpuHierarchy(hs);
+      if (!json_path.empty()) std::ofstream(json_path) << out.dump(2) << "\n";
+      return 0;
+    }
     const Scene scene = ReadScene(std::filesystem::path(workspace) / "scene.json");
     const VolumeGeometry geometry = VolumeGeometry::FromScene(scene);
     const RaySet rays = MakeRaySet(LoadImages(scene, workspace, Split::kTrain));
@@ -41,7 +69,12 @@ int main(int argc, char** argv) {
     std::vector<float> x;
     if (!checkpoint.empty()) {
       const Checkpoint c = ReadCheckpoint(checkpoint);
-      x = c.shape == shape ? c.params : Resample(c.shape, c.params, shape);
+      if (c.shape.n == n && c.shape.m == n && !as_dense) {
+        shape = c.shape;  // as stored (a sparse checkpoint stays sparse)
+        x = c.params;
+      } else {
+        x = Resample(c.shape, c.params, shape);
+      }
     } else {
       x = InitialParams(shape, geometry, InitOptions{});
     }

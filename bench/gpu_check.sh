@@ -7,6 +7,8 @@
 #                                                                        -> parity.log, parity.xml
 #   memcheck   compute-sanitizer memcheck on a short filter of it        -> memcheck.log
 #   gn128      perf_bench_gpu, Gauss-Newton only, 32^3 .. 128^3         -> gn128.log, gn_128.json/.svg
+#   gn128dense the same with every level dense (--dense), for the sparse/dense ratio
+#                                                                        -> gn128dense.log, gn_128_dense.json
 #   both256    perf_bench_gpu, GN then Adam, 32^3 .. 256^3, in the time left
 #                                                                        -> both256.log, gn_adam_256.json/.svg
 #   summary.txt: one line per step (exit status, seconds, cap) and a verdict that is PASS only if
@@ -144,6 +146,9 @@ PY
 
 # 5. Gauss-Newton to 128^3: the first complete figure and the pass throughput (~2-3 min).
 bench gn128 200 gn_128 --solver gn --levels 3
+
+# 5b. The same with dense levels: sparse against dense per level (issue 15).
+bench gn128dense 120 gn_128_dense --solver gn --levels 3 --dense
 
 # 6. Gauss-Newton, then Adam, to 256^3 in what is left (GN the first half, Adam the second).
 bench both256 $(($(left) - 10)) gn_adam_256 --solver both --levels 4

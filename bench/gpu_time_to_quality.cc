@@ -78,6 +78,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--tag", tag, "File name stem (default: gpu_<data folder>_<date>)");
   app.add_option("--commit", commit, "Commit of the build, for the record")->capture_default_str();
+  bool dense = false;
+  app.add_flag("--dense", dense, "Every level's grid dense (default: levels after the first keep the occupied bricks)");
   app.add_flag("--check-data", check_data, "Load the data, build every level's rays, print their sizes and exit (no GPU)");
   CLI11_PARSE(app, argc, argv);
   try {
@@ -85,6 +87,7 @@ int main(int argc, char** argv) {
       throw InputError("command line", "--solver", solver, "unknown solver", "use both, gn or adam");
     }
     s.solver.adam.lr_opacity = s.solver.adam.lr_colour;
+    s.sparse = !dense;
     s.solver.psnr_ray_stride = 0;  // the benchmark measures held-out PSNR itself
     const auto t_start = WallClock::now();
     const BenchData d = LoadBenchData(data);
@@ -145,6 +148,7 @@ int main(int argc, char** argv) {
                         {"max_cg_iterations", s.solver.max_cg_iterations},
                         {"line_search_ray_stride", s.solver.line_search_ray_stride},
                         {"min_box_opacity", s.min_box_opacity},
+                        {"sparse", s.sparse},
                         {"time_budget_s", time_budget},
                         {"seed", s.seed}}}};
     std::map<std::string, SolverRun> runs;

@@ -168,6 +168,7 @@ void RunHierarchy(Backend* backend, const BenchData& d, SolverType type, const B
   ho.solver.type = type;
   ho.iterations = type == SolverType::kGaussNewton ? s.gn_iterations : s.adam_steps;
   ho.init = InitOptions{s.seed};
+  ho.sparse = s.sparse;
   ho.fixed_background = d.alpha;
   ho.background = {d.background[0], d.background[1], d.background[2]};
   TrainingViews views;
@@ -245,8 +246,11 @@ void RunHierarchy(Backend* backend, const BenchData& d, SolverType type, const B
       run->passes[std::to_string(h.level)] = passes;
     }
     peak();
+    const int64_t nb = h.shape.n / kBrickSide;
     json entry{{"level", h.level},
                {"n", h.shape.n},
+               {"bricks", h.shape.sparse() ? h.shape.bricks->ActiveBricks() : nb * nb * nb},
+               {"bricks_of", nb * nb * nb},
                {"m", h.shape.m},
                {"params", h.shape.ParamCount()},
                {"image_downscale", h.image_downscale},

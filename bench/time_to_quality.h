@@ -55,6 +55,7 @@ struct BenchSettings {
   int levels = 4, start = 32, gn_iterations = 10, adam_steps = 200, adam_eval_every = 20;
   uint32_t seed = 1;
   float min_box_opacity = recon::kDefaultMinBoxOpacity;
+  bool sparse = true;  // levels after the first keep the occupied bricks (hierarchy.h)
   recon::SolverOptions solver;  // GN settings and Adam's learning rates
 };
 

@@ -55,6 +55,14 @@ void AddReconstructCommand(CLI::App& app) {
   cmd->add_flag("--dense", o.dense,
                 "Keep every level's grid dense (default: levels after the first store only the 8^3 bricks near "
                 "what the level before fitted)");
+  cmd->add_option("--sparse-min-opacity", o.occupancy.min_opacity,
+                  "Sparse levels keep the bricks near cells of at least this opacity at the level before")
+      ->check(CLI::Range(0.0f, 1.0f))
+      ->capture_default_str();
+  cmd->add_option("--sparse-dilation", o.occupancy.dilation,
+                  "Sparse levels: the kept cells grow by this many cells of the level before")
+      ->check(CLI::Range(0, 8))
+      ->capture_default_str();
   cmd->add_option("--max-cg-iterations", o.solver.max_cg_iterations, "PCG iterations per Gauss-Newton step at most")
       ->capture_default_str();
   cmd->add_option("--cg-exit-ratio", o.solver.cg_exit_ratio, "PCG leaves when |r|^2 falls by less than this factor (paper: 0.85; default inf: never)")

@@ -22,17 +22,26 @@ BrickGrid MakeBrickGrid(int n, const std::vector<uint8_t>& active) {
     b.slot[i] = static_cast<int32_t>(b.bricks.size());
     b.bricks.push_back(i);
   }
-  for (int64_t brick : b.bricks) {
-    const int bi = static_cast<int>(brick % nb), bj = static_cast<int>(brick / nb % nb),
-              bk = static_cast<int>(brick / (int64_t{nb} * nb));
-    for (int dk = -1; dk <= 1; ++dk) {
-      for (int dj = -1; dj <= 1; ++dj) {
-        for (int di = -1; di <= 1; ++di) {
-          const int i = bi + di, j = bj + dj, k = bk + dk;
-          if (i < 0 || j < 0 || k < 0 || i >= nb || j >= nb || k >= nb) continue;
-          int32_t& s = b.slot[BrickOf(nb, i, j, k)];
-          if (s == kSkipBrick) s = kEmptyBrick;
+  // An inactive brick's octant o (per axis 0 or 1) reaches cells 4 o - 1 .. 4 o + 4 of it, so the
+  // bricks o - 1 and o along each axis: its mask bit is set when one of those 2 x 2 x 2 is active.
+  const auto active_at = [&](int i, int j, int k) {
+    return i >= 0 && j >= 0 && k >= 0 && i < nb && j < nb && k < nb && active[BrickOf(nb, i, j, k)];
+  };
+  for (int bk = 0; bk < nb; ++bk) {
+    for (int bj = 0; bj < nb; ++bj) {
+      for (int bi = 0; bi < nb; ++bi) {
+        int32_t& s = b.slot[BrickOf(nb, bi, bj, bk)];
+        if (s >= 0) continue;
+        int mask = 0;
+        for (int o = 0; o < 8; ++o) {
+          const int ox = o & 1, oy = (o >> 1) & 1, oz = o >> 2;
+          bool reach = false;
+          for (int c = 0; c < 8 && !reach; ++c) {
+            reach = active_at(bi + ox - 1 + (c & 1), bj + oy - 1 + ((c >> 1) & 1), bk + oz - 1 + (c >> 2));
+          }
+          if (reach) mask |= 1 << o;
         }
+        s = InactiveBrick(mask);
       }
     }
   }

@@ -13,7 +13,7 @@ namespace perf::recon {
 
 struct BrickGrid {
   int n = 0;                    // cells per axis, a multiple of kBrickSide
-  std::vector<int32_t> slot;    // [(n/8)^3], x fastest: the brick's slot, kEmptyBrick or kSkipBrick
+  std::vector<int32_t> slot;    // [(n/8)^3], x fastest: the brick's slot, or InactiveBrick(octant mask)
   std::vector<int64_t> bricks;  // the active bricks (BrickOf index) in slot order
 
   int nb() const { return n / kBrickSide; }
@@ -23,8 +23,8 @@ struct BrickGrid {
   bool operator==(const BrickGrid&) const = default;
 };
 
-// active: [(n/8)^3] flags, x fastest. Slots follow the brick order; an inactive brick is
-// kEmptyBrick when one of its 26 neighbours is active, kSkipBrick otherwise. Throws InputError
+// active: [(n/8)^3] flags, x fastest. Slots follow the brick order; an inactive brick holds the
+// mask of its octants within one cell of an active brick (ray_types.h). Throws InputError
 // when n is not a positive multiple of 8 or `active` has the wrong size.
 BrickGrid MakeBrickGrid(int n, const std::vector<uint8_t>& active);
 

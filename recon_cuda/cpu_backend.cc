@@ -323,7 +323,9 @@ class CpuBackend final : public Backend {
   };
 
   // Bytes of the recorded Jacobian: every ray's march length (no jitter needed for the count;
-  // early termination only shortens it) times the per-sample record, plus the shell records.
+  // early termination only shortens it; a sparse grid's march counted sample by sample, plus an
+  // eighth for the jittered samples that land differently) times the per-sample record, plus
+  // the shell records.
   int64_t CacheBytes(const LevelProblem& p) const {
     const VolumeView<float> vol = MakeView(p.shape, p.geometry, nullptr);
     const int64_t n = p.rays->size();
@@ -335,7 +337,19 @@ class CpuBackend final : public Backend {
           const RayPixel& px = p.rays->pixels[i];
           const BoxRay<float> ray = PixelBoxRay(p.rays->cameras[px.camera], p.geometry.box, p.shape.n, px.x, px.y,
                                                 Jitter{0, 0, false, false});
-          count += MakeMarch(vol, ray).count;
+          const March<float> march = MakeMarch(vol, ray);
+          if (!vol.brick_slot) {
+            count += march.count;
+            continue;
+          }
+          const Jitter none{0, 0, false, false};
+          MarchStep<float> st;
+          int taken = 0;
+          for (int k = TakeSample(vol, ray, march, 0, 1, none, &st); k < march.count;
+               k = TakeSample(vol, ray, march, k + 1, 1, none, &st)) {
+            ++taken;
+          }
+          count += std::min(march.count, taken + taken / 8 + 2);
         }
         per_block[b] = count;
       });

@@ -13,10 +13,10 @@ namespace perf::recon {
 struct OccupancyOptions {
   // A fitted cell is occupied when its opacity across one cell, 1 - exp(-sigma * cell side),
   // reaches this (docs/tuning.md: chosen on lego by held-out PSNR against the dense solve).
-  float min_opacity = 0.01f;
+  float min_opacity = 0.1f;
   // Occupied cells grow by this many cells of the fitted level before bricks are chosen, so that
   // surfaces can still move and trilinear samples near them keep real neighbours.
-  int dilation = 2;
+  int dilation = 1;
 };
 
 // The bricks of an n_next^3 grid (a multiple of 8) that cover the occupied cells of the fitted

@@ -157,11 +157,33 @@ PERF_HD_INLINE MarchStep<T> StepAt(const March<T>& m, int k, const Jitter& jit) 
   return {start + u * len, len};
 }
 
+// Whether the trilinear support of grid point g (the cells TrilinearWeights reads) reaches a
+// stored cell of a brick-sparse grid: the at most 2 x 2 x 2 bricks of its corner cells.
+template <class T>
+PERF_HD_INLINE bool ReachesStoredCell(const VolumeView<T>& vol, Vec3<T> g) {
+  const int nb = vol.n / kBrickSide;
+  int b0[3], b1[3];
+  for (int a = 0; a < 3; ++a) {
+    int lo, hi;
+    T f;
+    LinearCoord(g[a], vol.n, &lo, &hi, &f);
+    b0[a] = lo / kBrickSide;
+    b1[a] = hi / kBrickSide;
+  }
+  for (int c = 0; c < 8; ++c) {
+    const int bi = c & 1 ? b1[0] : b0[0], bj = c & 2 ? b1[1] : b0[1], bk = c & 4 ? b1[2] : b0[2];
+    if (vol.brick_slot[BrickOf(nb, bi, bj, bk)] >= 0) return true;
+  }
+  return false;
+}
+
 // The march index of the first sample at or after k (dir +1), or at or before k (dir -1), that a
 // brick-sparse grid cannot skip, with its step in *st; march.count (or -1) when none is left. A
-// sample inside a kSkipBrick brick reads only inactive cells (zeros): it adds exact zeros to every
-// sum of Forward and Backward, so skipping it changes nothing, and the march jumps to the sample
-// whose segment holds the point where the ray leaves (enters) that brick. The samples that are
+// sample whose trilinear support has no stored cell reads only zeros: it adds exact zeros to every
+// sum of Forward and Backward, so skipping it changes nothing. In an inactive brick's octant that
+// no stored cell is near (or a kSkipBrick brick) the march jumps to the sample whose segment holds
+// the point where the ray leaves (enters) that octant (brick); in the other octants it checks each
+// sample's corners (ReachesStoredCell). The samples that are
 // taken keep their index, hence their jitter: the sparse march equals the dense one wherever the
 // skipped space is empty. Dense grids: k.
 template <class T>
@@ -172,17 +194,25 @@ PERF_HD_INLINE int TakeSample(const VolumeView<T>& vol, const BoxRay<T>& ray, co
     *st = StepAt(m, k, jit);
     if (!vol.brick_slot) return k;
     const Vec3<T> g = ray.GridPoint(st->t);
-    int b[3];
-    for (int a = 0; a < 3; ++a) {
-      const T c = Clamp(g[a] * (T(1) / T(kBrickSide)), T(0), T(nb - 1));
-      b[a] = static_cast<int>(c);  // c >= 0: truncation is floor
+    int cell[3];
+    for (int a = 0; a < 3; ++a) cell[a] = static_cast<int>(Clamp(g[a], T(0), T(vol.n - 1)));  // >= 0: floor
+    const int32_t slot = vol.brick_slot[BrickOf(nb, cell[0] >> 3, cell[1] >> 3, cell[2] >> 3)];
+    if (slot >= 0) return k;
+    const int mask = OctantMask(slot);
+    const int octant = ((cell[0] >> 2) & 1) | (((cell[1] >> 2) & 1) << 1) | (((cell[2] >> 2) & 1) << 2);
+    if (mask & (1 << octant)) {
+      if (ReachesStoredCell(vol, g)) return k;
+      k += dir;
+      continue;
     }
-    if (vol.brick_slot[BrickOf(nb, b[0], b[1], b[2])] != kSkipBrick) return k;
+    // The box to leave: the whole brick when no octant of it is near a stored cell, else the octant.
+    const int side = mask == 0 ? kBrickSide : kBrickSide / 2;
     T t_edge = dir > 0 ? T(3.0e38) : T(-3.0e38);
     for (int a = 0; a < 3; ++a) {
       const T d = ray.grid_dir[a];
       if (d == 0) continue;
-      const T face = T(kBrickSide) * T(b[a] + ((d > 0) == (dir > 0) ? 1 : 0));
+      const int lo = cell[a] / side * side;
+      const T face = T(lo + ((d > 0) == (dir > 0) ? side : 0));
       const T t = (face - ray.grid_origin[a]) / d;
       t_edge = dir > 0 ? Min(t_edge, t) : Max(t_edge, t);
     }

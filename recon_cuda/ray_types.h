@@ -128,15 +128,16 @@ PERF_HD_INLINE int64_t ParamCount(int n, int m, int num_shells) {
 // of 8^3 (OpenVDB's leaf), N a multiple of 8. Only active bricks hold parameters: brick slot s
 // holds its cells at s 512 + (z 8 + y) 8 + x (local coordinates), each cell 4 values as in the
 // dense layout, and the shells follow the last slot. The brick table [(N/8)^3] gives each brick's
-// slot, or one of two marks for inactive bricks, which read as 0 in every channel:
-//   kEmptyBrick: an active brick is among its 26 neighbours, so samples inside it are taken
-//                (their trilinear support can reach stored cells);
-//   kSkipBrick:  no active neighbour either: no sample inside it reads a stored cell, and the
-//                march steps over it (ray_math.h NextSampleToTake).
+// slot (>= 0), or for an inactive brick, which reads as 0 in every channel, -1 - mask: bit
+// ox + 2 oy + 4 oz of the mask is set when octant (ox, oy, oz) of the brick (its 4^3 cells at
+// 4 o) lies within one cell of a stored cell, so that a sample there may read one. The march
+// steps over the other octants, and over a brick whose mask is 0 (kSkipBrick) whole
+// (ray_math.h TakeSample).
 inline constexpr int kBrickSide = 8;
 inline constexpr int kBrickCells = kBrickSide * kBrickSide * kBrickSide;
-inline constexpr int32_t kEmptyBrick = -1;
-inline constexpr int32_t kSkipBrick = -2;
+inline constexpr int32_t kSkipBrick = -1;
+PERF_HD_INLINE int32_t InactiveBrick(int octant_mask) { return -1 - octant_mask; }
+PERF_HD_INLINE int OctantMask(int32_t slot) { return -1 - slot; }
 
 PERF_HD_INLINE int64_t SparseGridParams(int64_t active_bricks) { return 4 * kBrickCells * active_bricks; }
 PERF_HD_INLINE int64_t BrickOf(int nb, int bi, int bj, int bk) { return (static_cast<int64_t>(bk) * nb + bj) * nb + bi; }

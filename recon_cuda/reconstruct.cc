@@ -137,6 +137,7 @@ HierarchyOptions ToHierarchy(const ReconstructOptions& o, int levels) {
   h.residuals = o.residuals;
   h.pyramid = o.pyramid;
   h.sparse = !o.dense;
+  h.occupancy = o.occupancy;
   return h;
 }
 
@@ -157,6 +158,18 @@ void MeanColour(const std::vector<PosedImage>& images, float colour[3]) {
 
 bool FixedBackground(BackgroundChoice background, const Scene& scene) {
   return background == BackgroundChoice::kAuto ? EveryImageHasAlpha(scene) : background == BackgroundChoice::kFixed;
+}
+
+TrainingViews ViewsForHierarchy(const std::vector<PosedImage>& train) {
+  TrainingViews views;
+  for (const PosedImage& im : train) views.cameras.push_back(im.camera);
+  views.rays = [&train](int factor) {
+    if (factor == 1) return MakeRaySet(train);
+    std::vector<PosedImage> small;
+    for (const PosedImage& im : train) small.push_back(Downscaled(im, factor));
+    return MakeRaySet(small);
+  };
+  return views;
 }
 
 ReconstructResult Reconstruct(const ReconstructOptions& o) {
@@ -243,14 +256,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
           : std::string("background: learned (environment shells)"));
 
   if (start.level == 0 && o.init_shells_from_photos) MeanColour(train, ho.init.shell_colour);
-  TrainingViews views;
-  for (const PosedImage& im : train) views.cameras.push_back(im.camera);
-  views.rays = [&train](int factor) {
-    if (factor == 1) return MakeRaySet(train);
-    std::vector<PosedImage> small;
-    for (const PosedImage& im : train) small.push_back(Downscaled(im, factor));
-    return MakeRaySet(small);
-  };
+  const TrainingViews views = ViewsForHierarchy(train);
 
   double elapsed = 0;  // solver time so far (excludes held-out evaluation and previews)
   auto t_level = WallClock::now();

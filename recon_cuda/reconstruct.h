@@ -17,8 +17,10 @@
 #include <vector>
 
 #include "recon_cuda/device_choice.h"
-#include "recon_cuda/solver.h"
+#include "recon_cuda/hierarchy.h"
 #include "recon_cuda/render_rule.h"
+#include "recon_cuda/solver.h"
+#include "recon_cuda/training_data.h"
 
 namespace perf {
 struct Scene;
@@ -49,6 +51,7 @@ struct ReconstructOptions {
   // at least one pixel wide in the median view (fewer rays, same information at that level).
   bool pyramid = true;
   bool dense = false;  // every level's grid dense (else levels after the first keep the occupied bricks)
+  OccupancyOptions occupancy;  // which bricks a sparse level keeps
   bool resume = false;          // continue after the last checkpoint instead of starting over
   int preview_every = 0;        // write a held-out preview every K iterations (0: never)
   int eval_every = 0;           // held-out PSNR every K iterations (0: at the end of each level)
@@ -91,6 +94,10 @@ struct ReconstructResult {
 };
 
 ReconstructResult Reconstruct(const ReconstructOptions& options);
+
+// The hierarchy's view of training photos (each level's rays from the photos downscaled by its
+// pyramid factor); `train` must outlive it.
+TrainingViews ViewsForHierarchy(const std::vector<PosedImage>& train);
 
 // A few lines for the terminal.
 std::string ReconstructSummary(const ReconstructResult& r);

@@ -7,6 +7,7 @@
 #include <openvdb/openvdb.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 
@@ -124,6 +125,51 @@ TEST_F(VdbExportTest, RoundTripGridsTransformAndValues) {
   EXPECT_FALSE(f.density->tree().isValueOn(openvdb::Coord(0, 0, 0)));
   EXPECT_EQ(f.density->tree().getValue(openvdb::Coord(0, 0, 0)), 0.f);
   EXPECT_EQ(f.density->background(), 0.f);
+}
+
+// A sparse checkpoint (only the bricks with cells the export writes) exports the same voxels as the dense
+// one, its stored 8^3 bricks as OpenVDB's leaves; vdb_print (openvdb-tools) reads it.
+TEST_F(VdbExportTest, SparseCheckpointWritesTheSameVoxels) {
+  const int nb = kN / recon::kBrickSide;
+  std::vector<uint8_t> active(nb * nb * nb, 0);
+  for (int k = 0; k < kN; ++k)
+    for (int j = 0; j < kN; ++j)
+      for (int i = 0; i < kN; ++i)
+        if (1 - std::exp(-Sigma(i, j, k) * test::Length(checkpoint_)) >= 0.01) {  // what the export writes
+          active[recon::BrickOf(nb, i / 8, j / 8, k / 8)] = 1;
+        }
+  recon::Checkpoint sparse = checkpoint_;
+  auto bricks = std::make_shared<const recon::BrickGrid>(recon::MakeBrickGrid(kN, active));
+  ASSERT_LT(bricks->ActiveBricks(), nb * nb * nb);
+  sparse.shape = checkpoint_.shape.WithBricks(bricks);
+  const int64_t grid = checkpoint_.shape.GridParamCount();
+  sparse.params = recon::PackGrid<float>(*bricks, std::span<const float>(checkpoint_.params.data(), grid));
+  sparse.params.insert(sparse.params.end(), checkpoint_.params.begin() + grid, checkpoint_.params.end());
+
+  const VdbStats d = WriteVdb(checkpoint_, dir_ / "dense.vdb", {});
+  const VdbStats s = WriteVdb(sparse, dir_ / "sparse.vdb", {});
+  EXPECT_EQ(s.active_voxels, d.active_voxels);
+  const Files fd = Read(dir_ / "dense.vdb", "color"), fs_ = Read(dir_ / "sparse.vdb", "color");
+  ASSERT_TRUE(fd.density && fs_.density);
+  EXPECT_EQ(fs_.density->activeVoxelCount(), fd.density->activeVoxelCount());
+  EXPECT_LE(fs_.density->tree().leafCount(), static_cast<openvdb::Index32>(bricks->ActiveBricks()));
+  for (auto it = fd.density->cbeginValueOn(); it; ++it) {
+    ASSERT_TRUE(fs_.density->tree().isValueOn(it.getCoord())) << it.getCoord();
+    EXPECT_EQ(fs_.density->tree().getValue(it.getCoord()), *it);
+    EXPECT_EQ(fs_.colour->tree().getValue(it.getCoord()), fd.colour->tree().getValue(it.getCoord()));
+  }
+  if (std::system("command -v vdb_print > /dev/null 2>&1") != 0) GTEST_SKIP() << "vdb_print not installed";
+  const auto r = perf::test::RunCommand("vdb_print -l " + (dir_ / "sparse.vdb").string());
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("density"), std::string::npos) << r.output;
+  // "Number of active voxels:       11,459" (thousands separated) for the density grid.
+  const size_t at = r.output.find("Number of active voxels:");
+  ASSERT_NE(at, std::string::npos) << r.output;
+  std::string digits;
+  for (size_t i = at + 24; i < r.output.size() && r.output[i] != '\n'; ++i) {
+    if (std::isdigit(static_cast<unsigned char>(r.output[i]))) digits += r.output[i];
+  }
+  EXPECT_EQ(digits, std::to_string(s.active_voxels)) << r.output;
 }
 
 TEST_F(VdbExportTest, ThresholdDecidesWhichCellsAreWritten) {

@@ -419,6 +419,30 @@ TEST_F(GpuParityTest, ManyRaysWithEarlyTerminationAndFixedShells) {
   test::ExpectAllClose(Get(gpu.get(), kOut), Get(cpu.get(), kOut), 2e-4, 1e-4, "restricted J^T J p, 1e5 rays");
 }
 
+// A sparse level (3 of 8 bricks stored): the device reads its own copy of the brick table and
+// takes the same samples as the CPU.
+TEST_F(GpuParityTest, SparseLevel) {
+  TinyProblem p(31, 16, 4, 6, 24, 18);
+  QuantiseColours(&p.rays);
+  const test::SparseVersion s(p, {0, 1, 1, 0, 0, 0, 1, 0});
+  SetLevel(s.level, s.x);
+  const PassStats c = cpu->Linearize(kX, 13, kG, kD), g = gpu->Linearize(kX, 13, kG, kD);
+  ExpectStatsClose(g, c, "sparse linearize");
+  ExpectClose(Get(gpu.get(), kG), Get(cpu.get(), kG), "sparse J^T r");
+  ExpectClose(Get(gpu.get(), kD), Get(cpu.get(), kD), "sparse diag(J^T J)");
+  std::mt19937 rng(31);
+  std::normal_distribution<float> normal;
+  std::vector<float> pv(s.level.shape.ParamCount());
+  for (float& v : pv) v = normal(rng);
+  for (Backend* b : {cpu.get(), gpu.get()}) b->Upload(kP, pv);
+  ExpectStatsClose(gpu->MultiplyJtJ(kP, kOut), cpu->MultiplyJtJ(kP, kOut), "sparse J^T J p");
+  ExpectClose(Get(gpu.get(), kOut), Get(cpu.get(), kOut), "sparse J^T J p");
+  ExpectStatsClose(gpu->Cost(kX, 13), cpu->Cost(kX, 13), "sparse cost");
+  const RenderOutput rc = cpu->Render(kX, p.rays.cameras[1], 24, 18, 0.7f);
+  const RenderOutput rg = gpu->Render(kX, p.rays.cameras[1], 24, 18, 0.7f);
+  test::ExpectAllClose(rg.colour, rc.colour, 1e-4, 1e-4, "sparse render");
+}
+
 // A cudaMalloc that fails leaves its error as the runtime's last error; the error path clears
 // it, so the next launch check does not report it against an unrelated kernel.
 TEST_F(GpuParityTest, AFailedAllocationLeavesNoErrorForTheNextLaunch) {

@@ -7,11 +7,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <random>
+#include <span>
 #include <utility>
 #include <vector>
 
 #include "recon_cuda/backend.h"
+#include "recon_cuda/brick_grid.h"
 #include "recon_cuda/ray_math.h"
 #include "tests/recon/per_param_visitor.h"
 
@@ -171,5 +174,39 @@ void ExpectAllClose(const std::vector<G>& got, const std::vector<W>& want, doubl
   }
   EXPECT_GT(nonzero, static_cast<int>(want.size() / 10)) << what << ": too few entries exercised";
 }
+
+// A TinyProblem (n a multiple of 8) with only some bricks stored: the sparse level and its x, and
+// the dense x with every cell of the other bricks zeroed (all four channels), which the sparse
+// level must reproduce (ray_math.h TakeSample).
+struct SparseVersion {
+  LevelProblem level;
+  std::vector<float> x, dense_x;
+
+  SparseVersion(const TinyProblem& p, const std::vector<uint8_t>& active) {
+    auto bricks = std::make_shared<const BrickGrid>(MakeBrickGrid(p.shape.n, active));
+    level = p.Level();
+    level.shape = p.shape.WithBricks(bricks);
+    const int64_t grid = p.shape.GridParamCount();
+    const std::span<const float> dense_grid(p.x.data(), static_cast<size_t>(grid));
+    x = PackGrid<float>(*bricks, dense_grid);
+    dense_x = UnpackGrid<float>(*bricks, x);
+    x.insert(x.end(), p.x.begin() + grid, p.x.end());
+    dense_x.insert(dense_x.end(), p.x.begin() + grid, p.x.end());
+  }
+  // A dense-layout vector's entries at the stored cells and the shells (the sparse layout).
+  std::vector<float> Stored(const std::vector<float>& dense) const {
+    const int64_t grid = GridParamCount(level.shape.n);
+    std::vector<float> out = PackGrid<float>(*level.shape.bricks, std::span<const float>(dense.data(), grid));
+    out.insert(out.end(), dense.begin() + grid, dense.end());
+    return out;
+  }
+  // A sparse-layout vector in the dense layout (0 in the other bricks).
+  std::vector<float> Dense(const std::vector<float>& sparse) const {
+    const int64_t grid = level.shape.GridParamCount();
+    std::vector<float> out = UnpackGrid<float>(*level.shape.bricks, std::span<const float>(sparse.data(), grid));
+    out.insert(out.end(), sparse.begin() + grid, sparse.end());
+    return out;
+  }
+};
 
 }  // namespace perf::recon::test

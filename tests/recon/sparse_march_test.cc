@@ -119,21 +119,33 @@ TEST(BrickGrid, SlotsMarksAndLayouts) {
   EXPECT_EQ(b.slot[BrickOf(nb, 3, 0, 0)], 0);  // brick order, x fastest
   EXPECT_EQ(b.slot[BrickOf(nb, 1, 1, 1)], 1);
   EXPECT_EQ(b.bricks, (std::vector<int64_t>{BrickOf(nb, 3, 0, 0), BrickOf(nb, 1, 1, 1)}));
-  int empty = 0, skip = 0;
+  // Each inactive brick's octant mask against the definition: octant o is within one cell of a
+  // stored cell when a cell of 4 o - 1 .. 4 o + 4 (per axis, relative to the brick) is stored.
+  int partial = 0, skip = 0;
   for (int k = 0; k < nb; ++k) {
     for (int j = 0; j < nb; ++j) {
       for (int i = 0; i < nb; ++i) {
         const int32_t s = b.slot[BrickOf(nb, i, j, k)];
         if (s >= 0) continue;
-        const bool near_a = std::abs(i - 1) <= 1 && std::abs(j - 1) <= 1 && std::abs(k - 1) <= 1;
-        const bool near_b = std::abs(i - 3) <= 1 && j <= 1 && k <= 1;
-        EXPECT_EQ(s, near_a || near_b ? kEmptyBrick : kSkipBrick) << i << " " << j << " " << k;
-        (s == kEmptyBrick ? empty : skip)++;
+        int want = 0;
+        for (int o = 0; o < 8; ++o) {
+          const int o3[3] = {o & 1, (o >> 1) & 1, o >> 2}, base[3] = {8 * i, 8 * j, 8 * k};
+          bool reach = false;
+          for (int z = base[2] + 4 * o3[2] - 1; z <= base[2] + 4 * o3[2] + 4; ++z)
+            for (int y = base[1] + 4 * o3[1] - 1; y <= base[1] + 4 * o3[1] + 4; ++y)
+              for (int x = base[0] + 4 * o3[0] - 1; x <= base[0] + 4 * o3[0] + 4; ++x)
+                reach = reach || (x >= 0 && y >= 0 && z >= 0 && x < n && y < n && z < n &&
+                                  SparseCell(b.slot.data(), nb, x, y, z) >= 0);
+          if (reach) want |= 1 << o;
+        }
+        EXPECT_EQ(OctantMask(s), want) << i << " " << j << " " << k;
+        (s == kSkipBrick ? skip : partial)++;
       }
     }
   }
-  EXPECT_EQ(empty, 26 + 7 - 4);  // (3,0,0)'s 7 neighbours, those with i = 2 shared with (1,1,1)'s 26
-  EXPECT_EQ(skip, 64 - 2 - empty);
+  EXPECT_EQ(partial, 26 + 7 - 4);  // the bricks next to (1,1,1) or (3,0,0), edges and corners included
+  EXPECT_EQ(skip, 64 - 2 - partial);
+  EXPECT_EQ(OctantMask(b.slot[BrickOf(nb, 0, 1, 1)]), 0b10101010);  // its +x half faces (1,1,1)
 
   std::mt19937 rng(3);
   std::uniform_real_distribution<float> u(0.f, 1.f);
