@@ -5,7 +5,8 @@
 // Build, seed and run with scripts/fuzz.sh checkpoint.
 //
 // Built with -DPERF_FUZZ_MAKE_SEEDS instead, this file is a small program that writes seed
-// checkpoints (the smallest shape, a small one with two shells, one with every shell).
+// checkpoints (the smallest shape, a small one with two shells, one with every shell, a sparse
+// one).
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -87,6 +88,10 @@ int main(int argc, char** argv) {
   std::ofstream(out / "smallest.perfvol", std::ios::binary) << Write(Make({1, 1, 1}, 0, 0));
   std::ofstream(out / "small.perfvol", std::ios::binary) << Write(Make({4, 2, 2}, 1, 1));
   std::ofstream(out / "all_shells.perfvol", std::ios::binary) << Write(Make({2, 2, perf::recon::kMaxShells}, 2, 0));
+  std::vector<uint8_t> active(8, 0);
+  active[2] = active[5] = 1;
+  const auto bricks = std::make_shared<const perf::recon::BrickGrid>(perf::recon::MakeBrickGrid(16, active));
+  std::ofstream(out / "sparse.perfvol", std::ios::binary) << Write(Make({16, 1, 1, bricks}, 1, 0));
   return 0;
 }
 

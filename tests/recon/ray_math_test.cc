@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "tests/recon/per_param_visitor.h"
+#include "tests/recon/random_rays.h"
 
 namespace perf::recon {
 namespace {
@@ -23,7 +24,6 @@ Mat3<double> AxisAngle(V3 axis, double angle) {
            t * a.x * a.z - s * a.y, t * a.y * a.z + s * a.x, t * a.z * a.z + c}};
 }
 
-V3 Cross(V3 a, V3 b) { return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x}; }
 
 // A rotated, non-cubic box, N = 4 grid, K = 2 shells of M = 4, random positive parameters.
 struct TestScene {
@@ -58,16 +58,7 @@ struct TestScene {
 
 // A camera 2.5 from the box centre looking at it, and a random pixel of a 64 x 48 image.
 BoxRay<double> RandomCameraRay(const TestScene& s, std::mt19937& rng, double distance = 2.5) {
-  std::normal_distribution<double> g;
-  std::uniform_real_distribution<double> u(0, 1), off(-0.3, 0.3);
-  const V3 pos = s.box.center + Normalized(V3{g(rng), g(rng), g(rng)}) * distance;
-  const V3 z = Normalized(s.box.center + V3{off(rng), off(rng), off(rng)} - pos);
-  const V3 xa = Normalized(Cross(z, V3{0.2, 1.0, 0.1}));
-  const V3 ya = Cross(z, xa);
-  PinholeCamera<double> cam{50, 50, 32, 24, {xa.x, ya.x, z.x, pos.x, xa.y, ya.y, z.y, pos.y, xa.z, ya.z, z.z, pos.z}};
-  V3 o, d;
-  PixelRay(cam, static_cast<int>(u(rng) * 64), static_cast<int>(u(rng) * 48), u(rng), u(rng), &o, &d);
-  return ToBoxRay(s.box, s.vol.n, o, d);
+  return test::RandomCameraRay(s.box, s.vol.n, rng, distance);
 }
 
 struct DenseRow {

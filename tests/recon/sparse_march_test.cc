@@ -13,13 +13,12 @@
 #include "recon_cuda/brick_grid.h"
 #include "recon_cuda/ray_math.h"
 #include "tests/recon/per_param_visitor.h"
+#include "tests/recon/random_rays.h"
 
 namespace perf::recon {
 namespace {
 
 using V3 = Vec3<double>;
-
-V3 Cross(V3 a, V3 b) { return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x}; }
 
 // A tilted, non-cubic box whose grid holds random values in the active bricks and zeros (every
 // channel) elsewhere, stored both ways, and two shells.
@@ -82,16 +81,7 @@ struct SparseScene {
 };
 
 BoxRay<double> RandomRay(const SparseScene& s, std::mt19937& rng, double distance) {
-  std::normal_distribution<double> g;
-  std::uniform_real_distribution<double> u(0, 1), off(-0.4, 0.4);
-  const V3 pos = s.box.center + Normalized(V3{g(rng), g(rng), g(rng)}) * distance;
-  const V3 z = Normalized(s.box.center + V3{off(rng), off(rng), off(rng)} - pos);
-  const V3 xa = Normalized(Cross(z, V3{0.2, 1.0, 0.1}));
-  const V3 ya = Cross(z, xa);
-  PinholeCamera<double> cam{50, 50, 32, 24, {xa.x, ya.x, z.x, pos.x, xa.y, ya.y, z.y, pos.y, xa.z, ya.z, z.z, pos.z}};
-  V3 o, d;
-  PixelRay(cam, static_cast<int>(u(rng) * 64), static_cast<int>(u(rng) * 48), u(rng), u(rng), &o, &d);
-  return ToBoxRay(s.box, s.dense_view.n, o, d);
+  return test::RandomCameraRay(s.box, s.dense_view.n, rng, distance, 0.4);
 }
 
 // J^T u for the 4 residual rows (u = the residuals), summed over rays.
