@@ -58,18 +58,23 @@ RaySet MakeRaySet(const std::vector<PosedImage>& images) {
   return rays;
 }
 
-int PyramidFactor(std::span<const PinholeCamera<float>> cameras, const VolumeGeometry& geo, int n, int max_factor) {
-  if (cameras.empty() || max_factor <= 1) return 1;
-  std::vector<double> px_per_voxel;
-  const double voxel = std::min({geo.box.size.x, geo.box.size.y, geo.box.size.z}) / n;
+double PixelsAcrossBox(std::span<const PinholeCamera<float>> cameras, const VolumeGeometry& geo) {
+  if (cameras.empty()) return 0;
+  std::vector<double> pixels;
+  const double side = std::min({geo.box.size.x, geo.box.size.y, geo.box.size.z});
   for (const PinholeCamera<float>& cam : cameras) {
     const float* m = cam.world_from_cam;
     const double dx = m[3] - geo.box.center.x, dy = m[7] - geo.box.center.y, dz = m[11] - geo.box.center.z;
     const double dist = std::max(1e-9, std::sqrt(dx * dx + dy * dy + dz * dz));
-    px_per_voxel.push_back(cam.fx * voxel / dist);
+    pixels.push_back(cam.fx * side / dist);
   }
-  std::nth_element(px_per_voxel.begin(), px_per_voxel.begin() + px_per_voxel.size() / 2, px_per_voxel.end());
-  const double median = px_per_voxel[px_per_voxel.size() / 2];
+  std::nth_element(pixels.begin(), pixels.begin() + pixels.size() / 2, pixels.end());
+  return pixels[pixels.size() / 2];
+}
+
+int PyramidFactor(std::span<const PinholeCamera<float>> cameras, const VolumeGeometry& geo, int n, int max_factor) {
+  if (cameras.empty() || max_factor <= 1) return 1;
+  const double median = PixelsAcrossBox(cameras, geo) / n;  // pixels per voxel in the median view
   int f = 1;
   while (2 * f <= max_factor && median / (2 * f) >= 1.0) f *= 2;
   return f;

@@ -160,6 +160,22 @@ bool FixedBackground(BackgroundChoice background, const Scene& scene) {
   return background == BackgroundChoice::kAuto ? EveryImageHasAlpha(scene) : background == BackgroundChoice::kFixed;
 }
 
+std::string ResolutionAdvice(double pixels_across_box, int start_resolution, int levels) {
+  const int finest = start_resolution << (levels - 1);
+  std::string s = StrCat("the photos resolve about ", static_cast<int>(std::lround(pixels_across_box)),
+                         " cells across the box (one pixel a cell in the median view); the finest level here is ",
+                         finest, "^3");
+  if (pixels_across_box <= 0) return s;
+  int best = 1;  // the fewest levels whose finest grid reaches the photos' resolution, at most 6
+  while (best < 6 && (start_resolution << (best - 1)) < pixels_across_box) ++best;
+  if (best > levels) {
+    s += StrCat(" (--levels ", best, " would reach ", start_resolution << (best - 1), "^3)");
+  } else if (best < levels) {
+    s += StrCat(" (finer than the photos: --levels ", best, " would do)");
+  }
+  return s;
+}
+
 TrainingViews ViewsForHierarchy(const std::vector<PosedImage>& train) {
   TrainingViews views;
   for (const PosedImage& im : train) views.cameras.push_back(im.camera);
@@ -243,6 +259,9 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   const std::vector<PosedImage>& preview_views = test.empty() ? train : test;
   say(StrCat("backend: ", result.backend, "; ", train.size(), " training and ", test.size(), " held-out views; ",
              levels, " levels from ", o.start_resolution, "^3"));
+  const TrainingViews views = ViewsForHierarchy(train);
+  result.pixels_across_box = PixelsAcrossBox(views.cameras, geometry);
+  say(ResolutionAdvice(result.pixels_across_box, o.start_resolution, levels));
   const bool fits_alpha = o.residuals.use_alpha && ImagesHaveAlpha(train);  // as every level's RaySet will
   const float opacity_weight = OpacityResidualWeight(o.residuals, fits_alpha);
   const std::string opacity_residual = opacity_weight <= 0 ? "off" : (fits_alpha ? "alpha" : "auxiliary");
@@ -256,7 +275,6 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
           : std::string("background: learned (environment shells)"));
 
   if (start.level == 0 && o.init_shells_from_photos) MeanColour(train, ho.init.shell_colour);
-  const TrainingViews views = ViewsForHierarchy(train);
 
   double elapsed = 0;  // solver time so far (excludes held-out evaluation and previews)
   auto t_level = WallClock::now();
@@ -356,9 +374,11 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
 
   json levels_json = json::array();
   for (const LevelReport& l : result.levels) {
+    const int64_t nb = l.shape.n / kBrickSide;
     levels_json.push_back({{"level", l.level},
                            {"n", l.shape.n},
                            {"m", l.shape.m},
+                           {"bricks", l.shape.sparse() ? l.shape.bricks->ActiveBricks() : nb * nb * nb},
                            {"image_downscale", l.image_downscale},
                            {"rays", l.rays},
                            {"iterations", l.iterations},
@@ -380,6 +400,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                      {"min_box_opacity", o.min_box_opacity},  // the render rule of test_psnr
                      {"levels", levels},
                      {"start_resolution", o.start_resolution},
+                     {"pixels_across_box", result.pixels_across_box},
                      {"iterations_per_level", o.iterations},
                      {"final_checkpoint", fs::relative(result.final_checkpoint, o.workspace).string()},
                      {"test_psnr", result.test_psnr},

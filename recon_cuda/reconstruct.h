@@ -91,7 +91,13 @@ struct ReconstructResult {
   double test_psnr = 0;             // held-out PSNR of the final level (0: no held-out views)
   std::filesystem::path final_checkpoint;
   bool already_complete = false;    // --resume found every level done
+  double pixels_across_box = 0;     // training_data.h PixelsAcrossBox
 };
+
+// One line on the grid the photos can support against the one this run ends at, e.g. "the photos
+// resolve about 240 cells across the box ...; the finest level here is 64^3 (--levels 4 would
+// reach 256^3)".
+std::string ResolutionAdvice(double pixels_across_box, int start_resolution, int levels);
 
 ReconstructResult Reconstruct(const ReconstructOptions& options);
 

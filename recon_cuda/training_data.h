@@ -55,6 +55,10 @@ RaySet MakeRaySet(const std::vector<PosedImage>& images);
 // No rays: what a render-only level (LevelProblem::rays == nullptr) passes see.
 const RaySet& NoRays();
 
+// How many pixels the box's shortest side spans in the median training view, measured at the box
+// centre: the grid resolution at which a cell is about one pixel (0 without cameras).
+double PixelsAcrossBox(std::span<const PinholeCamera<float>> cameras, const VolumeGeometry& geometry);
+
 // The image pyramid's rule: the largest power-of-two downscale (at most `max_factor`) that keeps
 // a voxel of the n^3 grid at least one pixel wide in the median training view, measured at the
 // box centre.

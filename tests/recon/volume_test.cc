@@ -7,6 +7,8 @@
 #include <cmath>
 
 #include "common/errors.h"
+#include "recon_cuda/reconstruct.h"
+#include "recon_cuda/training_data.h"
 #include "workspace/scene.h"
 
 namespace perf::recon {
@@ -153,6 +155,31 @@ TEST(VolumeTest, GeometryFromSceneAndItsErrors) {
 TEST(VolumeTest, DescribeShape) {
   EXPECT_EQ(DescribeShape({32, 32, 4}), "32^3 grid, 4 shells of 6 x 32^2 texels (229376 parameters)");
   EXPECT_EQ(DescribeShape({128, 128, 1}), "128^3 grid, 1 shell of 6 x 128^2 texels (8.78 M parameters)");
+  std::vector<uint8_t> active(64, 0);
+  active[5] = active[6] = 1;
+  const VolumeShape sparse{32, 32, 4, std::make_shared<const BrickGrid>(MakeBrickGrid(32, active))};
+  // 2 bricks x 512 cells x 4 + 4 shells x 6 x 32^2 texels x 4.
+  EXPECT_EQ(DescribeShape(sparse), "32^3 grid (2 of 64 bricks), 4 shells of 6 x 32^2 texels (102400 parameters)");
+}
+
+// Cameras 4 units from the box centre with fx 100 (and one at 8, one at 2): the box's shortest
+// side, 2 units, spans 50 pixels in the median view.
+TEST(VolumeTest, PixelsAcrossTheBoxAndTheAdviceOnLevels) {
+  VolumeGeometry g;
+  g.box.center = {1, 2, 3};
+  g.box.size = {3, 2, 5};
+  g.box.world_from_box = {{1, 0, 0, 0, 1, 0, 0, 0, 1}};
+  std::vector<PinholeCamera<float>> cams;
+  for (float d : {4.f, 8.f, 4.f, 2.f, 4.f}) {
+    cams.push_back({100, 100, 50, 50, {1, 0, 0, 1 + d, 0, 1, 0, 2, 0, 0, 1, 3}});
+  }
+  EXPECT_NEAR(PixelsAcrossBox(cams, g), 50.0, 1e-4);
+  EXPECT_EQ(PixelsAcrossBox({}, g), 0.0);
+  EXPECT_EQ(ResolutionAdvice(50, 32, 2),
+            "the photos resolve about 50 cells across the box (one pixel a cell in the median view); the finest "
+            "level here is 64^3");
+  EXPECT_NE(ResolutionAdvice(215, 32, 1).find("(--levels 4 would reach 256^3)"), std::string::npos);
+  EXPECT_NE(ResolutionAdvice(20, 32, 3).find("(finer than the photos: --levels 1 would do)"), std::string::npos);
 }
 
 }  // namespace
