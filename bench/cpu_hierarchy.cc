@@ -32,12 +32,7 @@ json RunMode(const CpuHierarchySettings& s, bool sparse, const Scene& scene, con
   ho.iterations = s.iterations;
   ho.sparse = sparse;
   ho.occupancy = s.occupancy;
-  // As perf reconstruct runs an RGBA capture (lego): shells fixed at the background.
-  bool alpha = !train.empty();
-  for (const PosedImage& im : train) alpha = alpha && !im.alpha.empty();
-  ho.fixed_background = alpha;
-  ho.background = {static_cast<float>(scene.background.x()), static_cast<float>(scene.background.y()),
-                   static_cast<float>(scene.background.z())};
+  SetHierarchyBackground(BackgroundChoice::kAuto, scene, &ho);  // as perf reconstruct does by default
   const TrainingViews views = ViewsForHierarchy(train);
   const char* mode = sparse ? "sparse" : "dense";
   json levels = json::array();
@@ -46,9 +41,7 @@ json RunMode(const CpuHierarchySettings& s, bool sparse, const Scene& scene, con
   cb.level_done = [&](const HierarchyLevel& h, const SolverSummary& summary, const std::vector<float>&) {
     const PassStats probe = backend->Cost(h.params, 7);
     const double psnr = test.empty() ? 0.0 : MeanPsnr(ScoreViews(backend.get(), h.params, test, kDefaultMinBoxOpacity));
-    const int64_t nb = h.shape.n / kBrickSide;
-    const int64_t bricks = h.shape.sparse() ? h.shape.bricks->ActiveBricks() : nb * nb * nb;
-    const int64_t cells = h.shape.sparse() ? h.shape.bricks->ActiveCells() : int64_t{h.shape.n} * h.shape.n * h.shape.n;
+    const int64_t bricks = h.shape.StoredBricks(), bricks_of = BrickCount(h.shape.n), cells = h.shape.StoredCells();
     const double per_iteration = summary.iterations > 0 ? summary.seconds_total / summary.iterations : 0.0;
     total += summary.seconds_total;
     json l{{"mode", mode},
@@ -56,7 +49,7 @@ json RunMode(const CpuHierarchySettings& s, bool sparse, const Scene& scene, con
            {"n", h.shape.n},
            {"stored_cells", cells},
            {"bricks", bricks},
-           {"bricks_of", nb * nb * nb},
+           {"bricks_of", bricks_of},
            {"params", h.shape.ParamCount()},
            {"rays", h.rays},
            {"samples_per_ray", static_cast<double>(probe.samples) / std::max<int64_t>(1, probe.rays)},
@@ -70,7 +63,7 @@ json RunMode(const CpuHierarchySettings& s, bool sparse, const Scene& scene, con
     std::printf("%-6s level %d  %4d^3  %9lld cells (%6lld of %6lld bricks)  %6.1f samples/ray  %7.2f s/it "
                 "(linearize %.2f, J^T J p %.3f, cost %.3f s)  %7.1f MiB  held-out %.2f dB\n",
                 mode, h.level, h.shape.n, static_cast<long long>(cells), static_cast<long long>(bricks),
-                static_cast<long long>(nb * nb * nb), l["samples_per_ray"].get<double>(), per_iteration,
+                static_cast<long long>(bricks_of), l["samples_per_ray"].get<double>(), per_iteration,
                 l["seconds_linearize_pass"].get<double>(), l["seconds_jtj_pass"].get<double>(), probe.seconds,
                 h.memory.Total() / 1048576.0, psnr);
     std::fflush(stdout);

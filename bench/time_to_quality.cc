@@ -246,11 +246,10 @@ void RunHierarchy(Backend* backend, const BenchData& d, SolverType type, const B
       run->passes[std::to_string(h.level)] = passes;
     }
     peak();
-    const int64_t nb = h.shape.n / kBrickSide;
     json entry{{"level", h.level},
                {"n", h.shape.n},
-               {"bricks", h.shape.sparse() ? h.shape.bricks->ActiveBricks() : nb * nb * nb},
-               {"bricks_of", nb * nb * nb},
+               {"bricks", h.shape.StoredBricks()},
+               {"bricks_of", BrickCount(h.shape.n)},
                {"m", h.shape.m},
                {"params", h.shape.ParamCount()},
                {"image_downscale", h.image_downscale},

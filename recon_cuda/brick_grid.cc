@@ -12,7 +12,7 @@ BrickGrid MakeBrickGrid(int n, const std::vector<uint8_t>& active) {
   BrickGrid b;
   b.n = n;
   const int nb = b.nb();
-  const int64_t count = static_cast<int64_t>(nb) * nb * nb;
+  const int64_t count = BrickCount(n);
   if (static_cast<int64_t>(active.size()) != count) {
     throw InputError("brick grid", "active", StrCat(active.size(), " flags"), StrCat("expected ", count));
   }
@@ -46,11 +46,6 @@ BrickGrid MakeBrickGrid(int n, const std::vector<uint8_t>& active) {
     }
   }
   return b;
-}
-
-BrickGrid FullBrickGrid(int n) {
-  const int nb = n / kBrickSide;
-  return MakeBrickGrid(n, std::vector<uint8_t>(static_cast<size_t>(nb) * nb * nb, 1));
 }
 
 }  // namespace perf::recon

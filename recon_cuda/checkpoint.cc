@@ -114,7 +114,7 @@ std::vector<T> ReadArray(Reader& r, uint64_t count, bool checked) {
 
 // The brick grid of a version 2 checkpoint's list (ascending indices below nb^3).
 std::shared_ptr<const BrickGrid> BricksFromList(Reader& r, int n, const std::vector<uint32_t>& list) {
-  const int64_t nb = n / kBrickSide, total = nb * nb * nb;
+  const int64_t total = BrickCount(n);
   std::vector<uint8_t> active(static_cast<size_t>(total), 0);
   for (size_t i = 0; i < list.size(); ++i) {
     if (list[i] >= total || (i > 0 && list[i] <= list[i - 1])) {
@@ -206,11 +206,11 @@ Checkpoint ReadCheckpoint(std::istream& in, const std::string& name) {
   const uint64_t checksum = r.Get<uint64_t>("checksum");
   const int64_t num_bricks = version == 1 ? -1 : r.Get<int64_t>("bricks");
   if (num_bricks >= 0) {
-    const int64_t nb = c.shape.n / kBrickSide;
     if (c.shape.n % kBrickSide != 0) {
       r.Bad("n", std::to_string(c.shape.n), StrCat("a sparse grid's size must be a multiple of ", kBrickSide));
     }
-    if (num_bricks > nb * nb * nb) r.Bad("bricks", StrCat(num_bricks), StrCat("more than the grid's ", nb * nb * nb));
+    const int64_t total = BrickCount(c.shape.n);
+    if (num_bricks > total) r.Bad("bricks", StrCat(num_bricks), StrCat("more than the grid's ", total));
   } else if (num_bricks != -1) {
     r.Bad("bricks", StrCat(num_bricks), "must be -1 (dense) or a brick count");
   }

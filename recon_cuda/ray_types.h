@@ -140,6 +140,11 @@ PERF_HD_INLINE int32_t InactiveBrick(int octant_mask) { return -1 - octant_mask;
 PERF_HD_INLINE int OctantMask(int32_t slot) { return -1 - slot; }
 
 PERF_HD_INLINE int64_t SparseGridParams(int64_t active_bricks) { return 4 * kBrickCells * active_bricks; }
+// The bricks of an n^3 grid, (n / 8)^3.
+PERF_HD_INLINE int64_t BrickCount(int n) {
+  const int64_t nb = n / kBrickSide;
+  return nb * nb * nb;
+}
 PERF_HD_INLINE int64_t BrickOf(int nb, int bi, int bj, int bk) { return (static_cast<int64_t>(bk) * nb + bj) * nb + bi; }
 // The stored cell of grid cell (i, j, k) in a brick-sparse grid, or -1 when its brick is inactive.
 PERF_HD_INLINE int64_t SparseCell(const int32_t* brick_slot, int nb, int i, int j, int k) {

@@ -160,6 +160,12 @@ bool FixedBackground(BackgroundChoice background, const Scene& scene) {
   return background == BackgroundChoice::kAuto ? EveryImageHasAlpha(scene) : background == BackgroundChoice::kFixed;
 }
 
+void SetHierarchyBackground(BackgroundChoice background, const Scene& scene, HierarchyOptions* options) {
+  options->fixed_background = FixedBackground(background, scene);
+  options->background = {static_cast<float>(scene.background.x()), static_cast<float>(scene.background.y()),
+                         static_cast<float>(scene.background.z())};
+}
+
 std::string ResolutionAdvice(double pixels_across_box, int start_resolution, int levels) {
   const int finest = start_resolution << (levels - 1);
   std::string s = StrCat("the photos resolve about ", static_cast<int>(std::lround(pixels_across_box)),
@@ -206,11 +212,9 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   ReconstructResult result;
   result.backend = backend->Describe();
   const int levels = o.levels > 0 ? o.levels : DefaultLevels(backend->kind());
-  result.fixed_background = FixedBackground(o.background, scene);
   HierarchyOptions ho = ToHierarchy(o, levels);
-  ho.fixed_background = result.fixed_background;
-  ho.background = {static_cast<float>(scene.background.x()), static_cast<float>(scene.background.y()),
-                   static_cast<float>(scene.background.z())};
+  SetHierarchyBackground(o.background, scene, &ho);
+  result.fixed_background = ho.fixed_background;
   const auto shape_of = [&](int level) { return LevelShape(ho, geometry.num_shells(), level); };
 
   EnsureWritableDirectory(o.workspace / "recon");
@@ -374,11 +378,10 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
 
   json levels_json = json::array();
   for (const LevelReport& l : result.levels) {
-    const int64_t nb = l.shape.n / kBrickSide;
     levels_json.push_back({{"level", l.level},
                            {"n", l.shape.n},
                            {"m", l.shape.m},
-                           {"bricks", l.shape.sparse() ? l.shape.bricks->ActiveBricks() : nb * nb * nb},
+                           {"bricks", l.shape.StoredBricks()},
                            {"image_downscale", l.image_downscale},
                            {"rays", l.rays},
                            {"iterations", l.iterations},

@@ -83,6 +83,10 @@ struct LevelReport {
 // Whether `background` fixes the shells for this scene.
 bool FixedBackground(BackgroundChoice background, const Scene& scene);
 
+// The hierarchy's background as perf reconstruct sets it: fixed or not (FixedBackground), and
+// the colour fixed shells hold (scene.json's background).
+void SetHierarchyBackground(BackgroundChoice background, const Scene& scene, HierarchyOptions* options);
+
 struct ReconstructResult {
   std::string backend;
   bool fixed_background = false;

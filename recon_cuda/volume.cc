@@ -155,10 +155,7 @@ void ProjectToValidRange(const VolumeShape& shape, std::span<float> x) {
 std::string DescribeShape(const VolumeShape& shape) {
   std::ostringstream s;
   s << shape.n << "^3 grid";
-  if (shape.bricks) {
-    const int64_t nb = shape.bricks->nb();
-    s << " (" << shape.bricks->ActiveBricks() << " of " << nb * nb * nb << " bricks)";
-  }
+  if (shape.bricks) s << " (" << shape.bricks->ActiveBricks() << " of " << BrickCount(shape.n) << " bricks)";
   s << ", " << shape.num_shells << " shell" << (shape.num_shells == 1 ? "" : "s") << " of 6 x "
     << shape.m << "^2 texels (";
   const double p = static_cast<double>(shape.ParamCount());

@@ -36,6 +36,9 @@ struct VolumeShape {
   // Where the shells start: 4 n^3, or 4 values per cell of the active bricks.
   int64_t GridParamCount() const { return bricks ? bricks->GridParams() : recon::GridParamCount(n); }
   int64_t ParamCount() const { return GridParamCount() + 4 * static_cast<int64_t>(num_shells) * 6 * m * m; }
+  int64_t StoredCells() const { return GridParamCount() / 4; }
+  // The bricks holding parameters: the active ones, or every brick of a dense grid.
+  int64_t StoredBricks() const { return bricks ? bricks->ActiveBricks() : BrickCount(n); }
   // The next level of the hierarchy: every resolution doubled, the grid dense.
   VolumeShape Doubled() const { return {2 * n, 2 * m, num_shells}; }
   // The same resolutions with these bricks active (nullptr: dense).
@@ -119,16 +122,7 @@ void ForEachStoredCell(const VolumeShape& shape, F&& f) {
         for (int i = 0; i < shape.n; ++i) f(i, j, k, GridCell(shape.n, i, j, k));
     return;
   }
-  const int nb = shape.bricks->nb();
-  for (int64_t slot = 0; slot < shape.bricks->ActiveBricks(); ++slot) {
-    const int64_t brick = shape.bricks->bricks[slot];
-    const int bi = static_cast<int>(brick % nb) * kBrickSide, bj = static_cast<int>(brick / nb % nb) * kBrickSide,
-              bk = static_cast<int>(brick / (int64_t{nb} * nb)) * kBrickSide;
-    int64_t cell = slot * kBrickCells;
-    for (int z = 0; z < kBrickSide; ++z)
-      for (int y = 0; y < kBrickSide; ++y)
-        for (int x = 0; x < kBrickSide; ++x) f(bi + x, bj + y, bk + z, cell++);
-  }
+  shape.bricks->ForEachCell(f);
 }
 
 // Which of the 4 channels of parameter i is what (param_ops.h).

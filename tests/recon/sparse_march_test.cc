@@ -156,7 +156,7 @@ TEST(BrickGrid, SlotsMarksAndLayouts) {
     }
   }
   // Every brick active: the same values, brick by brick.
-  const BrickGrid full = FullBrickGrid(16);
+  const BrickGrid full = MakeBrickGrid(16, std::vector<uint8_t>(8, 1));
   EXPECT_EQ(full.ActiveBricks(), 8);
   std::vector<float> small(GridParamCount(16));
   for (float& v : small) v = u(rng);
