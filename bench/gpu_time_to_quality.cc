@@ -92,10 +92,10 @@ int main(int argc, char** argv) {
     const auto t_start = WallClock::now();
     const BenchData d = LoadBenchData(data);
     if (check_data) {
-      std::vector<PinholeCamera<float>> cams;
+      std::vector<ViewFrustum> cams;
       std::vector<PosedImage> images;
       for (const View& v : d.views) {
-        if (v.train) cams.push_back(v.camera);
+        if (v.train) cams.push_back({v.camera, v.width, v.height});
       }
       for (int level = 0; level < s.levels; ++level) {
         const int n = s.start << level, f = PyramidFactor(cams, d.geometry, n, 1 << (s.levels - 1 - level));

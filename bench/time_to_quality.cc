@@ -172,7 +172,7 @@ void RunHierarchy(Backend* backend, const BenchData& d, SolverType type, const B
   ho.fixed_background = d.alpha;
   ho.background = {d.background[0], d.background[1], d.background[2]};
   TrainingViews views;
-  for (const View* v : train) views.cameras.push_back(v->camera);
+  for (const View* v : train) views.views.push_back({v->camera, v->width, v->height});
   views.rays = [&](int factor) {
     std::vector<PosedImage> images;
     for (const View* v : train) images.push_back(ToPosed(*v, factor));

@@ -26,7 +26,12 @@ void AddReconstructCommand(CLI::App& app) {
       "Gauss-Newton with preconditioned CG, coarse to fine, checkpointed after every level.");
   cmd->add_option("workspace", args->workspace, "Workspace folder (made by perf import)")->required();
   AddDeviceOptions(cmd, &o.device, &o.threads);
-  cmd->add_option("--levels", o.levels, "Hierarchy levels, each doubling the resolution (0: 2 on CPU, 4 on GPU)")
+  cmd->add_option("--levels", o.levels,
+                  "Hierarchy levels, each doubling the resolution (0: the fewest whose finest cell is about one pixel "
+                  "of the median photo, within --max-resolution and memory)")
+      ->capture_default_str();
+  cmd->add_option("--max-resolution", o.max_resolution,
+                  "Without --levels: the finest grid has at most this many cells across (0: 128 on CPU, 1024 on GPU)")
       ->capture_default_str();
   cmd->add_option("--start-resolution", o.start_resolution, "Grid cells per axis (and texels per face side) at level 1")
       ->capture_default_str();

@@ -41,6 +41,8 @@ void AddRunCommand(CLI::App& app) {
   cmd->add_option("--preset", o.preset, "preview, default or high (quality vs time)")->capture_default_str();
   cmd->add_option("--max-size", o.max_size, "Override the preset: longest image side in pixels");
   cmd->add_option("--levels", o.levels, "Override the preset: hierarchy levels");
+  cmd->add_option("--max-resolution", o.max_resolution,
+                  "Override the preset: levels from the photos, the finest grid at most this many cells across");
   cmd->add_option("--iterations", o.iterations, "Override the preset: Gauss-Newton iterations per level");
   AddDeviceOptions(cmd, &o.device, &o.threads);
   cmd->add_flag("--force", o.force, "Re-run every stage even when its outputs are up to date");

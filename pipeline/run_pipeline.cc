@@ -171,6 +171,7 @@ class Runner {
     ro.device = o_.device;
     ro.threads = o_.threads;
     ro.levels = preset_.levels;
+    ro.max_resolution = preset_.max_resolution;
     ro.iterations = preset_.iterations;
     ro.resume = fresh && !o_.force;
     if (!ro.resume) {
@@ -273,6 +274,7 @@ void RunOptions::Check() const {
   if (max_size < 0) throw InputError(kCommandLine, "--max-size", StrCat(max_size), "must be >= 0");
   if (levels < 0 || levels > 6) throw InputError(kCommandLine, "--levels", StrCat(levels), "must be 1 to 6");
   if (iterations < 0) throw InputError(kCommandLine, "--iterations", StrCat(iterations), "must be >= 0");
+  if (max_resolution < 0) throw InputError(kCommandLine, "--max-resolution", StrCat(max_resolution), "must be >= 0");
   for (const fs::path* p : {&images, &colmap, &nerf}) {
     if (!p->empty() && !fs::exists(*p)) throw IoError(p->string(), "does not exist", "check the path");
   }
@@ -281,7 +283,11 @@ void RunOptions::Check() const {
 std::string PresetSettings::Describe() const {
   std::ostringstream s;
   s << "images " << (max_size > 0 ? "at most " + std::to_string(max_size) + " px" : std::string("full size")) << ", "
-    << (levels > 0 ? std::to_string(levels) : std::string("default")) << " levels x " << iterations
+    << (levels > 0 ? std::to_string(levels) + " levels"
+                   : "levels from the photos (finest grid " +
+                         (max_resolution > 0 ? "at most " + std::to_string(max_resolution) + "^3"
+                                             : std::string("at most 128^3 on a CPU, 1024^3 on a GPU")) + ")")
+    << " x " << iterations
     << " Gauss-Newton iterations, " << orbit_frames << " orbit frames";
   return s.str();
 }
@@ -292,11 +298,15 @@ PresetSettings PresetFor(const RunOptions& o) {
   // high: full-size images and one more level (meant for a GPU).
   PresetSettings p;
   if (o.preset == "preview") {
-    p = {128, 2, 8, 24};
+    p = {128, 2, 0, 8, 24};
   } else if (o.preset == "high") {
-    p = {0, 0, 30, 120};
+    p = {0, 0, 1024, 30, 120};
   } else {
-    p = {400, 0, 30, 60};
+    p = {400, 0, 0, 30, 60};
+  }
+  if (o.max_resolution > 0) {  // levels from the photos, within this
+    p.max_resolution = o.max_resolution;
+    p.levels = 0;
   }
   if (o.max_size > 0) p.max_size = o.max_size;
   if (o.levels > 0) p.levels = o.levels;

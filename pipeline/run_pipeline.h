@@ -27,7 +27,7 @@ struct RunOptions {
   int threads = 0;
   bool force = false;
   // Overrides of the preset (0: the preset's).
-  int max_size = 0, levels = 0, iterations = 0;
+  int max_size = 0, levels = 0, iterations = 0, max_resolution = 0;
   bool quiet = false;
   std::filesystem::path log_json;  // JSON lines of stage events for scripts (empty: none)
   const std::atomic<bool>* stop = nullptr;  // set (by a signal handler) to stop at a safe point
@@ -38,7 +38,8 @@ struct RunOptions {
 // What a preset sets (printed at the start of a run).
 struct PresetSettings {
   int max_size = 0;     // import: longest image side (0: full size)
-  int levels = 0;       // reconstruct: hierarchy levels (0: the backend's default)
+  int levels = 0;       // reconstruct: hierarchy levels (0: from the photos, level_choice.h)
+  int max_resolution = 0;  // with levels 0: the finest grid at most (0: the backend's default)
   int iterations = 30;  // per level
   int orbit_frames = 60;
   std::string Describe() const;

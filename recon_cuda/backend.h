@@ -97,6 +97,9 @@ struct MemoryEstimate {
   int64_t rays = 0;           // training rays
   int64_t available = 0;      // what the backend may use (free RAM or device memory)
   int64_t Total() const { return vectors + scratch + jacobian_cache + rays; }
+  // Whether the level can run: everything but the Jacobian cache, which a backend short of
+  // memory does without (it recomputes), fits in what is available (0: unknown, assumed to fit).
+  bool Fits() const { return available <= 0 || vectors + scratch + rays <= available; }
 };
 
 // Adam, the baseline, compared at its best: CALIBRATION.md's colour rate and a density rate

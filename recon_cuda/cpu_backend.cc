@@ -58,7 +58,7 @@ class CpuBackend final : public Backend {
     weight_ = OpacityResidualWeight(p);
     const MemoryEstimate e = EstimateMemory(p, num_vectors);
     const int64_t needed = e.vectors + e.scratch + e.rays;
-    if (e.available > 0 && needed > e.available) {
+    if (!e.Fits()) {
       throw ResourceError(StrCat("level ", DescribeShape(p.shape), " needs ", needed >> 20, " MiB for the solver's ",
                                  num_vectors, " vectors, per-thread sums and rays, but only ", e.available >> 20,
                                  " MiB are available; use fewer --levels, fewer --threads, or a larger --downscale"));

@@ -9,10 +9,10 @@ VolumeShape LevelShape(const HierarchyOptions& o, int num_shells, int level) {
 }
 
 VolumeShape NextLevelShape(const HierarchyOptions& o, const VolumeGeometry& geometry, const VolumeShape& shape,
-                           std::span<const float> x) {
+                           std::span<const float> x, std::span<const ViewFrustum> views) {
   const VolumeShape next = shape.Doubled();
   if (!o.sparse || next.n % kBrickSide != 0) return next;
-  return next.WithBricks(OccupiedBricks(shape, geometry, x, next.n, o.occupancy));
+  return next.WithBricks(OccupiedBricks(shape, geometry, x, next.n, o.occupancy, views));
 }
 
 std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geometry, const TrainingViews& train,
@@ -20,6 +20,7 @@ std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geomet
   std::vector<float> x = std::move(start.x);
   VolumeShape shape = x.empty() ? LevelShape(o, geometry.num_shells(), start.level) : start.shape;
   PERF_CHECK(static_cast<int64_t>(x.size()) == (x.empty() ? 0 : shape.ParamCount()));
+  std::vector<float> fitted;  // with stop_when_out_of_memory: the level before's solution
   for (int level = start.level; level < o.levels; ++level) {
     if (cb.before_level && !cb.before_level(level)) break;
     HierarchyLevel h;
@@ -30,11 +31,19 @@ std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geomet
       x = InitialParams(h.shape, geometry, o.init);
       if (o.fixed_background) SetBackgroundShells(h.shape, o.background.data(), x);
     }
-    h.image_downscale = o.pyramid ? PyramidFactor(train.cameras, geometry, h.shape.n, 1 << (o.levels - 1 - level)) : 1;
+    h.image_downscale = o.pyramid ? PyramidFactor(train.views, geometry, h.shape.n, 1 << (o.levels - 1 - level)) : 1;
     const RaySet rays = train.rays(h.image_downscale);
     h.rays = rays.size();
-    h.memory = backend->SetLevel({h.shape, geometry, &rays, o.residuals, o.fixed_background},
-                                 RequiredVectors(o.solver.type));
+    const LevelProblem problem{h.shape, geometry, &rays, o.residuals, o.fixed_background};
+    if (o.stop_when_out_of_memory && level > 0) {
+      h.memory = backend->EstimateMemory(problem, RequiredVectors(o.solver.type));
+      if (!h.memory.Fits()) {
+        if (cb.out_of_memory) cb.out_of_memory(h);
+        x = std::move(fitted);
+        break;
+      }
+    }
+    h.memory = backend->SetLevel(problem, RequiredVectors(o.solver.type));
     h.solver = o.solver;
     h.solver.max_iterations = o.iterations;
     h.solver.seed = Hash(o.init.seed, static_cast<uint32_t>(level), 0x1e7e1u);
@@ -56,8 +65,10 @@ std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geomet
     if (cb.level_done) cb.level_done(h, summary, x);
     if (stopped) break;
     if (level + 1 < o.levels) {
-      shape = NextLevelShape(o, geometry, h.shape, x);
-      x = Resample(h.shape, x, shape);
+      shape = NextLevelShape(o, geometry, h.shape, x, train.views);
+      std::vector<float> next = Resample(h.shape, x, shape);
+      if (o.stop_when_out_of_memory) fitted = std::move(x);
+      x = std::move(next);
     }
   }
   return x;

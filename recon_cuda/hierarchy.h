@@ -31,15 +31,19 @@ struct HierarchyOptions {
   // false keeps every level dense (--dense).
   bool sparse = true;
   OccupancyOptions occupancy;
+  // A level after the first whose vectors and rays would not fit the backend's memory ends the
+  // hierarchy at the level before (automatic levels); false: SetLevel throws ResourceError.
+  bool stop_when_out_of_memory = false;
 };
 
 // The resolutions of `level`, its grid dense.
 VolumeShape LevelShape(const HierarchyOptions& options, int num_shells, int level);
 
 // The shape of the level after the fitted one (shape, x): resolutions doubled, and with
-// options.sparse (and a grid a multiple of 8 cells across) only the occupied bricks.
+// options.sparse (and a grid a multiple of 8 cells across) only the occupied bricks that the
+// training views see (OccupiedBricks).
 VolumeShape NextLevelShape(const HierarchyOptions& options, const VolumeGeometry& geometry, const VolumeShape& shape,
-                           std::span<const float> x);
+                           std::span<const float> x, std::span<const ViewFrustum> views);
 
 // What the callbacks see of the level being solved.
 struct HierarchyLevel {
@@ -63,12 +67,17 @@ struct HierarchyCallbacks {
   std::function<bool(const HierarchyLevel&, const IterationSummary&)> iteration;
   // After the level's solve; the backend still holds the level. `x` is its solution.
   std::function<void(const HierarchyLevel&, const SolverSummary&, const std::vector<float>& x)> level_done;
+  // With stop_when_out_of_memory: the level that did not fit (h.memory says what it needed) and
+  // so ended the hierarchy; SolveHierarchy returns the level before's solution (empty when the
+  // hierarchy started at the level that did not fit).
+  std::function<void(const HierarchyLevel&)> out_of_memory;
 };
 
-// The training photos: their full-size cameras (for the pyramid rule), and their rays at an
-// integer downscale factor of the photos (1: as they are; MakeRaySet of the downscaled photos).
+// The training photos: their full-size cameras and sizes (for the pyramid rule and occupancy),
+// and their rays at an integer downscale factor of the photos (1: as they are; MakeRaySet of the
+// downscaled photos).
 struct TrainingViews {
-  std::vector<PinholeCamera<float>> cameras;
+  std::vector<ViewFrustum> views;
   std::function<RaySet(int factor)> rays;
 };
 

@@ -5,6 +5,7 @@
 
 #include <memory>
 #include <span>
+#include <vector>
 
 #include "recon_cuda/volume.h"
 
@@ -19,9 +20,15 @@ struct OccupancyOptions {
   int dilation = 1;
 };
 
+// Per brick of an n^3 grid (BrickOf order): 1 where some photo's rays may cross it, tested
+// conservatively (the brick's bounding sphere in front of the camera and overlapping the image);
+// 0 where none can, so that the solve cannot have fitted anything there.
+std::vector<uint8_t> SeenBricks(int n, const VolumeGeometry& geometry, std::span<const ViewFrustum> views);
+
 // The bricks of an n_next^3 grid (a multiple of 8) that cover the occupied cells of the fitted
-// level (shape, x), dilated.
+// level (shape, x), dilated, and that some training photo sees (SeenBricks; no views: every brick).
 std::shared_ptr<const BrickGrid> OccupiedBricks(const VolumeShape& shape, const VolumeGeometry& geometry,
-                                                std::span<const float> x, int n_next, const OccupancyOptions& options);
+                                                std::span<const float> x, int n_next, const OccupancyOptions& options,
+                                                std::span<const ViewFrustum> views = {});
 
 }  // namespace perf::recon

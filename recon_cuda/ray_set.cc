@@ -58,11 +58,12 @@ RaySet MakeRaySet(const std::vector<PosedImage>& images) {
   return rays;
 }
 
-double PixelsAcrossBox(std::span<const PinholeCamera<float>> cameras, const VolumeGeometry& geo) {
-  if (cameras.empty()) return 0;
+double PixelsAcrossBox(std::span<const ViewFrustum> views, const VolumeGeometry& geo) {
+  if (views.empty()) return 0;
   std::vector<double> pixels;
   const double side = std::min({geo.box.size.x, geo.box.size.y, geo.box.size.z});
-  for (const PinholeCamera<float>& cam : cameras) {
+  for (const ViewFrustum& view : views) {
+    const PinholeCamera<float>& cam = view.camera;
     const float* m = cam.world_from_cam;
     const double dx = m[3] - geo.box.center.x, dy = m[7] - geo.box.center.y, dz = m[11] - geo.box.center.z;
     const double dist = std::max(1e-9, std::sqrt(dx * dx + dy * dy + dz * dz));
@@ -72,9 +73,9 @@ double PixelsAcrossBox(std::span<const PinholeCamera<float>> cameras, const Volu
   return pixels[pixels.size() / 2];
 }
 
-int PyramidFactor(std::span<const PinholeCamera<float>> cameras, const VolumeGeometry& geo, int n, int max_factor) {
-  if (cameras.empty() || max_factor <= 1) return 1;
-  const double median = PixelsAcrossBox(cameras, geo) / n;  // pixels per voxel in the median view
+int PyramidFactor(std::span<const ViewFrustum> views, const VolumeGeometry& geo, int n, int max_factor) {
+  if (views.empty() || max_factor <= 1) return 1;
+  const double median = PixelsAcrossBox(views, geo) / n;  // pixels per voxel in the median view
   int f = 1;
   while (2 * f <= max_factor && median / (2 * f) >= 1.0) f *= 2;
   return f;

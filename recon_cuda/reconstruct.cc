@@ -81,11 +81,13 @@ void CheckMatchesScene(const Checkpoint& c, const Scene& scene, const fs::path& 
 
 }  // namespace
 
-int DefaultLevels(BackendKind kind) { return kind == BackendKind::kCuda ? 4 : 2; }
-
 void ReconstructOptions::Check() const {
   if (workspace.empty()) Fail("WORKSPACE", "", "missing", "pass the workspace made by perf import");
   if (levels < 0 || levels > 6) Fail("--levels", std::to_string(levels), "must be 1 to 6 (or 0 for the default)");
+  if (max_resolution != 0 && max_resolution < start_resolution) {
+    Fail("--max-resolution", std::to_string(max_resolution), StrCat("must be at least --start-resolution (", start_resolution, ")"),
+         "or 0 for the backend's default");
+  }
   if (start_resolution < 2 || start_resolution > 1024) {
     Fail("--start-resolution", std::to_string(start_resolution), "must be 2 to 1024");
   }
@@ -166,25 +168,9 @@ void SetHierarchyBackground(BackgroundChoice background, const Scene& scene, Hie
                          static_cast<float>(scene.background.z())};
 }
 
-std::string ResolutionAdvice(double pixels_across_box, int start_resolution, int levels) {
-  const int finest = start_resolution << (levels - 1);
-  std::string s = StrCat("the photos resolve about ", static_cast<int>(std::lround(pixels_across_box)),
-                         " cells across the box (one pixel a cell in the median view); the finest level here is ",
-                         finest, "^3");
-  if (pixels_across_box <= 0) return s;
-  int best = 1;  // the fewest levels whose finest grid reaches the photos' resolution, at most 6
-  while (best < 6 && (start_resolution << (best - 1)) < pixels_across_box) ++best;
-  if (best > levels) {
-    s += StrCat(" (--levels ", best, " would reach ", start_resolution << (best - 1), "^3)");
-  } else if (best < levels) {
-    s += StrCat(" (finer than the photos: --levels ", best, " would do)");
-  }
-  return s;
-}
-
 TrainingViews ViewsForHierarchy(const std::vector<PosedImage>& train) {
   TrainingViews views;
-  for (const PosedImage& im : train) views.cameras.push_back(im.camera);
+  for (const PosedImage& im : train) views.views.push_back({im.camera, im.image.width, im.image.height});
   views.rays = [&train](int factor) {
     if (factor == 1) return MakeRaySet(train);
     std::vector<PosedImage> small;
@@ -211,8 +197,12 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   std::unique_ptr<Backend> backend = MakeBackend(o.device, o.threads);
   ReconstructResult result;
   result.backend = backend->Describe();
-  const int levels = o.levels > 0 ? o.levels : DefaultLevels(backend->kind());
+  const std::vector<ViewFrustum> train_views = SplitViews(scene, Split::kTrain);
+  result.levels_choice = ChooseLevels(o.levels, PixelsAcrossBox(train_views, geometry), o.start_resolution,
+                                      o.max_resolution > 0 ? o.max_resolution : DefaultMaxResolution(backend->kind()));
+  const int levels = result.levels_choice.levels;
   HierarchyOptions ho = ToHierarchy(o, levels);
+  ho.stop_when_out_of_memory = result.levels_choice.automatic;
   SetHierarchyBackground(o.background, scene, &ho);
   result.fixed_background = ho.fixed_background;
   const auto shape_of = [&](int level) { return LevelShape(ho, geometry.num_shells(), level); };
@@ -239,7 +229,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
       return result;
     }
     start.level = last + 1;
-    start.shape = NextLevelShape(ho, geometry, c.shape, c.params);
+    start.shape = NextLevelShape(ho, geometry, c.shape, c.params, train_views);
     start.x = Resample(c.shape, c.params, start.shape);
     // Constants of this run, whatever an earlier run (perhaps with learned shells) left there.
     if (result.fixed_background) SetBackgroundShells(start.shape, ho.background.data(), start.x);
@@ -264,8 +254,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   say(StrCat("backend: ", result.backend, "; ", train.size(), " training and ", test.size(), " held-out views; ",
              levels, " levels from ", o.start_resolution, "^3"));
   const TrainingViews views = ViewsForHierarchy(train);
-  result.pixels_across_box = PixelsAcrossBox(views.cameras, geometry);
-  say(ResolutionAdvice(result.pixels_across_box, o.start_resolution, levels));
+  say(result.levels_choice.Describe());
   const bool fits_alpha = o.residuals.use_alpha && ImagesHaveAlpha(train);  // as every level's RaySet will
   const float opacity_weight = OpacityResidualWeight(o.residuals, fits_alpha);
   const std::string opacity_residual = opacity_weight <= 0 ? "off" : (fits_alpha ? "alpha" : "auxiliary");
@@ -374,7 +363,19 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     t_level = WallClock::now();
     eval_seconds = 0;
   };
+  cb.out_of_memory = [&](const HierarchyLevel& h) {
+    result.memory_stop = StrCat("level ", h.level + 1, " (", DescribeShape(h.shape), ") would need ",
+                                FormatByteCount(h.memory.vectors + h.memory.scratch + h.memory.rays), " but ",
+                                FormatByteCount(h.memory.available), " are available");
+    say(StrCat(result.memory_stop, ": the reconstruction ends at level ", h.level, " (--levels ", h.level,
+               " next time, or a smaller --max-size)"));
+    if (result.final_checkpoint.empty()) {  // a resumed run whose first level did not fit
+      result.final_checkpoint = CheckpointPath(o.workspace, h.level - 1);
+      result.already_complete = true;
+    }
+  };
   SolveHierarchy(backend.get(), geometry, views, ho, std::move(start), cb);
+  if (result.already_complete) return result;
 
   json levels_json = json::array();
   for (const LevelReport& l : result.levels) {
@@ -403,7 +404,11 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                      {"min_box_opacity", o.min_box_opacity},  // the render rule of test_psnr
                      {"levels", levels},
                      {"start_resolution", o.start_resolution},
-                     {"pixels_across_box", result.pixels_across_box},
+                     {"pixels_across_box", result.levels_choice.pixels_across_box},
+                     {"levels_chosen", result.levels_choice.automatic ? "from the photos" : "as given"},
+                     {"max_resolution", result.levels_choice.max_resolution},
+                     {"levels_note", result.levels_choice.Describe()},
+                     {"memory_stop", result.memory_stop},
                      {"iterations_per_level", o.iterations},
                      {"final_checkpoint", fs::relative(result.final_checkpoint, o.workspace).string()},
                      {"test_psnr", result.test_psnr},

@@ -18,6 +18,7 @@
 
 #include "recon_cuda/device_choice.h"
 #include "recon_cuda/hierarchy.h"
+#include "recon_cuda/level_choice.h"
 #include "recon_cuda/render_rule.h"
 #include "recon_cuda/solver.h"
 #include "recon_cuda/training_data.h"
@@ -28,17 +29,12 @@ struct Scene;
 
 namespace perf::recon {
 
-// Levels used when none are asked for. CPU: 2 (32^3 and 64^3), because a 2-core CPU does a
-// 64^3 Gauss-Newton iteration on 100x100 images in about a second and 128^3 in several: two
-// levels give a recognisable result in about a minute, and --levels 3 is there for more. GPU:
-// the paper's 4 levels (up to 256^3).
-int DefaultLevels(BackendKind kind);
-
 struct ReconstructOptions {
   std::filesystem::path workspace;
   DeviceChoice device = DeviceChoice::kAuto;
   int threads = 0;              // CPU worker threads, 0: all cores
-  int levels = 0;               // 0: DefaultLevels
+  int levels = 0;               // 0: chosen from the photos (level_choice.h)
+  int max_resolution = 0;       // automatic levels: the finest grid at most this (0: DefaultMaxResolution)
   int start_resolution = 32;
   int iterations = 30;          // solver iterations per level (paper: 30)
   SolverOptions solver;         // max_iterations and seed are set per level
@@ -95,13 +91,9 @@ struct ReconstructResult {
   double test_psnr = 0;             // held-out PSNR of the final level (0: no held-out views)
   std::filesystem::path final_checkpoint;
   bool already_complete = false;    // --resume found every level done
-  double pixels_across_box = 0;     // training_data.h PixelsAcrossBox
+  LevelChoice levels_choice;        // how many levels and why
+  std::string memory_stop;          // automatic levels: why the hierarchy ended early (empty: it did not)
 };
-
-// One line on the grid the photos can support against the one this run ends at, e.g. "the photos
-// resolve about 240 cells across the box ...; the finest level here is 64^3 (--levels 4 would
-// reach 256^3)".
-std::string ResolutionAdvice(double pixels_across_box, int start_resolution, int levels);
 
 ReconstructResult Reconstruct(const ReconstructOptions& options);
 

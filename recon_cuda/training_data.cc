@@ -19,6 +19,16 @@ PinholeCamera<float> ToPinhole(const SceneCamera& camera, const Eigen::Matrix<do
   return c;
 }
 
+std::vector<ViewFrustum> SplitViews(const Scene& scene, Split split) {
+  std::vector<ViewFrustum> views;
+  for (const SceneImage& im : scene.images) {
+    if (im.split != split) continue;
+    const SceneCamera& cam = scene.camera(im.camera_id);
+    views.push_back({ToPinhole(cam, im.world_from_cam), cam.width, cam.height});
+  }
+  return views;
+}
+
 std::vector<PosedImage> LoadImages(const Scene& scene, const std::filesystem::path& workspace, Split split,
                                    const std::function<void(int done, int total)>& progress) {
   std::vector<const SceneImage*> chosen;

@@ -32,6 +32,9 @@ std::vector<PosedImage> LoadImages(const Scene& scene, const std::filesystem::pa
 
 PinholeCamera<float> ToPinhole(const SceneCamera& camera, const Eigen::Matrix<double, 3, 4>& world_from_cam);
 
+// The cameras and image sizes of `split`'s images as LoadImages poses them, without reading an image.
+std::vector<ViewFrustum> SplitViews(const Scene& scene, Split split);
+
 // The image (and its alpha) downscaled by an integer factor (OpenImageIO filtered resize) with its intrinsics
 // scaled to match: pixel edges map to pixel edges, so f and c both divide by the factor.
 PosedImage Downscaled(const PosedImage& image, int factor);
@@ -57,12 +60,11 @@ const RaySet& NoRays();
 
 // How many pixels the box's shortest side spans in the median training view, measured at the box
 // centre: the grid resolution at which a cell is about one pixel (0 without cameras).
-double PixelsAcrossBox(std::span<const PinholeCamera<float>> cameras, const VolumeGeometry& geometry);
+double PixelsAcrossBox(std::span<const ViewFrustum> views, const VolumeGeometry& geometry);
 
 // The image pyramid's rule: the largest power-of-two downscale (at most `max_factor`) that keeps
 // a voxel of the n^3 grid at least one pixel wide in the median training view, measured at the
 // box centre.
-int PyramidFactor(std::span<const PinholeCamera<float>> cameras, const VolumeGeometry& geometry, int n,
-                  int max_factor);
+int PyramidFactor(std::span<const ViewFrustum> views, const VolumeGeometry& geometry, int n, int max_factor);
 
 }  // namespace perf::recon

@@ -73,6 +73,12 @@ struct VolumeGeometry {
   int num_shells() const { return static_cast<int>(shell_radii.size()); }
 };
 
+// What a training photo sees: its camera and its image size in pixels.
+struct ViewFrustum {
+  PinholeCamera<float> camera{};
+  int width = 0, height = 0;
+};
+
 // The view the ray math reads: params (and shape.bricks) must outlive it. A sparse shape's view
 // points at the host's brick table (a device backend puts its own copy in its place).
 VolumeView<float> MakeView(const VolumeShape& shape, const VolumeGeometry& geometry, const float* params);

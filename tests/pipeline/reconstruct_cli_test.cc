@@ -97,6 +97,26 @@ TEST_F(ReconstructCli, ReconstructsLogsCheckpointsResumesAndRenders) {
   EXPECT_NE(fitted, ReadImage(ws_ / "rule1" / "view0.png").pixels);
 }
 
+// Without --levels the photos choose: the fewest levels reaching one cell a pixel, within
+// --max-resolution; the run says so and recon.json records it.
+TEST_F(ReconstructCli, LevelsFollowThePhotosWithinTheCap) {
+  auto r = RunCommand(Perf("reconstruct " + ws_.string() + " --start-resolution 4 --max-resolution 8 --iterations 1"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("levels: 2 (4^3 to 8^3) chosen from the photos"), std::string::npos) << r.output;
+  const nlohmann::json summary = nlohmann::json::parse(std::ifstream(ws_ / "recon" / "recon.json"));
+  EXPECT_EQ(summary["levels_chosen"], "from the photos");
+  EXPECT_EQ(summary["max_resolution"], 8);
+  EXPECT_GT(summary["pixels_across_box"].get<double>(), 8.0);  // so the cap, not the photos, chose 2 levels
+  EXPECT_EQ(summary["levels"], 2);
+  EXPECT_EQ(summary["final_checkpoint"], "recon/level_1.perfvol");
+  EXPECT_NE(r.output.find("--max-resolution 8 stops short of"), std::string::npos) << r.output;
+
+  r = RunCommand(Perf("reconstruct " + ws_.string() + " --start-resolution 8 --max-resolution 4"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("--max-resolution"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("at least --start-resolution (8)"), std::string::npos) << r.output;
+}
+
 TEST_F(ReconstructCli, ResumeContinuesAfterTheLastLevel) {
   auto r = RunCommand(Perf("reconstruct -q " + ws_.string() + " --levels 1 --start-resolution 8 --iterations 2"));
   ASSERT_EQ(r.exit_code, 0) << r.output;

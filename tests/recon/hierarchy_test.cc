@@ -1,0 +1,96 @@
+// The hierarchy's level count (level_choice.h) and its memory stop (HierarchyOptions::
+// stop_when_out_of_memory) on a small synthetic scene.
+#include "recon_cuda/hierarchy.h"
+
+#include <gtest/gtest.h>
+
+#include "common/errors.h"
+#include "recon_cuda/cpu_backend.h"
+#include "recon_cuda/level_choice.h"
+#include "recon_cuda/reconstruct.h"
+#include "tests/recon/synthetic_scene.h"
+
+namespace perf::recon {
+namespace {
+
+TEST(LevelChoiceTest, AutomaticLevelsReachThePhotosWithinTheCap) {
+  // 215 cells across: 32, 64, 128, 256 -> 4 levels reach it; a cap of 128 keeps 3.
+  LevelChoice c = ChooseLevels(0, 215, 32, 1024);
+  EXPECT_TRUE(c.automatic);
+  EXPECT_EQ(c.levels, 4);
+  EXPECT_EQ(c.Finest(), 256);
+  c = ChooseLevels(0, 215, 32, 128);
+  EXPECT_EQ(c.levels, 3);
+  EXPECT_NE(c.Describe().find("--max-resolution 128 stops short of 256^3"), std::string::npos) << c.Describe();
+  EXPECT_EQ(ChooseLevels(0, 215, 32, 200).levels, 3);  // a cap between two levels keeps the coarser
+  EXPECT_EQ(ChooseLevels(0, 256, 32, 1024).levels, 4);  // exactly reached
+  EXPECT_EQ(ChooseLevels(0, 257, 32, 1024).levels, 5);
+  EXPECT_EQ(ChooseLevels(0, 20, 32, 1024).levels, 1);   // coarser photos than the first level
+  EXPECT_EQ(ChooseLevels(0, 0, 32, 1024).levels, 1);    // no training views
+  EXPECT_EQ(ChooseLevels(0, 1e6, 32, 4096).levels, 6);  // at most 6
+  EXPECT_EQ(ChooseLevels(0, 215, 16, 1024).levels, 5);
+  EXPECT_EQ(ChooseLevels(0, 215, 32, 32).levels, 1);
+}
+
+TEST(LevelChoiceTest, GivenLevelsAreKeptAndAdvised) {
+  LevelChoice c = ChooseLevels(2, 50, 32, 128);
+  EXPECT_FALSE(c.automatic);
+  EXPECT_EQ(c.levels, 2);
+  EXPECT_EQ(c.Describe(),
+            "levels: 2 (32^3 to 64^3) as given, which resolve about 50 cells across the box (one pixel a cell in the "
+            "median view)");
+  EXPECT_NE(ChooseLevels(1, 215, 32, 128).Describe().find("; --levels 4 would reach 256^3"), std::string::npos);
+  EXPECT_NE(ChooseLevels(3, 20, 32, 128).Describe().find("finer than the photos: --levels 1 would do"),
+            std::string::npos);
+  EXPECT_NE(ChooseLevels(2, 0, 32, 128).Describe().find("no training views"), std::string::npos);
+}
+
+class HierarchyMemoryTest : public ::testing::Test {
+ protected:
+  HierarchyMemoryTest() {
+    o.levels = 3;
+    o.start_resolution = 8;
+    o.iterations = 1;
+    o.sparse = false;  // dense levels: each needs 8x the one before
+  }
+  // What the dense level `level` needs on a CPU backend, by its own estimate.
+  int64_t Needs(int level) const {
+    const RaySet rays = views.rays(1);
+    const MemoryEstimate e = MakeCpuBackend({})->EstimateMemory(
+        {LevelShape(o, scene.geometry.num_shells(), level), scene.geometry, &rays, o.residuals},
+        RequiredVectors(o.solver.type));
+    return e.vectors + e.scratch + e.rays;
+  }
+  const test::SyntheticScene scene{8, 8, 6, 16, 6};
+  const TrainingViews views = ViewsForHierarchy(scene.train);
+  HierarchyOptions o;
+};
+
+TEST_F(HierarchyMemoryTest, ALevelThatDoesNotFitEndsAutomaticLevelsAtTheOneBefore) {
+  CpuBackendOptions bo;
+  bo.max_memory = Needs(1) + 1000;  // 16^3 fits, 32^3 does not
+  ASSERT_GT(Needs(2), bo.max_memory);
+  auto backend = MakeCpuBackend(bo);
+  o.stop_when_out_of_memory = true;
+  std::vector<int> done, refused;
+  HierarchyCallbacks cb;
+  cb.level_done = [&](const HierarchyLevel& h, const SolverSummary&, const std::vector<float>&) {
+    done.push_back(h.level);
+  };
+  cb.out_of_memory = [&](const HierarchyLevel& h) {
+    refused.push_back(h.level);
+    EXPECT_FALSE(h.memory.Fits());
+    EXPECT_EQ(h.memory.available, bo.max_memory);
+  };
+  const std::vector<float> x = SolveHierarchy(backend.get(), scene.geometry, views, o, {}, cb);
+  EXPECT_EQ(done, (std::vector<int>{0, 1}));
+  EXPECT_EQ(refused, (std::vector<int>{2}));
+  EXPECT_EQ(static_cast<int64_t>(x.size()), LevelShape(o, scene.geometry.num_shells(), 1).ParamCount());
+
+  // Levels as given: the level that does not fit is an error.
+  o.stop_when_out_of_memory = false;
+  EXPECT_THROW(SolveHierarchy(backend.get(), scene.geometry, views, o, {}, {}), ResourceError);
+}
+
+}  // namespace
+}  // namespace perf::recon
