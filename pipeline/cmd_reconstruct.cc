@@ -37,6 +37,9 @@ void AddReconstructCommand(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--iterations", o.iterations, "Solver iterations per level (Gauss-Newton iterations or Adam steps)")
       ->capture_default_str();
+  cmd->add_option("--level-iterations", o.level_iterations,
+                  "Solver iterations of each level, comma-separated (e.g. 4,4,4,8); levels not listed run --iterations")
+      ->delimiter(',');
   cmd->add_option("--solver", args->solver, "gn (Gauss-Newton, the paper's) or adam (first-order baseline)")
       ->capture_default_str();
   cmd->add_option("--seed", o.init.seed, "Seed of the random start and of the jitter")->capture_default_str();

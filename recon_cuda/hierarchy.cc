@@ -45,7 +45,7 @@ std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geomet
     }
     h.memory = backend->SetLevel(problem, RequiredVectors(o.solver.type));
     h.solver = o.solver;
-    h.solver.max_iterations = o.iterations;
+    h.solver.max_iterations = o.IterationsAt(level);
     h.solver.seed = Hash(o.init.seed, static_cast<uint32_t>(level), 0x1e7e1u);
     h.params = VectorsOf(o.solver.type).params;
     if (cb.level_started) cb.level_started(h);

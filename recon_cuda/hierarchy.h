@@ -21,6 +21,7 @@ struct HierarchyOptions {
   int levels = 2;
   int start_resolution = 32;  // grid cells per axis (and texels per face side) at level 0
   int iterations = 30;        // solver iterations per level (paper: 30)
+  std::vector<int> level_iterations;  // level k runs level_iterations[k] where given, else `iterations`
   SolverOptions solver;       // max_iterations and seed are set per level
   InitOptions init;           // the start of level 0
   ResidualSettings residuals;
@@ -34,6 +35,10 @@ struct HierarchyOptions {
   // A level after the first whose vectors and rays would not fit the backend's memory ends the
   // hierarchy at the level before (automatic levels); false: SetLevel throws ResourceError.
   bool stop_when_out_of_memory = false;
+
+  int IterationsAt(int level) const {
+    return level < static_cast<int>(level_iterations.size()) ? level_iterations[level] : iterations;
+  }
 };
 
 // The resolutions of `level`, its grid dense.

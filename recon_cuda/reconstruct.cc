@@ -92,6 +92,9 @@ void ReconstructOptions::Check() const {
     Fail("--start-resolution", std::to_string(start_resolution), "must be 2 to 1024");
   }
   if (iterations < 0) Fail("--iterations", std::to_string(iterations), "must be >= 0");
+  for (int i : level_iterations) {
+    if (i < 0) Fail("--level-iterations", std::to_string(i), "must be >= 0 for every level");
+  }
   if (preview_every < 0) Fail("--preview-every", std::to_string(preview_every), "must be >= 0");
   if (eval_every < 0) Fail("--eval-every", std::to_string(eval_every), "must be >= 0");
   if (!(residuals.lambda >= 0)) Fail("--lambda", StrCat(residuals.lambda), "must be >= 0");
@@ -134,6 +137,7 @@ HierarchyOptions ToHierarchy(const ReconstructOptions& o, int levels) {
   h.levels = levels;
   h.start_resolution = o.start_resolution;
   h.iterations = o.iterations;
+  h.level_iterations = o.level_iterations;
   h.solver = o.solver;
   h.init = o.init;
   h.residuals = o.residuals;
@@ -410,6 +414,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                      {"levels_note", result.levels_choice.Describe()},
                      {"memory_stop", result.memory_stop},
                      {"iterations_per_level", o.iterations},
+                     {"level_iterations", o.level_iterations},
                      {"final_checkpoint", fs::relative(result.final_checkpoint, o.workspace).string()},
                      {"test_psnr", result.test_psnr},
                      {"solve_seconds", result.solve_seconds},

@@ -37,6 +37,7 @@ struct ReconstructOptions {
   int max_resolution = 0;       // automatic levels: the finest grid at most this (0: DefaultMaxResolution)
   int start_resolution = 32;
   int iterations = 30;          // solver iterations per level (paper: 30)
+  std::vector<int> level_iterations;  // per level, overriding `iterations` for the levels given
   SolverOptions solver;         // max_iterations and seed are set per level
   InitOptions init;
   bool init_shells_from_photos = false;  // shells start at the training photos' mean colour

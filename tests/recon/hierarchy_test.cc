@@ -92,5 +92,18 @@ TEST_F(HierarchyMemoryTest, ALevelThatDoesNotFitEndsAutomaticLevelsAtTheOneBefor
   EXPECT_THROW(SolveHierarchy(backend.get(), scene.geometry, views, o, {}, {}), ResourceError);
 }
 
+TEST_F(HierarchyMemoryTest, LevelIterationsOverrideTheDefaultForTheLevelsGiven) {
+  o.level_iterations = {2, 0};
+  o.iterations = 3;
+  std::vector<int> run;
+  HierarchyCallbacks cb;
+  cb.level_done = [&](const HierarchyLevel& h, const SolverSummary& s, const std::vector<float>&) {
+    EXPECT_EQ(h.solver.max_iterations, o.IterationsAt(h.level));
+    run.push_back(s.iterations);
+  };
+  SolveHierarchy(MakeCpuBackend({}).get(), scene.geometry, views, o, {}, cb);
+  EXPECT_EQ(run, (std::vector<int>{2, 0, 3}));
+}
+
 }  // namespace
 }  // namespace perf::recon
