@@ -84,7 +84,8 @@ std::string PsnrPlotSvg(const std::string& log_jsonl) {
     if (!j.is_object() || j.value("event", "") != "iteration" || !j.contains("elapsed")) continue;
     const double t = j["elapsed"].get<double>();
     if (j.contains("train_psnr")) train.push_back({t, j["train_psnr"].get<double>()});
-    if (j.contains("test_psnr")) test.push_back({t, j["test_psnr"].get<double>()});
+    // A level without held-out views logs test_psnr 0: no point.
+    if (j.contains("test_psnr") && j["test_psnr"].get<double>() > 0) test.push_back({t, j["test_psnr"].get<double>()});
     const int level = j.value("level", 0);
     if (level != last_level && last_level >= 0) level_starts.push_back(t);
     last_level = level;
@@ -131,8 +132,15 @@ std::string PsnrPlotSvg(const std::string& log_jsonl) {
   for (const LogPoint& p : test) {
     s << "<circle cx=\"" << X(p.t) << "\" cy=\"" << Y(p.psnr) << "\" r=\"3.5\" fill=\"#ee6677\"/>\n";
   }
-  s << "<text x=\"" << L + 8 << "\" y=\"" << T + 14 << "\" fill=\"#4477aa\">training rays (subset)</text>"
-    << "<text x=\"" << L + 8 << "\" y=\"" << T + 28 << "\" fill=\"#ee6677\">held-out views</text>\n";
+  // A legend entry only for a series that is drawn.
+  double legend_y = T + 14;
+  if (!train.empty()) {
+    s << "<text x=\"" << L + 8 << "\" y=\"" << legend_y << "\" fill=\"#4477aa\">training rays (subset)</text>\n";
+    legend_y += 14;
+  }
+  if (!test.empty()) {
+    s << "<text x=\"" << L + 8 << "\" y=\"" << legend_y << "\" fill=\"#ee6677\">held-out views</text>\n";
+  }
   s << "</svg>\n";
   return s.str();
 }
@@ -146,14 +154,24 @@ std::string ReportHtml(const nlohmann::json& report, const std::vector<ReportStr
     << "figcaption{font-size:12px;color:#444}</style></head><body>\n<h1>PERF reconstruction report</h1>\n";
   const nlohmann::json& mean = report["mean"];
   h << "<h2>Held-out views</h2>\n<table><tr><th></th><th>PSNR (dB)</th><th>SSIM</th><th>PSNR in mask</th><th>SSIM in mask</th><th>mask coverage</th></tr>\n";
-  const auto row = [&](const std::string& name, const nlohmann::json& s) {
+  // masked: whether the row has a mask to score inside (a view's own mask, or any view's for the mean).
+  const auto row = [&](const std::string& name, const nlohmann::json& s, bool masked) {
     h << "<tr><td>" << Escape(name) << "</td><td>" << Fixed(s["psnr"].get<double>(), 2) << "</td><td>"
-      << Fixed(s["ssim"].get<double>(), 4) << "</td><td>" << Fixed(s["psnr_masked"].get<double>(), 2) << "</td><td>"
-      << Fixed(s["ssim_masked"].get<double>(), 4) << "</td><td>" << Fixed(100 * s["mask_coverage"].get<double>(), 1)
-      << " %</td></tr>\n";
+      << Fixed(s["ssim"].get<double>(), 4) << "</td>";
+    if (masked) {
+      h << "<td>" << Fixed(s["psnr_masked"].get<double>(), 2) << "</td><td>" << Fixed(s["ssim_masked"].get<double>(), 4)
+        << "</td>";
+    } else {
+      h << "<td>no mask</td><td>no mask</td>";
+    }
+    h << "<td>" << Fixed(100 * s["mask_coverage"].get<double>(), 1) << " %</td></tr>\n";
   };
-  row("mean of " + std::to_string(report["test_views"].size()) + " views", mean);
-  for (const nlohmann::json& v : report["test_views"]) row(v["name"].get<std::string>(), v);
+  bool any_mask = false;
+  for (const nlohmann::json& v : report["test_views"]) any_mask = any_mask || v["mask_coverage"].get<double>() > 0;
+  row("mean of " + std::to_string(report["test_views"].size()) + " views", mean, any_mask);
+  for (const nlohmann::json& v : report["test_views"]) {
+    row(v["name"].get<std::string>(), v, v["mask_coverage"].get<double>() > 0);
+  }
   h << "</table>\n";
   if (report.contains("masks")) {
     const nlohmann::json& m = report["masks"];

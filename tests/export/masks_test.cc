@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <nlohmann/json.hpp>
+
 #include <Eigen/Geometry>
 #include <cmath>
 
@@ -258,6 +260,35 @@ TEST(Report, Base64AndPlot) {
   EXPECT_NE(svg.find("<polyline"), std::string::npos);
   EXPECT_NE(svg.find("<circle"), std::string::npos);        // the held-out point
   EXPECT_NE(svg.find("stroke-dasharray"), std::string::npos);  // the level boundary
+  EXPECT_NE(svg.find("held-out views"), std::string::npos);
+  // No held-out PSNR logged (a level without held-out views logs 0): no point, no legend entry.
+  const std::string train_only = PsnrPlotSvg(
+      "{\"event\":\"iteration\",\"level\":0,\"elapsed\":1.0,\"train_psnr\":15.0}\n"
+      "{\"event\":\"level\",\"level\":0,\"elapsed\":1.5,\"train_psnr\":16.0,\"test_psnr\":0}\n");
+  EXPECT_NE(train_only.find("training rays"), std::string::npos);
+  EXPECT_EQ(train_only.find("held-out views"), std::string::npos);
+  EXPECT_EQ(train_only.find("<circle"), std::string::npos);
+}
+
+// A held-out view whose mask is empty has no PSNR inside its mask: the table says so instead of 0.
+TEST(Report, AViewWithoutAMaskSaysSo) {
+  const nlohmann::json scores = {{"psnr", 21.5}, {"ssim", 0.5}, {"psnr_masked", 23.25}, {"ssim_masked", 0.6},
+                                 {"mask_coverage", 0.3}};
+  nlohmann::json empty = {{"psnr", 12.45}, {"ssim", 0.2}, {"psnr_masked", 0.0}, {"ssim_masked", 0.0},
+                          {"mask_coverage", 0.0}};
+  nlohmann::json with_mask = scores;
+  with_mask["name"] = "a.png";
+  empty["name"] = "b.png";
+  const nlohmann::json report = {{"mean", scores}, {"test_views", {with_mask, empty}}};
+  const std::string html = ReportHtml(report, {}, "");
+  const size_t a = html.find("<td>a.png</td>"), b = html.find("<td>b.png</td>");
+  ASSERT_NE(a, std::string::npos);
+  ASSERT_NE(b, std::string::npos);
+  const std::string row_a = html.substr(a, html.find("</tr>", a) - a), row_b = html.substr(b, html.find("</tr>", b) - b);
+  EXPECT_NE(row_a.find("23.25"), std::string::npos) << row_a;
+  EXPECT_EQ(row_a.find("no mask"), std::string::npos) << row_a;
+  EXPECT_NE(row_b.find("no mask"), std::string::npos) << row_b;
+  EXPECT_EQ(row_b.find("0.00"), std::string::npos) << row_b;
 }
 
 }  // namespace
