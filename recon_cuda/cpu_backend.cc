@@ -324,16 +324,19 @@ class CpuBackend final : public Backend {
 
   // Bytes of the recorded Jacobian: every ray's march length (no jitter needed for the count;
   // early termination only shortens it; a sparse grid's march counted sample by sample, plus an
-  // eighth for the jittered samples that land differently) times the per-sample record, plus
-  // the shell records.
+  // eighth for the jittered samples that land differently, on every 4th ray of a block and scaled
+  // to the block: an estimate, and a quarter of a march) times the per-sample record, plus the
+  // shell records.
   int64_t CacheBytes(const LevelProblem& p) const {
+    constexpr int64_t kSparseStride = 4;
     const VolumeView<float> vol = MakeView(p.shape, p.geometry, nullptr);
     const int64_t n = p.rays->size();
     std::vector<int64_t> per_block((n + kBlockRays - 1) / kBlockRays, 0);
     vectors_.arena().execute([&] {
       tbb::parallel_for(int64_t{0}, static_cast<int64_t>(per_block.size()), [&](int64_t b) {
-        int64_t count = 0;
-        for (int64_t i = b * kBlockRays; i < std::min(n, (b + 1) * kBlockRays); ++i) {
+        int64_t count = 0, sparse_count = 0, sparse_rays = 0;
+        const int64_t begin = b * kBlockRays, end = std::min(n, (b + 1) * kBlockRays);
+        for (int64_t i = begin; i < end; i += vol.brick_slot ? kSparseStride : 1) {
           const RayPixel& px = p.rays->pixels[i];
           const BoxRay<float> ray = PixelBoxRay(p.rays->cameras[px.camera], p.geometry.box, p.shape.n, px.x, px.y,
                                                 Jitter{0, 0, false, false});
@@ -349,8 +352,10 @@ class CpuBackend final : public Backend {
                k = TakeSample(vol, ray, march, k + 1, 1, none, &st)) {
             ++taken;
           }
-          count += std::min(march.count, taken + taken / 8 + 2);
+          sparse_count += std::min(march.count, taken + taken / 8 + 2);
+          ++sparse_rays;
         }
+        if (sparse_rays > 0) count += (sparse_count * (end - begin) + sparse_rays - 1) / sparse_rays;
         per_block[b] = count;
       });
     });
