@@ -12,6 +12,7 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
+#include "sfm_import/bad_poses.h"
 #include "sfm_import/camera_models.h"
 #include "sfm_import/colmap_model.h"
 #include "workspace/image_io.h"
@@ -105,6 +106,11 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
   const fs::path model_dir = o.colmap_dir;
   const colmap::ModelFormat format = colmap::DetectModelFormat(model_dir);
   colmap::Reconstruction rec = colmap::ReadReconstruction(model_dir);
+  // Named, not yet left out (bad_poses.h says what is next).
+  for (const BadPose& b : FindBadPoses(rec)) {
+    r->warnings.push_back(StrCat("the pose of ", b.Describe(),
+                                 " looks wrong: COLMAP may have registered it in the wrong place; it is still used"));
+  }
   std::error_code ec;
   for (fs::directory_iterator it(model_dir, ec), end; !ec && it != end; it.increment(ec)) ProtectInput(it->path());
 
