@@ -31,7 +31,9 @@ void AddReconstructCommand(CLI::App& app) {
                   "of the median photo, within --max-resolution and memory)")
       ->capture_default_str();
   cmd->add_option("--max-resolution", o.max_resolution,
-                  "Without --levels: the finest grid has at most this many cells across (0: 128 on CPU, 1024 on GPU)")
+                  StrCat("Without --levels: the finest grid has at most this many cells across (0: ",
+                         recon::DefaultMaxResolution(recon::BackendKind::kCpu), " on CPU, ",
+                         recon::DefaultMaxResolution(recon::BackendKind::kCuda), " on GPU)"))
       ->capture_default_str();
   cmd->add_option("--start-resolution", o.start_resolution, "Grid cells per axis (and texels per face side) at level 1")
       ->capture_default_str();

@@ -281,12 +281,14 @@ void RunOptions::Check() const {
 }
 
 std::string PresetSettings::Describe() const {
+  using recon::BackendKind;
+  const std::string finest =
+      max_resolution > 0 ? StrCat("at most ", max_resolution, "^3")
+                         : StrCat("at most ", recon::DefaultMaxResolution(BackendKind::kCpu), "^3 on a CPU, ",
+                                  recon::DefaultMaxResolution(BackendKind::kCuda), "^3 on a GPU");
   std::ostringstream s;
   s << "images " << (max_size > 0 ? "at most " + std::to_string(max_size) + " px" : std::string("full size")) << ", "
-    << (levels > 0 ? std::to_string(levels) + " levels"
-                   : "levels from the photos (finest grid " +
-                         (max_resolution > 0 ? "at most " + std::to_string(max_resolution) + "^3"
-                                             : std::string("at most 128^3 on a CPU, 1024^3 on a GPU")) + ")")
+    << (levels > 0 ? std::to_string(levels) + " levels" : "levels from the photos (finest grid " + finest + ")")
     << " x " << iterations
     << " Gauss-Newton iterations, " << orbit_frames << " orbit frames";
   return s.str();

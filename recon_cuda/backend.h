@@ -97,9 +97,11 @@ struct MemoryEstimate {
   int64_t rays = 0;           // training rays
   int64_t available = 0;      // what the backend may use (free RAM or device memory)
   int64_t Total() const { return vectors + scratch + jacobian_cache + rays; }
-  // Whether the level can run: everything but the Jacobian cache, which a backend short of
-  // memory does without (it recomputes), fits in what is available (0: unknown, assumed to fit).
-  bool Fits() const { return available <= 0 || vectors + scratch + rays <= available; }
+  // What the level cannot do without: everything but the Jacobian cache, which a backend short
+  // of memory drops (it recomputes).
+  int64_t Needed() const { return vectors + scratch + rays; }
+  // Whether Needed() fits in what is available (0: unknown, assumed to fit).
+  bool Fits() const { return available <= 0 || Needed() <= available; }
 };
 
 // Adam, the baseline, compared at its best: CALIBRATION.md's colour rate and a density rate

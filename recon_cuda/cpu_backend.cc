@@ -57,13 +57,12 @@ class CpuBackend final : public Backend {
              UsesAlpha(p) ? p.rays->alphas.data() : nullptr, p.rays->size()};
     weight_ = OpacityResidualWeight(p);
     const MemoryEstimate e = EstimateMemory(p, num_vectors);
-    const int64_t needed = e.vectors + e.scratch + e.rays;
     if (!e.Fits()) {
-      throw ResourceError(StrCat("level ", DescribeShape(p.shape), " needs ", needed >> 20, " MiB for the solver's ",
+      throw ResourceError(StrCat("level ", DescribeShape(p.shape), " needs ", e.Needed() >> 20, " MiB for the solver's ",
                                  num_vectors, " vectors, per-thread sums and rays, but only ", e.available >> 20,
                                  " MiB are available; use fewer --levels, fewer --threads, or a larger --downscale"));
     }
-    cache_ = options_.cache_jacobian && (e.available == 0 || needed + e.jacobian_cache <= e.available);
+    cache_ = options_.cache_jacobian && (e.available == 0 || e.Needed() + e.jacobian_cache <= e.available);
     vectors_.Assign(num_vectors, p.shape.ParamCount());
     const int64_t nblocks = (p.rays->size() + kBlockRays - 1) / kBlockRays;
     if (cache_) blocks_.resize(nblocks);

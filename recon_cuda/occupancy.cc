@@ -31,7 +31,7 @@ bool MaySee(const ViewFrustum& view, const Vec3<double>& c, double r) {
 std::vector<uint8_t> SeenBricks(int n, const VolumeGeometry& geometry, std::span<const ViewFrustum> views) {
   PERF_CHECK(n > 0 && n % kBrickSide == 0);
   const int nb = n / kBrickSide;
-  std::vector<uint8_t> seen(static_cast<size_t>(nb) * nb * nb, 0);
+  std::vector<uint8_t> seen(static_cast<size_t>(BrickCount(n)), 0);
   const BoxFrame<float>& box = geometry.box;
   const double size[3] = {box.size.x, box.size.y, box.size.z};
   double brick[3], radius2 = 0;  // a brick's sides and its half diagonal squared
@@ -94,7 +94,7 @@ std::shared_ptr<const BrickGrid> OccupiedBricks(const VolumeShape& shape, const 
     *lo = std::clamp(static_cast<int>(std::floor(double(b) * kBrickSide * n / n_next)) - o.dilation, 0, n);
     *hi = std::clamp(static_cast<int>(std::ceil(double(b + 1) * kBrickSide * n / n_next)) + o.dilation, 0, n);
   };
-  std::vector<uint8_t> active = views.empty() ? std::vector<uint8_t>(static_cast<size_t>(nb) * nb * nb, 1)
+  std::vector<uint8_t> active = views.empty() ? std::vector<uint8_t>(static_cast<size_t>(BrickCount(n_next)), 1)
                                              : SeenBricks(n_next, geometry, views);
   for (int bk = 0; bk < nb; ++bk) {
     for (int bj = 0; bj < nb; ++bj) {

@@ -369,7 +369,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   };
   cb.out_of_memory = [&](const HierarchyLevel& h) {
     result.memory_stop = StrCat("level ", h.level + 1, " (", DescribeShape(h.shape), ") would need ",
-                                FormatByteCount(h.memory.vectors + h.memory.scratch + h.memory.rays), " but ",
+                                FormatByteCount(h.memory.Needed()), " but ",
                                 FormatByteCount(h.memory.available), " are available");
     say(StrCat(result.memory_stop, ": the reconstruction ends at level ", h.level, " (--levels ", h.level,
                " next time, or a smaller --max-size)"));

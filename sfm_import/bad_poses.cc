@@ -1,22 +1,12 @@
 #include "sfm_import/bad_poses.h"
 
-#include <Eigen/Geometry>
-#include <algorithm>
 #include <cstdio>
 
 #include "common/errors.h"
+#include "sfm_import/bounds.h"
+#include "sfm_import/colmap_pose.h"
 
 namespace perf {
-namespace {
-
-double Median(std::vector<double> v) {
-  PERF_CHECK(!v.empty());
-  const size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + mid, v.end());
-  return v[mid];
-}
-
-}  // namespace
 
 std::string BadPose::Describe() const {
   char buf[64];
@@ -32,9 +22,7 @@ std::vector<BadPose> FindBadPoses(const colmap::Reconstruction& rec, const BadPo
   std::vector<Eigen::Vector3d> centres;
   std::vector<int> points;
   for (const auto& [id, im] : rec.images) {
-    const Eigen::Quaterniond q(im.qvec[0], im.qvec[1], im.qvec[2], im.qvec[3]);
-    const Eigen::Vector3d t(im.tvec[0], im.tvec[1], im.tvec[2]);
-    centres.push_back(-(q.normalized().toRotationMatrix().transpose() * t));  // cam_from_world -> centre
+    centres.push_back(WorldFromCam(im).col(3));
     int seen = 0;
     for (const colmap::Point2D& p : im.points2D) {
       seen += p.point3D_id != colmap::kInvalidPoint3DId && rec.points3D.count(p.point3D_id) > 0;

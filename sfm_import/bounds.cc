@@ -22,8 +22,6 @@ double Percentile(std::vector<double>& v, double q) {
   return v[k];
 }
 
-double Median(std::vector<double> v) { return Percentile(v, 50.0); }
-
 // A cameras-look-at-it test: the axes point is in front of most cameras, near their axes.
 bool IsObjectCentric(const std::vector<BoundsCamera>& cameras, const Eigen::Vector3d& p) {
   int inward = 0;
@@ -87,6 +85,8 @@ double VisibleFraction(const std::vector<BoundsCamera>& cameras, const Eigen::Ve
 }
 
 }  // namespace
+
+double Median(std::vector<double> v) { return Percentile(v, 50.0); }
 
 bool ClosestPointToAxes(const std::vector<BoundsCamera>& cameras, Eigen::Vector3d* point) {
   // Minimises sum_i |(I - d_i d_i^T)(p - o_i)|^2: (sum P_i) p = sum P_i o_i.

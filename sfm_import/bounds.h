@@ -54,6 +54,9 @@ struct BoundsResult {
   int num_points_used = 0;         // ROI points that defined the box (0: camera-only)
 };
 
+// The median of `values` (of an even count, the upper of the two middle ones), by nth_element.
+double Median(std::vector<double> values);
+
 // The point closest (least squares) to all cameras' optical axes. Returns false when the axes
 // are (nearly) parallel and no such point is defined.
 bool ClosestPointToAxes(const std::vector<BoundsCamera>& cameras, Eigen::Vector3d* point);

@@ -15,6 +15,7 @@
 #include "sfm_import/bad_poses.h"
 #include "sfm_import/camera_models.h"
 #include "sfm_import/colmap_model.h"
+#include "sfm_import/colmap_pose.h"
 #include "workspace/image_io.h"
 #include "sfm_import/import_images.h"
 #include "sfm_import/nerf_reader.h"
@@ -229,16 +230,12 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
   std::set<std::string> taken;
   for (const auto& [id, im] : rec.images) {
     if (!on_disk.count(im.name)) continue;
-    const Eigen::Quaterniond q(im.qvec[0], im.qvec[1], im.qvec[2], im.qvec[3]);
-    const Eigen::Matrix3d r_cw = q.normalized().toRotationMatrix();
-    const Eigen::Vector3d t_cw(im.tvec[0], im.tvec[1], im.tvec[2]);
     SceneImage si;
     si.name = im.name;
     si.path = ClaimOutputName("images", im.name, ext, &taken);
     si.source_path = fs::absolute(images_dir / im.name).lexically_normal().string();
     si.camera_id = static_cast<int>(im.camera_id);
-    si.world_from_cam.leftCols<3>() = r_cw.transpose();
-    si.world_from_cam.col(3) = -r_cw.transpose() * t_cw;
+    si.world_from_cam = WorldFromCam(im);
     const SceneCamera& sc = r->scene.camera(si.camera_id);
     jobs.push_back({images_dir / im.name, si.path, "", &undistorters.at(im.camera_id), sc.width, sc.height});
     r->scene.images.push_back(std::move(si));
