@@ -55,6 +55,7 @@ int main(int argc, char** argv) {
     for (const SceneImage& im : scene.images) {
       const SceneCamera& cam = scene.camera(im.camera_id);
       const PinholeCamera<float> pin = ToPinhole(cam, im.world_from_cam);
+      if (im.split == Split::kExcluded) continue;  // a pose that looks wrong: neither trained on nor scored
       const bool is_train = im.split == Split::kTrain;
       (is_train ? train : test) += 1;
       views.push_back({{"name", im.name},

@@ -49,6 +49,7 @@ void CompareWithTruth(const EvalOptions& o, const Scene& scene, LoadedCheckpoint
   // Each image with a true mask, and that mask's file.
   std::vector<std::pair<const SceneImage*, fs::path>> with_truth;
   for (const SceneImage& im : scene.images) {
+    if (im.split == Split::kExcluded) continue;  // a wrong pose: our mask of it is not scored
     const fs::path file = from_dir ? FindTrueMask(o.gt_masks, im)
                                    : (im.alpha_path.empty() ? fs::path() : o.workspace / im.alpha_path);
     if (!file.empty()) with_truth.emplace_back(&im, file);
@@ -85,7 +86,7 @@ void CompareWithTruth(const EvalOptions& o, const Scene& scene, LoadedCheckpoint
       ours = RenderWorkspaceMask(l.backend.get(), LoadedCheckpoint::kParams, cam, *im);
     }
     const MaskAgreement m = CompareMasks(Binarize(ours, o.mask_threshold), Binarize(truth, 0.5));
-    r->masks.push_back({im->name, im->split == Split::kTest ? "test" : "train", m});
+    r->masks.push_back({im->name, SplitName(im->split), m});
     Accumulate(&r->pooled, m);
     iou_sum += m.iou;
     Progress(o, "masks", ++done, static_cast<int>(with_truth.size()));

@@ -96,19 +96,29 @@ double WriteMaskFiles(const ExportOptions& o, const Scene& scene, const SceneIma
 void ExportMasks(const ExportOptions& o, const Scene& scene, LoadedCheckpoint& l, Outputs& out, ExportResult* r) {
   if (o.foreground) CheckPhotos(scene);
   std::map<int, PhotoFrame> frames;
+  // A photo whose pose looks wrong (left out on import) gets no mask: the volume seen from a
+  // wrong pose does not outline the object in the photo.
+  std::vector<const SceneImage*> photos;
+  for (const SceneImage& im : scene.images) {
+    if (im.split == Split::kExcluded) {
+      r->no_mask.push_back(im.name);
+    } else {
+      photos.push_back(&im);
+    }
+  }
   double coverage = 0;
   int done = 0;
-  const int total = static_cast<int>(scene.images.size());
+  const int total = static_cast<int>(photos.size());
   // Masks are rendered one photo at a time (the backend uses every core per render) and then
   // encoded in parallel a batch at a time: PNG encoding of full-size photos would otherwise
   // take most of the time.
   constexpr size_t kBatch = 8;
-  for (size_t first = 0; first < scene.images.size(); first += kBatch) {
-    const size_t count = std::min(kBatch, scene.images.size() - first);
+  for (size_t first = 0; first < photos.size(); first += kBatch) {
+    const size_t count = std::min(kBatch, photos.size() - first);
     std::vector<Image> soft(count);
     std::vector<MaskFiles> files(count);
     for (size_t k = 0; k < count; ++k) {
-      const SceneImage& im = scene.images[first + k];
+      const SceneImage& im = *photos[first + k];
       const SceneCamera& cam = scene.camera(im.camera_id);
       auto it = frames.find(cam.id);
       if (it == frames.end()) it = frames.emplace(cam.id, PhotoFrame::Create(cam)).first;
@@ -122,7 +132,7 @@ void ExportMasks(const ExportOptions& o, const Scene& scene, LoadedCheckpoint& l
     }
     std::vector<double> cover(count);
     tbb::parallel_for(size_t{0}, count, [&](size_t k) {
-      cover[k] = WriteMaskFiles(o, scene, scene.images[first + k], soft[k], files[k]);
+      cover[k] = WriteMaskFiles(o, scene, *photos[first + k], soft[k], files[k]);
     });
     for (size_t k = 0; k < count; ++k) {
       coverage += cover[k];
@@ -175,7 +185,8 @@ nlohmann::json Manifest(const ExportOptions& o, const ExportResult& r, const fs:
                 {"soft_format", o.soft_mask_exr ? "exr (half)" : "png (16-bit)"},
                 {"mean_coverage", r.mean_mask_coverage},
                 {"foreground_cutouts", r.foreground},
-                {"foreground_alpha", o.foreground_soft_alpha ? "soft" : "binary"}};
+                {"foreground_alpha", o.foreground_soft_alpha ? "soft" : "binary"},
+                {"not_written", r.no_mask}};
   if (o.volume) {
     j["volume"] = {{"file", "volume.vdb"},
                    {"density_grid", r.vdb.density_grid},

@@ -49,6 +49,7 @@ struct ExportResult {
   std::filesystem::path checkpoint;
   int masks = 0, foreground = 0, renders = 0, orbit_frames = 0;
   double mean_mask_coverage = 0;  // mean fraction of photo pixels in the binary mask
+  std::vector<std::string> no_mask;  // photos left out on import (a pose that looks wrong): no mask
   VdbStats vdb;
   int64_t mesh_vertices = 0, mesh_triangles = 0;
   int mesh_components_found = 0, mesh_components_kept = 0;

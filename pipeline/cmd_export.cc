@@ -74,6 +74,11 @@ void AddExportCommand(CLI::App& app) {
                 << " %\n";
     }
     if (r.foreground > 0) std::cout << "  foreground: " << r.foreground << " RGBA cut-outs\n";
+    if (!r.no_mask.empty()) {
+      std::cout << "  no masks for " << r.no_mask.size() << " photos left out on import (pose looks wrong):";
+      for (const std::string& name : r.no_mask) std::cout << " " << name;
+      std::cout << "\n";
+    }
     if (o.volume) {
       std::cout << "  volume.vdb: grids " << r.vdb.density_grid << " + " << r.vdb.colour_grid << ", " << r.vdb.active_voxels
                 << " of " << r.vdb.total_voxels << " voxels, " << r.vdb.file_bytes / 1024 << " KiB\n";

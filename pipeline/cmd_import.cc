@@ -53,6 +53,9 @@ void AddImportCommand(CLI::App& app) {
   cmd->add_option("--holdout", o.holdout, "Hold out every N-th image for testing (COLMAP: sorted by name; NeRF: json order, r_0, r_8, ...); 0 for none")
       ->capture_default_str();
   cmd->add_flag("--skip-missing", o.skip_missing, "Import the other images when some in the model are missing on disk");
+  cmd->add_flag("--keep-bad-poses", o.keep_bad_poses,
+                "Train and score on COLMAP photos whose pose looks wrong too (by default they are marked \"excluded\" in "
+                "scene.json and named in a warning)");
   cmd->add_option("--background", args->background,
                   "Colour RGBA photos are composited over: white, black or R,G,B in [0,1]")
       ->capture_default_str();

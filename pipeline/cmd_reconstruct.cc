@@ -143,7 +143,7 @@ void AddRenderCommand(CLI::App& app) {
   cmd->add_option("workspace", args->workspace, "Workspace folder")->required();
   using recon::ViewSplit;
   AddChoiceOption(cmd, "--split", &o.split, {{"test", ViewSplit::kTest}, {"train", ViewSplit::kTrain}, {"all", ViewSplit::kAll}},
-                  "Which photos: test, train or all");
+                  "Which photos: test, train or all (all includes those left out for a wrong-looking pose)");
   cmd->add_option("--view", o.names, "Only this image (a scene.json name); repeatable");
   cmd->add_option("--checkpoint", args->checkpoint, "Checkpoint to render (default: the last level in WORKSPACE/recon)");
   cmd->add_option("-o,--out", args->out, "Output folder (default: WORKSPACE/renders)");

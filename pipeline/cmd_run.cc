@@ -46,6 +46,8 @@ void AddRunCommand(CLI::App& app) {
   cmd->add_option("--iterations", o.iterations, "Override the preset: Gauss-Newton iterations per level");
   AddDeviceOptions(cmd, &o.device, &o.threads);
   cmd->add_flag("--force", o.force, "Re-run every stage even when its outputs are up to date");
+  cmd->add_flag("--keep-bad-poses", o.keep_bad_poses,
+                "Train and score on COLMAP photos whose pose looks wrong too (by default they are left out and named)");
   cmd->add_option("--log-level", args->log_level, "info (progress and summary) or quiet (errors only)")
       ->capture_default_str();
   cmd->add_option("--log-json", args->log_json, "Append JSON lines of stage events to this file (for scripts)");

@@ -137,7 +137,7 @@ class Runner {
   void Import(const fs::path& model, StageReport* s) {
     const fs::path input = o_.nerf.empty() ? model : o_.nerf;
     const fs::path scene = o_.workspace / "scene.json";
-    if (!o_.force && NewerThan(scene, NewestInput(input))) {
+    if (!o_.force && NewerThan(scene, NewestInput(input)) && !(o_.keep_bad_poses && AnyExcluded(ReadScene(scene)))) {
       s->skipped = true;
       s->reason = "scene.json is newer than " + input.filename().string();
       return;
@@ -150,6 +150,7 @@ class Runner {
       io.nerf_json = o_.nerf;
     }
     io.workspace = o_.workspace;
+    io.keep_bad_poses = o_.keep_bad_poses;
     io.max_size = preset_.max_size;
     io.num_threads = o_.threads;
     Progress progress("import", o_.quiet);
@@ -159,6 +160,7 @@ class Runner {
     };
     const ImportResult r = RunImport(io);
     progress.Finish();
+    for (const std::string& w : r.warnings) Say("import: warning: " + w);
     s->reason = StrCat(r.scene.images.size(), " images");
   }
 

@@ -255,8 +255,14 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   JsonLog log(o.workspace / "recon" / "log.jsonl", start.level > 0, "reconstruction log");
   if (start.level > 0) log.Write({{"event", "resume"}, {"level", start.level}});
   const std::vector<PosedImage>& preview_views = test.empty() ? train : test;
-  say(StrCat("backend: ", result.backend, "; ", train.size(), " training and ", test.size(), " held-out views; ",
-             levels, " levels from ", o.start_resolution, "^3"));
+  json excluded_views = json::array();
+  for (const SceneImage& im : scene.images) {
+    if (im.split == Split::kExcluded) excluded_views.push_back({{"name", im.name}, {"because", im.excluded_because}});
+  }
+  say(StrCat("backend: ", result.backend, "; ", train.size(), " training and ", test.size(), " held-out views",
+             excluded_views.empty() ? std::string()
+                                    : StrCat(" (", excluded_views.size(), " left out on import: scene.json says why)"),
+             "; ", levels, " levels from ", o.start_resolution, "^3"));
   const TrainingViews views = ViewsForHierarchy(train);
   say(result.levels_choice.Describe());
   const bool fits_alpha = o.residuals.use_alpha && ImagesHaveAlpha(train);  // as every level's RaySet will
@@ -415,6 +421,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                      {"memory_stop", result.memory_stop},
                      {"iterations_per_level", o.iterations},
                      {"level_iterations", o.level_iterations},
+                     {"excluded_views", excluded_views},
                      {"final_checkpoint", fs::relative(result.final_checkpoint, o.workspace).string()},
                      {"test_psnr", result.test_psnr},
                      {"solve_seconds", result.solve_seconds},

@@ -34,8 +34,8 @@ RenderViewsResult RenderViews(const RenderViewsOptions& o) {
   result.checkpoint = loaded.path;
 
   std::vector<PosedImage> views;
-  for (Split s : {Split::kTrain, Split::kTest}) {
-    if ((s == Split::kTrain && o.split == ViewSplit::kTest) || (s == Split::kTest && o.split == ViewSplit::kTrain)) {
+  for (Split s : {Split::kTrain, Split::kTest, Split::kExcluded}) {  // kAll: the excluded ones too
+    if ((s != Split::kTest && o.split == ViewSplit::kTest) || (s != Split::kTrain && o.split == ViewSplit::kTrain)) {
       continue;
     }
     std::vector<PosedImage> part = LoadImages(scene, o.workspace, s);

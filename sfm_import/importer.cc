@@ -52,15 +52,21 @@ std::set<std::string> ListImages(const fs::path& dir) {
 
 // Every N-th image in the given order is held out: COLMAP images sorted by name (the mip-NeRF
 // 360 convention), NeRF frames in the json's order (r_0, r_8, r_16, ...).
+// An excluded image (a bad pose) keeps its place in the count, so that the held-out views are
+// the same ones with or without --keep-bad-poses.
 void AssignSplit(std::vector<SceneImage>* images, int holdout) {
   for (size_t i = 0; i < images->size(); ++i) {
+    if ((*images)[i].split == Split::kExcluded) continue;
     (*images)[i].split = holdout > 0 && i % holdout == 0 ? Split::kTest : Split::kTrain;
   }
 }
 
+// The cameras that place the box and shells: not those left out (a wrong pose far away would
+// push the outer shell out to it).
 std::vector<BoundsCamera> BoundsCameras(const Scene& scene) {
   std::vector<BoundsCamera> out;
   for (const auto& im : scene.images) {
+    if (im.split == Split::kExcluded) continue;
     const SceneCamera& c = scene.camera(im.camera_id);
     out.push_back({im.world_from_cam, c.fx, c.fy, c.cx, c.cy, c.width, c.height});
   }
@@ -84,7 +90,9 @@ void PlaceBoundsAndShells(const ImportOptions& o, const std::vector<BoundsPoint>
   if (manual_box || o.box_center || o.box_size) {
     // Shells must still enclose the cameras and the inlier points around the new box.
     double enclose = 0;
-    for (const auto& im : r->scene.images) enclose = std::max(enclose, (im.world_from_cam.col(3) - box.center).norm());
+    for (const auto& im : r->scene.images) {
+      if (im.split != Split::kExcluded) enclose = std::max(enclose, (im.world_from_cam.col(3) - box.center).norm());
+    }
     r->bounds.shells = PlaceShells(box, enclose, bo);
   }
   if (o.shell_radii) {
@@ -107,10 +115,12 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
   const fs::path model_dir = o.colmap_dir;
   const colmap::ModelFormat format = colmap::DetectModelFormat(model_dir);
   colmap::Reconstruction rec = colmap::ReadReconstruction(model_dir);
-  // Named, not yet left out (bad_poses.h says what is next).
+  std::map<std::string, std::string> bad_poses;  // image name -> why
   for (const BadPose& b : FindBadPoses(rec)) {
-    r->warnings.push_back(StrCat("the pose of ", b.Describe(),
-                                 " looks wrong: COLMAP may have registered it in the wrong place; it is still used"));
+    bad_poses[b.name] = StrCat("pose looks wrong: ", b.Describe());
+    r->warnings.push_back(StrCat("the pose of ", b.Describe(), " looks wrong: COLMAP may have registered it in the wrong place; ",
+                                 o.keep_bad_poses ? "kept (--keep-bad-poses)"
+                                                  : "left out of training and scoring (--keep-bad-poses keeps it)"));
   }
   std::error_code ec;
   for (fs::directory_iterator it(model_dir, ec), end; !ec && it != end; it.increment(ec)) ProtectInput(it->path());
@@ -236,6 +246,10 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
     si.source_path = fs::absolute(images_dir / im.name).lexically_normal().string();
     si.camera_id = static_cast<int>(im.camera_id);
     si.world_from_cam = WorldFromCam(im);
+    if (!o.keep_bad_poses && bad_poses.count(im.name)) {
+      si.split = Split::kExcluded;
+      si.excluded_because = bad_poses[im.name];
+    }
     const SceneCamera& sc = r->scene.camera(si.camera_id);
     jobs.push_back({images_dir / im.name, si.path, "", &undistorters.at(im.camera_id), sc.width, sc.height});
     r->scene.images.push_back(std::move(si));
@@ -401,12 +415,13 @@ ImportResult RunImport(const ImportOptions& o) {
 
 std::string ImportSummary(const ImportResult& r) {
   const Scene& s = r.scene;
-  int test = 0;
-  for (const auto& im : s.images) test += im.split == Split::kTest ? 1 : 0;
+  int count[3] = {0, 0, 0};
+  for (const auto& im : s.images) ++count[static_cast<int>(im.split)];
   std::ostringstream out;
   out.precision(4);
-  out << "imported " << s.images.size() << " images (" << s.images.size() - test << " train, " << test
-      << " test) from " << s.source.type << " (" << s.source.format << ") in " << r.seconds << " s\n";
+  out << "imported " << s.images.size() << " images (" << count[0] << " train, " << count[1] << " test"
+      << (count[2] ? StrCat(", ", count[2], " left out") : std::string()) << ") from " << s.source.type << " ("
+      << s.source.format << ") in " << r.seconds << " s\n";
   for (const auto& c : s.cameras) {
     out << "  camera " << c.id << ": " << c.source.model << " " << c.source.width << "x" << c.source.height
         << " -> PINHOLE " << c.width << "x" << c.height << " fx " << c.fx << " fy " << c.fy << " cx " << c.cx

@@ -31,6 +31,9 @@ struct ImportOptions {
   int max_size = 0;   // alternatively: the target long side in pixels (0: unused)
   int holdout = 8;    // every N-th image is held out for testing (COLMAP: by name; NeRF: json order); 0: none
   bool skip_missing = false;  // import the others when model images are missing on disk
+  // COLMAP photos whose pose looks wrong (bad_poses.h) are imported but marked "excluded" in
+  // scene.json, out of training and scoring; true keeps them as train/test like the others.
+  bool keep_bad_poses = false;
   Eigen::Vector3d background = Eigen::Vector3d::Ones();  // RGBA photos are composited over it
 
   // Overrides of the automatic placement (bounds.h).

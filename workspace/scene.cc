@@ -93,9 +93,22 @@ const SceneCamera& Scene::camera(int id) const {
   throw;  // unreachable
 }
 
+const char* SplitName(Split split) {
+  switch (split) {
+    case Split::kTrain: return "train";
+    case Split::kTest: return "test";
+    case Split::kExcluded: return "excluded";
+  }
+  return "?";
+}
+
 bool EveryImageHasAlpha(const Scene& scene) {
   return !scene.images.empty() && std::all_of(scene.images.begin(), scene.images.end(),
                                               [](const SceneImage& im) { return !im.alpha_path.empty(); });
+}
+
+bool AnyExcluded(const Scene& scene) {
+  return std::any_of(scene.images.begin(), scene.images.end(), [](const SceneImage& im) { return im.split == Split::kExcluded; });
 }
 
 std::string SceneToJson(const Scene& scene) {
@@ -140,8 +153,9 @@ std::string SceneToJson(const Scene& scene) {
               {"path", im.path},
               {"source_path", im.source_path},
               {"camera_id", im.camera_id},
-              {"split", im.split == Split::kTrain ? "train" : "test"},
+              {"split", SplitName(im.split)},
               {"world_from_cam", MatToJson<3, 4>(im.world_from_cam)}};
+    if (im.split == Split::kExcluded) e["excluded_because"] = im.excluded_because;
     if (!im.alpha_path.empty()) e["alpha_path"] = im.alpha_path;
     imgs.push_back(e);
   }
@@ -252,8 +266,13 @@ Scene SceneFromJson(const std::string& text, const std::string& name) {
     for (const auto& c : s.cameras) found = found || c.id == im.camera_id;
     if (!found) r.Fail(p + ".camera_id", e["camera_id"], "no camera with this id in \"cameras\"");
     const std::string split = r.String(r.Get(e, "split", p), p + ".split");
-    if (split != "train" && split != "test") r.Fail(p + ".split", e["split"], "expected \"train\" or \"test\"");
-    im.split = split == "train" ? Split::kTrain : Split::kTest;
+    if (split != "train" && split != "test" && split != "excluded") {
+      r.Fail(p + ".split", e["split"], "expected \"train\", \"test\" or \"excluded\"");
+    }
+    im.split = split == "train" ? Split::kTrain : split == "test" ? Split::kTest : Split::kExcluded;
+    if (im.split == Split::kExcluded && e.contains("excluded_because")) {
+      im.excluded_because = r.String(e["excluded_because"], p + ".excluded_because");
+    }
     im.world_from_cam = r.Mat<3, 4>(r.Get(e, "world_from_cam", p), p + ".world_from_cam");
     const Eigen::Matrix3d R = im.world_from_cam.leftCols<3>();
     if (!(R.transpose() * R).isIdentity(1e-6) || R.determinant() < 0) {

@@ -33,7 +33,12 @@ struct SceneCamera {
   SourceCamera source;
 };
 
-enum class Split { kTrain, kTest };
+// kExcluded: left out of training and scoring (a pose that looks wrong, sfm_import/bad_poses.h);
+// SceneImage::excluded_because says why.
+enum class Split { kTrain, kTest, kExcluded };
+
+// "train", "test", "excluded": scene.json's spelling.
+const char* SplitName(Split split);
 
 struct SceneImage {
   std::string name;         // as in the source (COLMAP image name or NeRF file_path)
@@ -43,6 +48,7 @@ struct SceneImage {
   int camera_id = 0;
   Eigen::Matrix<double, 3, 4> world_from_cam = Eigen::Matrix<double, 3, 4>::Identity();
   Split split = Split::kTrain;
+  std::string excluded_because;  // why, when split is kExcluded (empty otherwise)
 };
 
 // Axis-aligned in the box's own frame: world point p is inside when
@@ -84,6 +90,8 @@ struct Scene {
 // Whether every image has an alpha image (its photo was RGBA, composited over `background` on
 // import); false for a scene without images.
 bool EveryImageHasAlpha(const Scene& scene);
+// Whether some image is left out (Split::kExcluded).
+bool AnyExcluded(const Scene& scene);
 
 // Serialises to JSON text (pretty, full precision).
 std::string SceneToJson(const Scene& scene);

@@ -11,6 +11,7 @@
 
 #include "common/atomic_file.h"
 #include "workspace/image_io.h"
+#include "workspace/scene.h"
 #include "tests/pipeline/synthetic_workspace.h"
 #include "tests/test_util.h"
 
@@ -125,6 +126,41 @@ TEST_F(ExportCli, WritesEveryOutputAndEvaluates) {
   EXPECT_EQ(again["masks"]["truth"], "gt-masks");
   EXPECT_EQ(again["masks"]["images"], 18);
   EXPECT_DOUBLE_EQ(again["masks"]["pooled"]["iou"].get<double>(), 1.0);
+}
+
+// A photo left out on import (a pose that looks wrong, split "excluded" in scene.json): not
+// trained on (recon.json names it), no mask or cut-out (export.json names it), rendered only
+// when asked for all views.
+TEST_F(ExportCli, APhotoLeftOutOnImportIsNamedAndGetsNoMask) {
+  Scene scene = ReadScene(ws_ / "scene.json");
+  ASSERT_EQ(scene.images[1].split, Split::kTrain);
+  scene.images[1].split = Split::kExcluded;
+  scene.images[1].excluded_because = "pose looks wrong: a test";
+  WriteScene(ws_ / "scene.json", scene);
+  const std::string name = scene.images[1].name;
+
+  auto r = RunCommand(Perf("reconstruct " + ws_.string() + " --levels 1 --start-resolution 16 --iterations 2"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("14 training and 3 held-out views (1 left out on import"), std::string::npos) << r.output;
+  const nlohmann::json recon = nlohmann::json::parse(ReadFileToString(ws_ / "recon" / "recon.json"));
+  ASSERT_EQ(recon["excluded_views"].size(), 1u);
+  EXPECT_EQ(recon["excluded_views"][0]["name"], name);
+  EXPECT_EQ(recon["excluded_views"][0]["because"], "pose looks wrong: a test");
+
+  r = RunCommand(Perf("export " + ws_.string() + " --no-volume --no-mesh --orbit-frames 0"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("no masks for 1 photos left out on import (pose looks wrong): " + name), std::string::npos) << r.output;
+  EXPECT_EQ(CountFiles(ws_ / "masks" / "binary"), 17);
+  EXPECT_EQ(CountFiles(ws_ / "foreground"), 17);
+  const nlohmann::json manifest = nlohmann::json::parse(ReadFileToString(ws_ / "export.json"));
+  EXPECT_EQ(manifest["masks"]["not_written"], nlohmann::json::array({name}));
+
+  r = RunCommand(Perf("render -q " + ws_.string() + " --split train --out " + (dir_ / "train").string()));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(CountFiles(dir_ / "train"), 14);
+  r = RunCommand(Perf("render -q " + ws_.string() + " --split all --out " + (dir_ / "all").string()));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(CountFiles(dir_ / "all"), 18);
 }
 
 TEST_F(ExportCli, BadInputsWriteNothing) {

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <random>
@@ -62,6 +63,51 @@ TEST(Importer, ColmapPinholeWorkspace) {
   EXPECT_LT(s.box.size.maxCoeff(), 2.0);
   EXPECT_GT(s.shells.radii.front(), 0.5 * s.box.size.norm());
   EXPECT_GT(s.shells.radii.back(), 4.0);
+}
+
+// One pose deliberately moved far outside the ring, seeing few points (as COLMAP's wrong
+// registrations in shared/data/bonsai do): left out of training and scoring, named, and kept out
+// of the shells' placement; --keep-bad-poses keeps it as a training view.
+TEST(Importer, AWrongPoseIsLeftOutUnlessKept) {
+  ColmapFixture f;
+  colmap::Image& moved = f.rec.images.at(4);  // img_03.png, a training view
+  const Eigen::Quaterniond q(moved.qvec[0], moved.qvec[1], moved.qvec[2], moved.qvec[3]);
+  const Eigen::Vector3d far_centre(24, 3, 1);  // the ring has radius 4
+  const Eigen::Vector3d t = -(q.toRotationMatrix() * far_centre);
+  moved.tvec = {t.x(), t.y(), t.z()};
+  for (size_t k = 5; k < moved.points2D.size(); ++k) {  // sees 5 points (the others see ~60)
+    const uint64_t id = moved.points2D[k].point3D_id;
+    auto& track = f.rec.points3D.at(id).track;
+    track.erase(std::remove_if(track.begin(), track.end(), [&](const auto& e) { return e.image_id == moved.image_id; }),
+                track.end());
+    moved.points2D[k].point3D_id = colmap::kInvalidPoint3DId;
+  }
+  colmap::WriteReconstruction(f.model, f.rec, colmap::ModelFormat::kBinary);
+
+  const ImportResult r = RunImport(f.Options());
+  const Scene s = ReadScene(f.dir / "ws" / "scene.json");
+  ASSERT_EQ(s.images.size(), static_cast<size_t>(kNumImages));
+  for (size_t i = 0; i < s.images.size(); ++i) {
+    const Split expected = i == 3 ? Split::kExcluded : i % 8 == 0 ? Split::kTest : Split::kTrain;
+    EXPECT_EQ(s.images[i].split, expected) << s.images[i].name;
+  }
+  EXPECT_NE(s.images[3].excluded_because.find("pose looks wrong"), std::string::npos) << s.images[3].excluded_because;
+  EXPECT_TRUE(fs::exists(f.dir / "ws" / s.images[3].path));  // imported all the same (perf render --split all)
+  ASSERT_EQ(r.warnings.size(), 1u);
+  EXPECT_NE(r.warnings[0].find("img_03.png"), std::string::npos) << r.warnings[0];
+  EXPECT_NE(r.warnings[0].find("--keep-bad-poses"), std::string::npos) << r.warnings[0];
+  EXPECT_NE(ImportSummary(r).find("(7 train, 2 test, 1 left out)"), std::string::npos) << ImportSummary(r);
+  EXPECT_LT(s.shells.radii.back(), 15.0);  // the ring and the points, not the stray camera
+
+  ImportOptions keep = f.Options();
+  keep.keep_bad_poses = true;
+  const ImportResult rk = RunImport(keep);
+  const Scene sk = ReadScene(f.dir / "ws" / "scene.json");
+  EXPECT_EQ(sk.images[3].split, Split::kTrain);
+  EXPECT_TRUE(sk.images[3].excluded_because.empty());
+  EXPECT_FALSE(AnyExcluded(sk));
+  EXPECT_NE(rk.warnings.at(0).find("kept"), std::string::npos) << rk.warnings[0];
+  EXPECT_GT(sk.shells.radii.back(), (far_centre - sk.shells.center).norm());
 }
 
 TEST(Importer, DownscaleScalesIntrinsics) {

@@ -37,7 +37,8 @@ Scene MakeScene() {
     im.path = "images/dir/img_" + std::to_string(i) + ".png";
     im.source_path = "/data/images/" + im.name;
     im.camera_id = 7;
-    im.split = i == 0 ? Split::kTest : Split::kTrain;
+    im.split = i == 0 ? Split::kTest : i == 2 ? Split::kExcluded : Split::kTrain;
+    if (i == 2) im.excluded_because = "pose looks wrong: 18.2 units from the cameras' centre";
     im.world_from_cam.leftCols<3>() = Eigen::AngleAxisd(0.1 * i + 0.2, Eigen::Vector3d::UnitY()).toRotationMatrix();
     im.world_from_cam.col(3) = Eigen::Vector3d(i, 2.0 / 7.0, -1e-9);
     if (i == 1) im.alpha_path = "alpha/dir/img_1.png";
@@ -68,6 +69,7 @@ TEST(Scene, JsonRoundTripIsExact) {
     EXPECT_EQ(back.images[i].path, s.images[i].path);
     EXPECT_EQ(back.images[i].alpha_path, s.images[i].alpha_path);
     EXPECT_EQ(back.images[i].split, s.images[i].split);
+    EXPECT_EQ(back.images[i].excluded_because, s.images[i].excluded_because);
     EXPECT_EQ(back.images[i].world_from_cam, s.images[i].world_from_cam);
   }
 }
@@ -117,6 +119,7 @@ INSTANTIATE_TEST_SUITE_P(
         Corruption{"cameras[0].width", [](nlohmann::json& j) { j["cameras"][0].erase("width"); }},
         Corruption{"images[1].camera_id", [](nlohmann::json& j) { j["images"][1]["camera_id"] = 3; }},
         Corruption{"images[2].split", [](nlohmann::json& j) { j["images"][2]["split"] = "val"; }},
+        Corruption{"images[2].excluded_because", [](nlohmann::json& j) { j["images"][2]["excluded_because"] = 5; }},
         Corruption{"images[0].world_from_cam", [](nlohmann::json& j) { j["images"][0]["world_from_cam"][0][0] = 5.0; }},
         Corruption{"images", [](nlohmann::json& j) { j["images"] = nlohmann::json::array(); }},
         // Paths that would read or write outside the workspace, and more shells than it solves.
