@@ -75,6 +75,13 @@ void AddReconstructCommand(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--max-cg-iterations", o.solver.max_cg_iterations, "PCG iterations per Gauss-Newton step at most")
       ->capture_default_str();
+  cmd->add_option("--smooth-grid", o.solver.smooth_grid,
+                  "Smoothness between neighbouring grid cells, relative to the photos (1: a pair as stiff as the mean "
+                  "cell's data; 0: off)")
+      ->capture_default_str();
+  cmd->add_option("--smooth-shells", o.solver.smooth_shells,
+                  "Smoothness between neighbouring shell texels, across cube-map seams too, relative to the photos (0: off)")
+      ->capture_default_str();
   cmd->add_option("--cg-exit-ratio", o.solver.cg_exit_ratio, "PCG leaves when |r|^2 falls by less than this factor (paper: 0.85; default inf: never)")
       ->capture_default_str();
   cmd->add_option("--damping", o.solver.damping, "Levenberg-Marquardt damping of the diagonal (0: Gauss-Newton)")

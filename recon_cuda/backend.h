@@ -10,6 +10,7 @@
 //   Render      one camera without jitter.
 #pragma once
 
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <memory>
@@ -18,6 +19,7 @@
 #include <vector>
 
 #include "recon_cuda/device_choice.h"
+#include "recon_cuda/smoothness.h"
 #include "recon_cuda/training_data.h"
 #include "recon_cuda/volume.h"
 
@@ -178,6 +180,12 @@ class Backend {
   // as they were. The CUDA backend, which recomputes the partials, skips those samples on the fly
   // (jacobian.h SkippableSample).
   virtual void RestrictJacobian(VecId /*free*/) {}
+  // The smoothness term (smoothness.h) with weights w at v: out += L v unless out is kNoVector
+  // (out != v), diag += L's diagonal unless diag is kNoVector. Returns v^T L v / 2, the term's
+  // cost at v, deterministic like Dot.
+  virtual double Smoothness(VecId v, const SmoothnessWeights& w, VecId out, VecId diag) = 0;
+  // The sum of v's entries of each ParamKind (indexed by its value), deterministic like Dot.
+  virtual std::array<double, 4> SumByKind(VecId v) const = 0;
   // One Adam step (Kingma & Ba) with per-kind learning rates, t = step number from 1.
   virtual void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) = 0;
 

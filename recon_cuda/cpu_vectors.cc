@@ -160,4 +160,39 @@ void CpuVectors::AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings
   Project(x, shape);
 }
 
+double CpuVectors::Smoothness(VecId v, const VolumeShape& shape, const SmoothnessWeights& w, VecId out, VecId diag) {
+  PERF_CHECK(out != v);
+  const SmoothnessLayout layout = MakeSmoothnessLayout(shape);
+  const float* pv = (*this)[v].data();
+  float* po = out == kNoVector ? nullptr : (*this)[out].data();
+  float* pd = diag == kNoVector ? nullptr : (*this)[diag].data();
+  return ReduceChunks(
+      [&](int64_t b, int64_t e) {
+        double energy = 0;
+        for (int64_t i = b; i < e; ++i) {
+          float lap, degree;
+          energy += SmoothnessRow(layout, w, pv, i, &lap, &degree);
+          if (po) po[i] += lap;
+          if (pd) pd[i] += degree;
+        }
+        return energy;
+      },
+      [](double x, double y) { return x + y; });
+}
+
+std::array<double, 4> CpuVectors::SumByKind(VecId v, const VolumeShape& shape) const {
+  const float* pv = (*this)[v].data();
+  std::array<double, 4> sums{};
+  for (int kind = 0; kind < 4; ++kind) {
+    sums[kind] = ReduceChunks(
+        [&](int64_t b, int64_t e) {
+          double s = 0;
+          for (int64_t i = b; i < e; ++i) s += static_cast<int>(KindOf(shape, i)) == kind ? pv[i] : 0.f;
+          return s;
+        },
+        [](double x, double y) { return x + y; });
+  }
+  return sums;
+}
+
 }  // namespace perf::recon

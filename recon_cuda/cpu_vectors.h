@@ -7,6 +7,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <array>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -42,6 +43,8 @@ class CpuVectors {
   void Project(VecId x, const VolumeShape& shape);
   void HoldParameters(VecId x, VecId g, VecId free, const VolumeShape& shape, bool fixed_shells, bool bounds);
   void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t, const VolumeShape& shape);
+  double Smoothness(VecId v, const VolumeShape& shape, const SmoothnessWeights& w, VecId out, VecId diag);
+  std::array<double, 4> SumByKind(VecId v, const VolumeShape& shape) const;
 
   // fn(begin, end) over the vectors' elements, in parallel over fixed chunks.
   template <class Fn>

@@ -138,6 +138,8 @@ class CudaBackend final : public Backend {
     if (p.shape.bricks) {
       bricks_ = DeviceBuffer<int32_t>(static_cast<int64_t>(p.shape.bricks->slot.size()));
       bricks_.CopyFromHost(p.shape.bricks->slot);
+      brick_list_ = DeviceBuffer<int64_t>(p.shape.bricks->ActiveBricks());
+      brick_list_.CopyFromHost(p.shape.bricks->bricks);
     }
     rays_ = std::make_unique<DeviceRays>(*p.rays, UsesAlpha(p));
     scratch_ = std::make_unique<Scratch>(p.rays->size(), p.shape.ParamCount());
@@ -162,6 +164,19 @@ class CudaBackend final : public Backend {
   }
   double Dot(VecId a, VecId b) const override { return cuda::Dot(ptr(a), ptr(b), n(), scratch_->Reduce()); }
   double MaxAbs(VecId v) const override { return cuda::MaxAbs(ptr(v), n(), scratch_->Reduce()); }
+  double Smoothness(VecId v, const SmoothnessWeights& w, VecId out, VecId diag) override {
+    PERF_CHECK(out != v);
+    SmoothnessLayout layout = MakeSmoothnessLayout(level_.shape);
+    if (level_.shape.bricks) {
+      layout.slot = bricks_.data();
+      layout.bricks = brick_list_.data();
+    }
+    return cuda::Smoothness(ptr(v), layout, w, out == kNoVector ? nullptr : ptr(out),
+                            diag == kNoVector ? nullptr : ptr(diag), n(), scratch_->Reduce());
+  }
+  std::array<double, 4> SumByKind(VecId v) const override {
+    return cuda::SumByKind(ptr(v), n(), level_.shape.GridParamCount(), scratch_->Reduce());
+  }
   void Project(VecId x) override { cuda::Project(ptr(x), n(), level_.shape.GridParamCount()); }
   void HoldParameters(VecId x, VecId g, VecId free, bool bounds) override {
     cuda::HoldParameters(ptr(x), ptr(g), ptr(free), n(), level_.shape.GridParamCount(), level_.fixed_shells, bounds);
@@ -228,6 +243,7 @@ class CudaBackend final : public Backend {
   void Release() {
     vectors_.clear();
     bricks_ = DeviceBuffer<int32_t>();
+    brick_list_ = DeviceBuffer<int64_t>();
     rays_.reset();
     scratch_.reset();
     held_ = 0;
@@ -311,6 +327,7 @@ class CudaBackend final : public Backend {
   LevelProblem level_;
   std::vector<DeviceBuffer<float>> vectors_;
   DeviceBuffer<int32_t> bricks_;  // a sparse level's brick table (VolumeView::brick_slot)
+  DeviceBuffer<int64_t> brick_list_;  // and the brick of each slot (SmoothnessLayout::bricks)
   std::unique_ptr<DeviceRays> rays_;
   std::unique_ptr<Scratch> scratch_;
   int64_t held_ = 0;  // bytes of the current level (EstimateMemory's Total)

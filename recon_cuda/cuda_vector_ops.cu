@@ -40,6 +40,23 @@ struct AbsTerm {
   const float* a;
   __device__ double operator()(int64_t i) const { return static_cast<double>(fabsf(a[i])); }
 };
+struct SmoothnessTerm {
+  SmoothnessLayout layout;
+  SmoothnessWeights w;
+  const float* v;
+  __device__ double operator()(int64_t i) const {
+    float lap, degree;
+    return SmoothnessRow(layout, w, v, i, &lap, &degree);
+  }
+};
+struct KindTerm {
+  const float* v;
+  int64_t grid_params;
+  int kind;
+  __device__ double operator()(int64_t i) const {
+    return static_cast<int>(KindOfParam(grid_params, i)) == kind ? static_cast<double>(v[i]) : 0.0;
+  }
+};
 struct AddD {
   __device__ double operator()(double x, double y) const { return x + y; }
 };
@@ -113,12 +130,40 @@ size_t ReduceTempBytes(int64_t n) {
                                             0.0));
   PERF_CUDA_CHECK(cub::DeviceReduce::Reduce(nullptr, max, Terms(AbsTerm{}), static_cast<double*>(nullptr), n, MaxD{},
                                             0.0));
-  return std::max(dot, max);
+  size_t smooth = 0, kind = 0;
+  PERF_CUDA_CHECK(cub::DeviceReduce::Reduce(nullptr, smooth, Terms(SmoothnessTerm{}), static_cast<double*>(nullptr), n,
+                                            AddD{}, 0.0));
+  PERF_CUDA_CHECK(cub::DeviceReduce::Reduce(nullptr, kind, Terms(KindTerm{}), static_cast<double*>(nullptr), n, AddD{},
+                                            0.0));
+  return std::max({dot, max, smooth, kind});
 }
 
 double Dot(const float* a, const float* b, int64_t n, const ReduceScratch& s) {
   return Reduce(DotTerm{a, b}, AddD{}, n, s);
 }
 double MaxAbs(const float* a, int64_t n, const ReduceScratch& s) { return Reduce(AbsTerm{a}, MaxD{}, n, s); }
+
+
+double Smoothness(const float* v, const SmoothnessLayout& layout, const SmoothnessWeights& w, float* out, float* diag,
+                  int64_t n, const ReduceScratch& s) {
+  if (out != nullptr || diag != nullptr) {
+    ForEach(
+        n,
+        [=] __device__(int64_t i) {
+          float lap, degree;
+          SmoothnessRow(layout, w, v, i, &lap, &degree);
+          if (out != nullptr) out[i] += lap;
+          if (diag != nullptr) diag[i] += degree;
+        },
+        "Smoothness");
+  }
+  return Reduce(SmoothnessTerm{layout, w, v}, AddD{}, n, s);
+}
+
+std::array<double, 4> SumByKind(const float* v, int64_t n, int64_t grid_params, const ReduceScratch& s) {
+  std::array<double, 4> sums{};
+  for (int kind = 0; kind < 4; ++kind) sums[kind] = Reduce(KindTerm{v, grid_params, kind}, AddD{}, n, s);
+  return sums;
+}
 
 }  // namespace perf::recon::cuda

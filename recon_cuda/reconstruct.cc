@@ -363,6 +363,11 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                {"train_psnr", lr.train_psnr},
                {"test_psnr", lr.test_psnr},
                {"status", lr.status},
+               {"smoothness_weights",
+                {{"grid_colour", summary.smoothness.grid_colour},
+                 {"grid_density", summary.smoothness.grid_density},
+                 {"shell_colour", summary.smoothness.shell_colour},
+                 {"shell_opacity", summary.smoothness.shell_opacity}}},
                {"report", summary.BriefReport()}});
     say(StrCat("level ", h.level + 1, "/", levels, " done in ", lr.seconds, " s: ", summary.BriefReport(),
                test.empty() ? std::string() : StrCat("; held-out PSNR ", lr.test_psnr, " dB")));
@@ -407,6 +412,8 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                      {"version", 1},
                      {"backend", result.backend},
                      {"solver", SolverName(o.solver.type)},
+                     {"smooth_grid", o.solver.smooth_grid},
+                     {"smooth_shells", o.solver.smooth_shells},
                      {"background", result.fixed_background ? "fixed" : "learned"},
                      {"opacity_residual", opacity_residual},
                      {"opacity_residual_weight", opacity_weight},

@@ -67,6 +67,10 @@ void SolverOptions::Check() const {
   if (!(step_factor > 0 && step_factor < 1)) Fail("step_factor", StrCat(step_factor), "must be in (0, 1)");
   if (max_line_search_steps < 1) Fail("max_line_search_steps", std::to_string(max_line_search_steps), "must be >= 1");
   if (line_search_ray_stride < 1) Fail("line_search_ray_stride", std::to_string(line_search_ray_stride), "must be >= 1");
+  if (!(smooth_grid >= 0 && std::isfinite(smooth_grid))) Fail("smooth_grid (--smooth-grid)", StrCat(smooth_grid), "must be finite and >= 0");
+  if (!(smooth_shells >= 0 && std::isfinite(smooth_shells))) {
+    Fail("smooth_shells (--smooth-shells)", StrCat(smooth_shells), "must be finite and >= 0");
+  }
   if (psnr_ray_stride < 0) Fail("psnr_ray_stride", std::to_string(psnr_ray_stride), "must be >= 0");
   if (!(adam.lr_colour > 0 && adam.lr_density > 0 && adam.lr_opacity > 0)) {
     Fail("adam learning rates", StrCat(adam.lr_colour, ", ", adam.lr_density, ", ", adam.lr_opacity), "must be > 0");
@@ -85,8 +89,28 @@ std::string SolverSummary::BriefReport() const {
 
 namespace {
 
+// The pair weights of the smoothness term (SolverOptions::smooth_grid, smooth_shells) from the
+// data's diagonal D of the level's first linearisation: relative weight times D's mean per kind.
+SmoothnessWeights CalibrateSmoothness(const SolverOptions& o, Backend* b) {
+  SmoothnessWeights w;
+  if (o.smooth_grid <= 0 && o.smooth_shells <= 0) return w;
+  const VolumeShape& shape = b->level().shape;
+  const std::array<double, 4> sums = b->SumByKind(kDiag);
+  const double cells = static_cast<double>(shape.StoredCells());
+  const double texels = static_cast<double>(shape.ParamCount() - shape.GridParamCount()) / 4;
+  const auto mean = [&](ParamKind k, double count) { return count > 0 ? sums[static_cast<int>(k)] / count : 0.0; };
+  w.grid_colour = static_cast<float>(o.smooth_grid * mean(ParamKind::kGridColour, 3 * cells));
+  w.grid_density = static_cast<float>(o.smooth_grid * mean(ParamKind::kGridDensity, cells));
+  if (!b->level().fixed_shells) {  // constants: nothing to smooth
+    w.shell_colour = static_cast<float>(o.smooth_shells * mean(ParamKind::kShellColour, 3 * texels));
+    w.shell_opacity = static_cast<float>(o.smooth_shells * mean(ParamKind::kShellOpacity, texels));
+  }
+  return w;
+}
+
 // PCG (paper Algorithm 2) on (J^T J + mu D) d = -g, d = 0 at the start. Returns iterations.
-int SolvePcg(const SolverOptions& o, Backend* b, SolverSummary* summary) {
+// J includes the smoothness residuals of weights w (their J^T J is the Laplacian).
+int SolvePcg(const SolverOptions& o, Backend* b, const SmoothnessWeights& w, SolverSummary* summary) {
   b->Fill(kStep, 0.f);
   b->Fill(kResidual, 0.f);
   b->Axpy(kResidual, -1.0, kG);  // r0 = b - A 0 = -g
@@ -99,6 +123,7 @@ int SolvePcg(const SolverOptions& o, Backend* b, SolverSummary* summary) {
   int k = 0;
   while (k < o.max_cg_iterations) {
     b->MultiplyJtJ(kDir, kAp);
+    if (w.Any()) b->Smoothness(kDir, w, kAp, kNoVector);
     b->Multiply(kAp, kFree);  // the system of the free parameters only
     ++summary->jtj_passes;
     if (o.damping > 0) b->AxpyDiag(kAp, o.damping, kDiag, kDir);
@@ -117,6 +142,11 @@ int SolvePcg(const SolverOptions& o, Backend* b, SolverSummary* summary) {
     rz = rz_next;
   }
   return k;
+}
+
+// The smoothness term's cost at v (0 when off).
+double SmoothnessCost(Backend* b, VecId v, const SmoothnessWeights& w) {
+  return w.Any() ? b->Smoothness(v, w, kNoVector, kNoVector) : 0.0;
 }
 
 // x(gamma) = P(x + gamma d) into kTrial.
@@ -148,9 +178,16 @@ void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const Iter
     const uint32_t seed = Hash(o.seed, static_cast<uint32_t>(it), 0u);
 
     auto t0 = WallClock::now();
-    const PassStats lin =
-        b->Linearize(kX, seed, kG, o.type == SolverType::kGaussNewton ? kDiag : kNoVector, ls_subset);
+    PassStats lin = b->Linearize(kX, seed, kG, o.type == SolverType::kGaussNewton ? kDiag : kNoVector, ls_subset);
     ++summary->linearize_passes;
+    if (o.type == SolverType::kGaussNewton) {
+      if (it == 0) summary->smoothness = CalibrateSmoothness(o, b);
+      if (summary->smoothness.Any()) {
+        const double e = b->Smoothness(kX, summary->smoothness, kG, kDiag);
+        lin.cost += e;
+        lin.subset_cost += e / o.line_search_ray_stride;  // on the subset's scale, as the line search sees it
+      }
+    }
     s.seconds_linearize = SecondsSince(t0);
     s.cost = lin.cost;
     s.samples = lin.samples;
@@ -177,7 +214,7 @@ void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const Iter
       b->RestrictJacobian(kFree);
       b->Multiply(kDiag, kFree);  // the reduced system's diagonal (and the floor's reference)
       s.held = b->level().shape.ParamCount() - std::llround(b->Dot(kFree, kFree));
-      s.cg_iterations = SolvePcg(o, b, summary);
+      s.cg_iterations = SolvePcg(o, b, summary->smoothness, summary);
       s.seconds_cg = SecondsSince(t0);
 
       t0 = WallClock::now();
@@ -187,7 +224,8 @@ void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const Iter
       double prev = std::numeric_limits<double>::infinity();
       for (int k = 0; k < o.max_line_search_steps; ++k) {
         TrialPoint(b, gamma);
-        const double mu = b->Cost(kTrial, seed, ls_subset).cost;
+        const double mu = b->Cost(kTrial, seed, ls_subset).cost + SmoothnessCost(b, kTrial, summary->smoothness) /
+                                                                         o.line_search_ray_stride;
         ++summary->cost_passes;
         ++s.line_search_steps;
         if (!(mu <= prev)) break;  // rose (or NaN): the previous gamma was the best
@@ -247,7 +285,7 @@ void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const Iter
   if (o.type == SolverType::kGaussNewton && o.line_search_ray_stride > 1 && summary->iterations > 0 &&
       summary->status != SolverStatus::kFailure) {
     const uint32_t seed = Hash(o.seed, static_cast<uint32_t>(summary->iterations - 1), 0u);
-    summary->final_cost = b->Cost(kX, seed).cost;
+    summary->final_cost = b->Cost(kX, seed).cost + SmoothnessCost(b, kX, summary->smoothness);
     ++summary->cost_passes;
   }
   b->Download(kX, *x);

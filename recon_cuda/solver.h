@@ -63,6 +63,12 @@ struct SolverOptions {
   // the line search's time (docs/tuning.md).
   int line_search_ray_stride = 4;
 
+  // Smoothness residuals (smoothness.h) between neighbouring grid cells and between neighbouring
+  // shell texels, relative to the data: a kind's pair weight is this times the mean of
+  // diag(J^T J) over that kind's parameters at the level's first linearisation, so 1 makes a
+  // pair as stiff as the average parameter's photos. 0: off. Gauss-Newton only.
+  double smooth_grid = 0, smooth_shells = 0;
+
   AdamSettings adam;
 
   // PSNR of the colour residuals on a fixed subset of the training rays (every k-th ray, a
@@ -107,6 +113,7 @@ struct SolverSummary {
   double seconds_linearize = 0, seconds_cg = 0, seconds_line_search = 0, seconds_update = 0, seconds_psnr = 0,
          seconds_total = 0;
   int linearize_passes = 0, jtj_passes = 0, cost_passes = 0;
+  SmoothnessWeights smoothness;  // the pair weights the level ran with (all 0: off)
   std::string message;
 
   // One line: "8 iterations, cost 1.2e+03 -> 45, 9.80 s (linearize 3.10, cg 2.50, line search 3.60,

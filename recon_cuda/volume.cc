@@ -54,6 +54,19 @@ VolumeView<float> MakeView(const VolumeShape& shape, const VolumeGeometry& geome
   return v;
 }
 
+SmoothnessLayout MakeSmoothnessLayout(const VolumeShape& shape) {
+  SmoothnessLayout l;
+  l.n = shape.n;
+  l.m = shape.m;
+  l.num_shells = shape.num_shells;
+  l.grid_params = shape.GridParamCount();
+  if (shape.bricks) {
+    l.slot = shape.bricks->slot.data();
+    l.bricks = shape.bricks->bricks.data();
+  }
+  return l;
+}
+
 std::vector<float> InitialParams(const VolumeShape& shape, const VolumeGeometry& geometry, const InitOptions& options) {
   std::vector<float> x(static_cast<size_t>(shape.ParamCount()));
   std::mt19937 rng(options.seed);

@@ -14,6 +14,7 @@
 #include "recon_cuda/brick_grid.h"
 #include "recon_cuda/param_ops.h"
 #include "recon_cuda/ray_math.h"
+#include "recon_cuda/smoothness.h"
 
 namespace perf {
 struct Scene;
@@ -94,6 +95,10 @@ struct InitOptions {
   // Shell texel colours: this colour (e.g. the photos' mean) when set (>= 0), else random.
   float shell_colour[3] = {-1, -1, -1};
 };
+
+// The stencil's view of the level's layout (smoothness.h), pointing at the host's brick tables
+// (shape must outlive it; a device backend puts its own copies in their place).
+SmoothnessLayout MakeSmoothnessLayout(const VolumeShape& shape);
 
 // Random colours in [0, 1], low densities and shell opacities (the outermost shell's opacity is
 // ignored by the ray math: it is always opaque).

@@ -443,6 +443,43 @@ TEST_F(GpuParityTest, SparseLevel) {
   test::ExpectAllClose(rg.colour, rc.colour, 1e-4, 1e-4, "sparse render");
 }
 
+// The smoothness term (smoothness.h) on a dense and a sparse level: L x, its diagonal, its cost,
+// the sums by kind, and a short solve with it.
+TEST_F(GpuParityTest, SmoothnessTermAndASolveWithIt) {
+  TinyProblem p(37, 16, 4, 6, 24, 18);
+  QuantiseColours(&p.rays);
+  const test::SparseVersion s(p, {1, 1, 0, 0, 0, 0, 1, 0});
+  const SmoothnessWeights w{0.7f, 0.3f, 1.3f, 0.9f};
+  for (const auto& [level, x] : {std::pair{LevelProblem{p.shape, p.geometry, &p.rays, {}}, p.x}, std::pair{s.level, s.x}}) {
+    SetLevel(level, x);
+    double cost[2];
+    int k = 0;
+    for (Backend* b : {cpu.get(), gpu.get()}) {
+      b->Fill(kG, 0.f);
+      b->Fill(kD, 0.f);
+      cost[k++] = b->Smoothness(kX, w, kG, kD);
+    }
+    EXPECT_NEAR(cost[1], cost[0], 1e-5 * cost[0]);
+    ExpectClose(Get(gpu.get(), kG), Get(cpu.get(), kG), "L x");
+    ExpectClose(Get(gpu.get(), kD), Get(cpu.get(), kD), "diag(L)");
+    const std::array<double, 4> sc = cpu->SumByKind(kX), sg = gpu->SumByKind(kX);
+    for (int i = 0; i < 4; ++i) EXPECT_NEAR(sg[i], sc[i], 1e-6 * std::abs(sc[i])) << "kind " << i;
+  }
+  SolverOptions o;
+  o.max_iterations = 3;
+  o.smooth_grid = 0.5;
+  o.smooth_shells = 1.0;
+  SolverSummary sum[2];
+  int k = 0;
+  for (Backend* b : {cpu.get(), gpu.get()}) {
+    b->SetLevel(s.level, RequiredVectors(o.type));
+    std::vector<float> x = s.x;
+    Solve(o, b, &x, nullptr, &sum[k++]);
+  }
+  EXPECT_NEAR(sum[1].smoothness.shell_colour, sum[0].smoothness.shell_colour, 1e-5 * sum[0].smoothness.shell_colour);
+  EXPECT_NEAR(sum[1].final_cost, sum[0].final_cost, 1e-3 * sum[0].final_cost);
+}
+
 // A cudaMalloc that fails leaves its error as the runtime's last error; the error path clears
 // it, so the next launch check does not report it against an unrelated kernel.
 TEST_F(GpuParityTest, AFailedAllocationLeavesNoErrorForTheNextLaunch) {
