@@ -75,11 +75,10 @@ void AddReconstructCommand(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--max-cg-iterations", o.solver.max_cg_iterations, "PCG iterations per Gauss-Newton step at most")
       ->capture_default_str();
-  cmd->add_option("--smooth-grid", o.solver.smooth_grid,
+  cmd->add_option("--smooth-grid", o.smooth_grid,
                   "Smoothness between neighbouring grid cells, relative to the photos (1: a pair as stiff as the mean "
-                  "cell's data; 0: off)")
-      ->capture_default_str();
-  cmd->add_option("--smooth-shells", o.solver.smooth_shells,
+                  "cell's data; 0: off; default: 0.3 where the background is learned, 0 where it is fixed)");
+  cmd->add_option("--smooth-shells", o.smooth_shells,
                   "Smoothness between neighbouring shell texels, across cube-map seams too, relative to the photos (0: off)")
       ->capture_default_str();
   cmd->add_option("--cg-exit-ratio", o.solver.cg_exit_ratio, "PCG leaves when |r|^2 falls by less than this factor (paper: 0.85; default inf: never)")

@@ -84,6 +84,10 @@ void CheckMatchesScene(const Checkpoint& c, const Scene& scene, const fs::path& 
 void ReconstructOptions::Check() const {
   if (workspace.empty()) Fail("WORKSPACE", "", "missing", "pass the workspace made by perf import");
   if (levels < 0 || levels > 6) Fail("--levels", std::to_string(levels), "must be 1 to 6 (or 0 for the default)");
+  if (!(smooth_shells >= 0 && std::isfinite(smooth_shells))) {
+    Fail("--smooth-shells", StrCat(smooth_shells), "must be finite and >= 0 (0: off)");
+  }
+  if (!std::isfinite(smooth_grid)) Fail("--smooth-grid", StrCat(smooth_grid), "must be finite (0: off)");
   if (max_resolution != 0 && max_resolution < start_resolution) {
     Fail("--max-resolution", std::to_string(max_resolution), StrCat("must be at least --start-resolution (", start_resolution, ")"),
          "or 0 for the backend's default");
@@ -209,6 +213,8 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   ho.stop_when_out_of_memory = result.levels_choice.automatic;
   SetHierarchyBackground(o.background, scene, &ho);
   result.fixed_background = ho.fixed_background;
+  ho.solver.smooth_grid = o.smooth_grid >= 0 ? o.smooth_grid : ho.fixed_background ? 0.0 : kAutoSmoothGrid;
+  ho.solver.smooth_shells = o.smooth_shells;
   const auto shape_of = [&](int level) { return LevelShape(ho, geometry.num_shells(), level); };
 
   EnsureWritableDirectory(o.workspace / "recon");
@@ -412,8 +418,8 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                      {"version", 1},
                      {"backend", result.backend},
                      {"solver", SolverName(o.solver.type)},
-                     {"smooth_grid", o.solver.smooth_grid},
-                     {"smooth_shells", o.solver.smooth_shells},
+                     {"smooth_grid", ho.solver.smooth_grid},
+                     {"smooth_shells", ho.solver.smooth_shells},
                      {"background", result.fixed_background ? "fixed" : "learned"},
                      {"opacity_residual", opacity_residual},
                      {"opacity_residual_weight", opacity_weight},

@@ -29,6 +29,10 @@ struct Scene;
 
 namespace perf::recon {
 
+// --smooth-grid's automatic value where the background is learned (the bonsai example: +0.1 dB
+// held-out, +1.1 dB inside the mask).
+inline constexpr double kAutoSmoothGrid = 0.3;
+
 struct ReconstructOptions {
   std::filesystem::path workspace;
   DeviceChoice device = DeviceChoice::kAuto;
@@ -38,7 +42,12 @@ struct ReconstructOptions {
   int start_resolution = 32;
   int iterations = 30;          // solver iterations per level (paper: 30)
   std::vector<int> level_iterations;  // per level, overriding `iterations` for the levels given
-  SolverOptions solver;         // max_iterations and seed are set per level
+  SolverOptions solver;         // max_iterations and seed are set per level; smooth_* from below
+  // Smoothness residuals (SolverOptions::smooth_grid, smooth_shells; docs/tuning.md 2026-12-02).
+  // The grid's: < 0 picks kAutoSmoothGrid where the background is learned (real photos) and 0
+  // where it is fixed (photos with alpha: lego loses 1.8 dB with 0.1).
+  double smooth_grid = -1;
+  double smooth_shells = 0.1;
   InitOptions init;
   bool init_shells_from_photos = false;  // shells start at the training photos' mean colour
   // The shells (device_choice.h); a known background is information (+0.7 dB on lego, docs/tuning.md).

@@ -113,13 +113,31 @@ bool InFrustum(const BoundsCamera& c, const Eigen::Vector3d& p) {
   return u >= 0 && u <= c.width && v >= 0 && v <= c.height;
 }
 
-SceneShells PlaceShells(const SceneBox& box, double enclose_radius, const BoundsOptions& o) {
+SceneShells PlaceShells(const SceneBox& box, double camera_radius, std::vector<double> point_distances,
+                        const BoundsOptions& o) {
   PERF_CHECK(o.num_shells >= 1);
   SceneShells shells;
   shells.center = box.center;
   // Innermost just outside the box, so the crossing beyond the box exit is unique.
   const double inner = 0.5 * box.size.norm() * 1.05;
-  const double outer = std::max({enclose_radius * o.outer_margin, inner * o.min_outer_factor});
+  std::vector<double> beyond;
+  for (double d : point_distances) {
+    if (d > inner) beyond.push_back(d);
+  }
+  if (o.num_shells >= 2 && static_cast<int>(beyond.size()) >= o.min_points_for_quantiles) {
+    // Where the scene is: shell k at quantile outer_point_quantile k / (K - 1) of the points
+    // beyond the innermost; the outermost also encloses the cameras.
+    shells.radii.push_back(inner);
+    for (int k = 1; k < o.num_shells; ++k) {
+      double r = Percentile(beyond, 100.0 * o.outer_point_quantile * k / (o.num_shells - 1));
+      if (k == o.num_shells - 1) r = std::max(r, camera_radius * o.outer_margin);
+      shells.radii.push_back(std::max(r, shells.radii.back() * o.min_radius_step));
+    }
+    return shells;
+  }
+  double enclose = camera_radius;
+  if (!point_distances.empty()) enclose = std::max(enclose, Percentile(point_distances, 99.0));
+  const double outer = std::max({enclose * o.outer_margin, inner * o.min_outer_factor});
   if (o.num_shells == 1) {
     shells.radii = {outer};
     return shells;
@@ -242,16 +260,11 @@ BoundsResult EstimateBounds(const std::vector<BoundsCamera>& cameras,
   box.size = size;
   box.center = origin + box.rotation * (0.5 * (lo + hi));
 
-  // Shells enclose every inlier point that is not an outlier (99th percentile of distance) and
-  // every camera.
-  double enclose = 0;
-  for (const auto& c : cameras) enclose = std::max(enclose, (CameraCentre(c) - box.center).norm());
-  if (!inliers.empty()) {
-    std::vector<double> d;
-    for (const auto& p : inliers) d.push_back((p - box.center).norm());
-    enclose = std::max(enclose, Percentile(d, 99.0));
-  }
-  result.shells = PlaceShells(box, enclose, o);
+  double camera_radius = 0;
+  for (const auto& c : cameras) camera_radius = std::max(camera_radius, (CameraCentre(c) - box.center).norm());
+  std::vector<double> d;
+  for (const auto& p : inliers) d.push_back((p - box.center).norm());
+  result.shells = PlaceShells(box, camera_radius, std::move(d), o);
   return result;
 }
 

@@ -88,12 +88,18 @@ void PlaceBoundsAndShells(const ImportOptions& o, const std::vector<BoundsPoint>
   if (o.box_size) box.size = *o.box_size;
   if (o.box_center || o.box_size) box.method = manual_box ? "given on the command line" : box.method + " (partly overridden)";
   if (manual_box || o.box_center || o.box_size) {
-    // Shells must still enclose the cameras and the inlier points around the new box.
-    double enclose = 0;
+    // Shells around the new box: enclosing the cameras, at the points' distances from it.
+    double camera_radius = 0;
     for (const auto& im : r->scene.images) {
-      if (im.split != Split::kExcluded) enclose = std::max(enclose, (im.world_from_cam.col(3) - box.center).norm());
+      if (im.split != Split::kExcluded) camera_radius = std::max(camera_radius, (im.world_from_cam.col(3) - box.center).norm());
     }
-    r->bounds.shells = PlaceShells(box, enclose, bo);
+    std::vector<double> distances;
+    for (const auto& p : points) {
+      if (p.track_length >= bo.min_track_length && (p.error < 0 || p.error <= bo.max_reproj_error)) {
+        distances.push_back((p.xyz - box.center).norm());
+      }
+    }
+    r->bounds.shells = PlaceShells(box, camera_radius, std::move(distances), bo);
   }
   if (o.shell_radii) {
     r->bounds.shells.center = box.center;

@@ -70,6 +70,10 @@ TEST_F(ReconstructCli, ReconstructsLogsCheckpointsResumesAndRenders) {
   EXPECT_EQ(summary["final_checkpoint"], "recon/level_1.perfvol");
   EXPECT_GT(summary["test_psnr"].get<double>(), 15.0);
   EXPECT_EQ(summary["min_box_opacity"].get<double>(), 0.0);  // scored as fitted, without the paper's rule
+  // Photos without alpha: the shells are learned, and both smoothness terms are on by default.
+  EXPECT_EQ(summary["background"], "learned");
+  EXPECT_EQ(summary["smooth_grid"].get<double>(), 0.3);
+  EXPECT_EQ(summary["smooth_shells"].get<double>(), 0.1);
 
   // Everything done: --resume says so and changes nothing.
   const auto before = fs::last_write_time(ws_ / "recon" / "level_1.perfvol");
@@ -233,6 +237,12 @@ TEST_F(ReconstructCli, BadInputsAreNamed) {
   r = RunCommand(Perf("reconstruct " + ws_.string() + " --levels 9"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("--levels"), std::string::npos) << r.output;
+  r = RunCommand(Perf("reconstruct " + ws_.string() + " --smooth-shells -1"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("--smooth-shells"), std::string::npos) << r.output;
+  r = RunCommand(Perf("reconstruct " + ws_.string() + " --smooth-grid inf"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("--smooth-grid"), std::string::npos) << r.output;
   r = RunCommand(Perf("reconstruct " + ws_.string() + " --init-opacity 1"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("--init-opacity"), std::string::npos) << r.output;

@@ -92,9 +92,11 @@ TEST(Bounds, ObjectInARoomKeepsTheObjectAndDropsTheWalls) {
   for (size_t i = 1; i < r.shells.radii.size(); ++i) EXPECT_GT(r.shells.radii[i], r.shells.radii[i - 1]);
   EXPECT_GT(r.shells.radii.back(), 8.0);
   EXPECT_LT(r.shells.radii.back(), 100.0);  // the far outlier does not count
-  // Radii grow with the square of the index.
+  // The shells beyond the innermost sit at the walls, where the scene is (quantiles of the points
+  // beyond the box), each at least 5 % beyond the one inside it.
   const auto& rr = r.shells.radii;
-  EXPECT_NEAR((rr[2] - rr[0]) / (rr[1] - rr[0]), 4.0, 1e-9);
+  EXPECT_NEAR(rr[1], 8.0, 0.3);
+  EXPECT_NEAR(rr[2], 1.05 * rr[1], 0.3);
 }
 
 TEST(Bounds, CameraOnlyBoxIsInsideEveryView) {
@@ -138,12 +140,37 @@ TEST(Bounds, ForwardFacingWithoutPointsAsksForABox) {
   EXPECT_THROW(EstimateBounds(cams, {}, BoundsOptions{}, "x"), InputError);
 }
 
+TEST(Bounds, ShellsSitAtQuantilesOfThePointsBeyondTheBox) {
+  SceneBox box;
+  box.size = Eigen::Vector3d(2, 2, 2);  // innermost shell 1.05 sqrt(3) = 1.82
+  BoundsOptions o;  // 4 shells: quantiles 30, 60, 90 % of the points beyond the innermost
+  std::vector<double> d;
+  for (int i = 0; i < 1000; ++i) d.push_back(i < 100 ? 1.0 : 10.0 + 20.0 * (i - 100) / 899.0);  // 10..30 beyond
+  SceneShells s = PlaceShells(box, 3.0, d, o);
+  ASSERT_EQ(s.radii.size(), 4u);
+  EXPECT_NEAR(s.radii[0], 1.05 * std::sqrt(3.0), 1e-12);
+  EXPECT_NEAR(s.radii[1], 16.0, 0.1);
+  EXPECT_NEAR(s.radii[2], 22.0, 0.1);
+  EXPECT_NEAR(s.radii[3], 28.0, 0.1);
+  // A camera beyond them moves the outermost out to enclose it; the others stay.
+  s = PlaceShells(box, 40.0, d, o);
+  EXPECT_NEAR(s.radii[2], 22.0, 0.1);
+  EXPECT_DOUBLE_EQ(s.radii[3], 44.0);
+  // Points bunched at one distance still give increasing radii.
+  s = PlaceShells(box, 3.0, std::vector<double>(200, 5.0), o);
+  for (int k = 1; k < 4; ++k) EXPECT_GE(s.radii[k], 1.05 * s.radii[k - 1] - 1e-12);
+  // Too few points beyond the box: the square ladder out to the farthest point (99th percentile).
+  s = PlaceShells(box, 3.0, std::vector<double>(10, 12.0), o);
+  EXPECT_DOUBLE_EQ(s.radii[3], 1.1 * 12.0);
+  EXPECT_NEAR(s.radii[1], s.radii[0] + (s.radii[3] - s.radii[0]) / 9, 1e-9);
+}
+
 TEST(Bounds, SingleShellIsTheOuterOne) {
   SceneBox box;
   box.size = Eigen::Vector3d(2, 2, 2);
   BoundsOptions o;
   o.num_shells = 1;
-  const SceneShells s = PlaceShells(box, 10.0, o);
+  const SceneShells s = PlaceShells(box, 10.0, {}, o);
   ASSERT_EQ(s.radii.size(), 1u);
   EXPECT_DOUBLE_EQ(s.radii[0], 11.0);
 }
