@@ -12,6 +12,7 @@
 #include "common/json_log.h"
 #include "common/stopwatch.h"
 #include "common/system_memory.h"
+#include "recon_cuda/box_check.h"
 #include "recon_cuda/checkpoint.h"
 #include "recon_cuda/evaluation.h"
 #include "recon_cuda/hierarchy.h"
@@ -345,7 +346,15 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     emit(e);
     return true;
   };
+  json box_faces = json::array();  // after the first level (box_check.h)
+  std::string box_warning;
   cb.level_done = [&](const HierarchyLevel& h, const SolverSummary& summary, const std::vector<float>& x) {
+    if (h.level == 0) {
+      const std::vector<BoxFace> faces = BoxFaces(h.shape, geometry, x);
+      for (const BoxFace& f : faces) box_faces.push_back({{"face", f.name}, {"opaque_fraction", f.opaque_fraction}});
+      box_warning = CutOffWarning(faces);
+      if (!box_warning.empty()) say("warning: " + box_warning);
+    }
     lr.iterations = summary.iterations;
     lr.cost = summary.final_cost;
     lr.train_psnr = summary.per_iteration.empty() ? 0 : summary.per_iteration.back().train_psnr;
@@ -435,6 +444,8 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                      {"iterations_per_level", o.iterations},
                      {"level_iterations", o.level_iterations},
                      {"excluded_views", excluded_views},
+                     {"box_faces", box_faces},
+                     {"box_warning", box_warning},
                      {"final_checkpoint", fs::relative(result.final_checkpoint, o.workspace).string()},
                      {"test_psnr", result.test_psnr},
                      {"solve_seconds", result.solve_seconds},

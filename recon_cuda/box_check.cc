@@ -1,0 +1,49 @@
+#include "recon_cuda/box_check.h"
+
+#include <cmath>
+
+#include "common/errors.h"
+
+namespace perf::recon {
+
+std::vector<BoxFace> BoxFaces(const VolumeShape& shape, const VolumeGeometry& geometry, std::span<const float> x) {
+  static const char* kNames[6] = {"-x", "+x", "-y", "+y", "-z (bottom)", "+z (top)"};
+  const int n = shape.n;
+  const float size[3] = {geometry.box.size.x, geometry.box.size.y, geometry.box.size.z};
+  std::vector<BoxFace> faces(6);
+  for (int f = 0; f < 6; ++f) {
+    const int axis = f / 2, layer = f % 2 == 0 ? 0 : n - 1;
+    const double h = static_cast<double>(size[axis]) / n;
+    int64_t opaque = 0;
+    for (int a = 0; a < n; ++a) {
+      for (int b = 0; b < n; ++b) {
+        int ijk[3];
+        ijk[axis] = layer;
+        ijk[(axis + 1) % 3] = a;
+        ijk[(axis + 2) % 3] = b;
+        const int64_t cell = StoredCell(shape, ijk[0], ijk[1], ijk[2]);
+        if (cell < 0) continue;
+        const double sigma = x[GridParam(cell, 3)];
+        opaque += 1.0 - std::exp(-sigma * h) >= kOpaqueCell;
+      }
+    }
+    faces[f] = {kNames[f], static_cast<double>(opaque) / (static_cast<double>(n) * n)};
+  }
+  return faces;
+}
+
+std::string CutOffWarning(const std::vector<BoxFace>& faces) {
+  std::string list;
+  int count = 0;
+  for (const BoxFace& f : faces) {
+    if (f.name.rfind("-z", 0) == 0 || f.opaque_fraction < kCutOffFraction) continue;
+    list += StrCat(list.empty() ? "" : ", ", f.name, " (", std::lround(100 * f.opaque_fraction), " % opaque)");
+    ++count;
+  }
+  if (list.empty()) return {};
+  return StrCat("the fitted density reaches the box's ", list, count > 1 ? " faces" : " face",
+                ": the object may go on beyond the box there and its masks would miss that part; check "
+                "preview/box_*.png (perf import --preview-box) and re-import with a larger --box-size if so");
+}
+
+}  // namespace perf::recon

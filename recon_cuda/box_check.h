@@ -1,0 +1,33 @@
+// Does the box hold the whole object? (issue 16.) After the first level, opaque cells in the
+// outermost layer of a box face mean the fitted density goes on beyond that face: the object (or
+// what it stands on) is cut off there, and its masks will miss that part. The bottom face (-z,
+// the box is aligned to the cameras' up) is where the object stands and is left out of the
+// warning (a table or floor always reaches it).
+#pragma once
+
+#include <span>
+#include <string>
+#include <vector>
+
+#include "recon_cuda/volume.h"
+
+namespace perf::recon {
+
+struct BoxFace {
+  std::string name;             // "+x", "-x", "+y", "-y", "+z (top)", "-z (bottom)"
+  double opaque_fraction = 0;   // of the face's outermost cells, those at least kOpaqueCell opaque
+};
+
+// A cell is opaque when 1 - exp(-sigma h) reaches this (h: the cell's side along the face normal).
+inline constexpr double kOpaqueCell = 0.5;
+// The warning's threshold on a side or top face's opaque fraction.
+inline constexpr double kCutOffFraction = 0.05;
+
+// The six faces of the grid of (shape, x); a sparse grid's inactive cells count as empty.
+std::vector<BoxFace> BoxFaces(const VolumeShape& shape, const VolumeGeometry& geometry, std::span<const float> x);
+
+// One line naming the side and top faces at or above kCutOffFraction and what to do, or "" when
+// none is.
+std::string CutOffWarning(const std::vector<BoxFace>& faces);
+
+}  // namespace perf::recon
