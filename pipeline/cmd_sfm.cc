@@ -27,6 +27,8 @@ void AddSfmCommand(CLI::App& app) {
                   "Largest set matched exhaustively by --matcher auto (CPU: ~0.28 s per pair)")->capture_default_str();
   cmd->add_option("--overlap", o->sequential_overlap, "Sequential matching overlap (quadratic overlap on)")
       ->capture_default_str();
+  cmd->add_flag("!--no-second-pass", o->second_pass,
+                "After sequential matching, do not match the photos left out with every other photo and register them again");
   cmd->add_option("--max-image-size", o->max_image_size, "Longest side used for feature extraction")
       ->capture_default_str();
   cmd->add_option("--max-features", o->max_num_features, "Most SIFT features per image")->capture_default_str();

@@ -18,6 +18,7 @@
 #include <fstream>
 #include <optional>
 #include <regex>
+#include <set>
 #include <system_error>
 #include <vector>
 
@@ -25,6 +26,7 @@
 #include "common/errors.h"
 #include "common/subprocess.h"
 #include "sfm_import/camera_models.h"
+#include "sfm_import/colmap_model.h"
 
 namespace fs = std::filesystem;
 
@@ -54,8 +56,9 @@ bool LooksLikeImage(const fs::path& path) {
   return std::find(kExtensions.begin(), kExtensions.end(), ext) != kExtensions.end();
 }
 
-// Counts photos under `images` (recursively, as COLMAP's ImageReader does).
-int CountInputImages(const fs::path& images) {
+// The photos under `images` (recursively, as COLMAP's ImageReader does), as COLMAP names them:
+// '/'-separated paths relative to `images`, sorted.
+std::vector<std::string> ListInputImages(const fs::path& images) {
   std::error_code ec;
   if (!fs::exists(images, ec)) {
     throw InputError(kCommandLine, "--images", images.string(), "the images folder does not exist",
@@ -65,7 +68,7 @@ int CountInputImages(const fs::path& images) {
     throw InputError(kCommandLine, "--images", images.string(), "not a folder",
                      "pass the folder that holds your photos, not a single file");
   }
-  int count = 0;
+  std::vector<std::string> names;
   fs::recursive_directory_iterator it(images, fs::directory_options::skip_permission_denied, ec);
   if (ec) {
     throw IoError(images.string(), "cannot list the images folder: " + ec.message(),
@@ -76,15 +79,18 @@ int CountInputImages(const fs::path& images) {
       throw IoError(images.string(), "cannot list the images folder: " + ec.message(),
                     "check its permissions");
     }
-    if (it->is_regular_file(ec) && LooksLikeImage(it->path())) ++count;
+    if (it->is_regular_file(ec) && LooksLikeImage(it->path())) {
+      names.push_back(it->path().lexically_relative(images).generic_string());
+    }
   }
-  if (count == 0) {
+  if (names.empty()) {
     throw InputError(kCommandLine, "--images", images.string(),
                      "the folder holds no images (looked for .jpg, .jpeg, .png, .tif, .tiff, .bmp, "
                      ".ppm, .pgm, .webp, .jp2, .exr, also in sub-folders)",
                      "put your photos in it or pass the folder that holds them");
   }
-  return count;
+  std::sort(names.begin(), names.end());
+  return names;
 }
 
 // --------------------------------------------------------------------------------------------
@@ -256,6 +262,36 @@ std::optional<ModelCounts> ReadModelCounts(const fs::path& dir) {
   return ModelCounts{static_cast<int>(*images), static_cast<int>(*points)};
 }
 
+// The photos a model holds (COLMAP image names); nullopt when it cannot be read in full.
+std::optional<std::set<std::string>> RegisteredNames(const fs::path& dir) {
+  try {
+    std::set<std::string> names;
+    for (const auto& [id, im] : colmap::ReadReconstruction(dir).images) names.insert(im.name);
+    return names;
+  } catch (const Error&) {
+    return std::nullopt;
+  }
+}
+
+// The inputs a model left out, when its names can be read.
+std::optional<std::vector<std::string>> LeftOut(const std::vector<std::string>& inputs, const fs::path& dir) {
+  const auto registered = RegisteredNames(dir);
+  if (!registered) return std::nullopt;
+  std::vector<std::string> out;
+  for (const std::string& name : inputs) {
+    if (!registered->count(name)) out.push_back(name);
+  }
+  return out;
+}
+
+// "a.jpg, b.jpg, c.jpg and 4 more"
+std::string NameList(const std::vector<std::string>& names, size_t shown = 8) {
+  std::string list;
+  for (size_t i = 0; i < names.size() && i < shown; ++i) list += (i ? ", " : "") + names[i];
+  if (names.size() > shown) list += StrCat(" and ", names.size() - shown, " more");
+  return list;
+}
+
 // Copies `src` to `dst` so that `dst` is either the old model or the complete new one, never a
 // mix: copy into a temporary folder beside it, move the old one aside, move the new one in.
 void ReplaceDirectory(const fs::path& src, const fs::path& dst) {
@@ -344,7 +380,8 @@ SfmResult RunSfm(const SfmOptions& options) {
   auto elapsed = [&] { return std::chrono::duration<double>(Clock::now() - start).count(); };
 
   SfmResult result;
-  result.num_input_images = CountInputImages(options.images);
+  const std::vector<std::string> inputs = ListInputImages(options.images);
+  result.num_input_images = static_cast<int>(inputs.size());
   result.sparse_dir = options.workspace / "sparse" / "0";
 
   if (!options.force) {
@@ -484,15 +521,67 @@ SfmResult RunSfm(const SfmOptions& options) {
         too_few_hint);
   }
 
+  // (d) Sequential matching misses photos taken out of order: match those left out with every
+  // other photo and register them into the model (COLMAP's image_registrator), then adjust.
+  if (!exhaustive && options.second_pass && best.num_images < n) {
+    if (const auto missing = LeftOut(inputs, *best_dir); missing && !missing->empty()) {
+      const fs::path pairs = colmap_dir / "second_pass_pairs.txt";
+      std::string text;
+      int64_t num_pairs = 0;
+      const std::set<std::string> missing_set(missing->begin(), missing->end());
+      for (const std::string& a : *missing) {
+        for (const std::string& b : inputs) {
+          if (a == b || (missing_set.count(b) && b < a)) continue;  // each pair once
+          text += a + " " + b + "\n";
+          ++num_pairs;
+        }
+      }
+      WriteFileAtomically(pairs, text);
+      Report(options, StrCat("sfm: ", best.num_images, "/", n, " images registered after sequential matching; matching the ",
+                             missing->size(), " left out with every other photo (", num_pairs, " pairs)"));
+      const fs::path second = models_dir / "second_pass";
+      EnsureWritableDirectory(second);
+      bool ok = true;
+      const auto step = [&](const std::vector<std::string>& args, const std::string& stage, const ProgressParser& parse) {
+        if (!ok) return;
+        const StepResult r = RunColmapStep(colmap, args, stage, parse, options, log, log_path);
+        ok = !r.signal && r.exit_code == 0;
+        if (!ok) Report(options, StrCat("sfm: ", args.front(), " failed (see ", log_path.string(), "); keeping the first model"));
+      };
+      step({"matches_importer", "--database_path", database.string(), "--match_list_path", pairs.string(),
+            "--match_type", "pairs", "--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", threads},
+           "matching", ExhaustiveParser());
+      step({"image_registrator", "--database_path", database.string(), "--input_path", best_dir->string(),
+            "--output_path", second.string(), "--Mapper.num_threads", threads},
+           "registering", MapperParser(n));
+      step({"bundle_adjuster", "--input_path", second.string(), "--output_path", second.string()}, "adjusting",
+           [](const std::string&) { return std::optional<std::string>(); });
+      const auto counts = ok ? ReadModelCounts(second) : std::nullopt;
+      if (counts && counts->num_images > best.num_images) {
+        best_dir = second;
+        best = *counts;
+      }
+    }
+  }
+
   ReplaceDirectory(*best_dir, result.sparse_dir);
   result.num_registered_images = best.num_images;
   result.num_points = best.num_points;
+  if (const auto missing = LeftOut(inputs, result.sparse_dir)) result.left_out = *missing;
   result.seconds = elapsed();
   Report(
       options,
       StrCat("sfm: ", best.num_images, "/", n, " images registered, ", best.num_points, " points",
              num_models > 1 ? StrCat(" (largest of ", num_models, " models)") : "", ", in ",
              static_cast<int>(result.seconds + 0.5), " s -> ", result.sparse_dir.string()));
+  if (!result.left_out.empty()) Report(options, "sfm: left out: " + NameList(result.left_out));
+  if (best.num_images < 0.9 * n) {
+    Report(options, StrCat("sfm: warning: only ", best.num_images, " of ", n, " photos (",
+                           static_cast<int>(100.0 * best.num_images / n), " %) are in the model; ",
+                           exhaustive ? "try more features (--max-num-features) or larger images (--max-image-size)"
+                                      : "try --matcher exhaustive (slower, order-free)",
+                           ", or add photos that overlap those left out"));
+  }
   return result;
 }
 

@@ -1,11 +1,13 @@
 // `perf sfm`: photos -> COLMAP sparse model by running the `colmap` CLI (CPU SIFT, headless):
-// feature_extractor, a matcher (exhaustive for small sets, sequential beyond), mapper; then the
-// largest model becomes WORKSPACE/sparse/0. COLMAP's own output goes to WORKSPACE/colmap/colmap.log.
+// feature_extractor, a matcher (exhaustive for small sets, sequential beyond), mapper, and after
+// sequential matching a second pass for the photos left out; then the largest model becomes
+// WORKSPACE/sparse/0, and the photos it left out are named. COLMAP's own output goes to WORKSPACE/colmap/colmap.log.
 #pragma once
 
 #include <filesystem>
 #include <functional>
 #include <string>
+#include <vector>
 
 namespace perf {
 
@@ -20,6 +22,9 @@ struct SfmOptions {
   std::string matcher = "auto";
   int exhaustive_max_images = 40;
   int sequential_overlap = 10;           // SequentialMatching.overlap (quadratic overlap on)
+  // After sequential matching, match the photos the model left out with every other photo and
+  // register them into it (matches_importer, image_registrator, bundle_adjuster).
+  bool second_pass = true;
   int max_image_size = 1600;             // SiftExtraction.max_image_size
   int max_num_features = 8192;           // SiftExtraction.max_num_features
   int num_threads = -1;                  // -1: all cores
@@ -37,6 +42,7 @@ struct SfmResult {
   int num_input_images = 0;
   int num_registered_images = 0;
   int num_points = 0;
+  std::vector<std::string> left_out;  // input photos not in the model (empty when unknown)
   double seconds = 0;
 };
 

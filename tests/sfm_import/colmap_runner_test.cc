@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "common/errors.h"
+#include "sfm_import/colmap_model.h"
 
 namespace fs = std::filesystem;
 
@@ -644,6 +645,84 @@ TEST(ColmapRunner, FakeColmapPicksLargestModelAndReplacesOldOne) {
   const std::string log2 = ReadFile(options.workspace / "colmap" / "colmap.log");
   EXPECT_NE(log2.find("arg=[sequential_matcher]"), std::string::npos);
   EXPECT_NE(log2.find("arg=[--SequentialMatching.overlap]\narg=[4]"), std::string::npos);
+}
+
+// A model holding the named photos (one camera, no points), as COLMAP writes it.
+void WriteNamedModel(const fs::path& dir, const std::vector<std::string>& names) {
+  colmap::Reconstruction rec;
+  colmap::Camera cam;
+  cam.camera_id = 1;
+  cam.model_id = 1;  // PINHOLE
+  cam.width = 64;
+  cam.height = 48;
+  cam.params = {60, 60, 32, 24};
+  rec.cameras[1] = cam;
+  for (size_t i = 0; i < names.size(); ++i) {
+    colmap::Image im;
+    im.image_id = static_cast<uint32_t>(i + 1);
+    im.camera_id = 1;
+    im.name = names[i];
+    rec.images[im.image_id] = im;
+  }
+  fs::create_directories(dir);
+  colmap::WriteReconstruction(dir, rec, colmap::ModelFormat::kBinary);
+}
+
+// Sequential matching leaves c.jpg out: the second pass matches it with every other photo,
+// registers it into the model and adjusts; the result holds all three. Without the second pass
+// (or when it registers nothing) the photo left out is named, with a warning under 90 %.
+TEST(ColmapRunner, SecondPassRegistersThePhotosSequentialMatchingLeftOut) {
+  TempDir dir("second");
+  const fs::path first = dir.path() / "first", full = dir.path() / "full";
+  WriteNamedModel(first, {"a.jpg", "b.jpg"});
+  WriteNamedModel(full, {"a.jpg", "b.jpg", "c.jpg"});
+  const std::string script = StrCat(R"SH(#!/bin/sh
+PATH=/usr/bin:/bin:$PATH
+step="$1"
+echo "fake colmap $step"
+for a in "$@"; do echo "arg=[$a]"; done
+while [ $# -gt 0 ]; do
+  case "$1" in --output_path) out="$2";; --match_list_path) pairs="$2";; esac; shift
+done
+case "$step" in
+  mapper) mkdir -p "$out/0" && cp ")SH", first.string(), R"SH("/* "$out/0/" ;;
+  matches_importer) echo "pairs:"; cat "$pairs" ;;
+  image_registrator) cp ")SH", full.string(), R"SH("/* "$out/" ;;
+esac
+exit 0
+)SH");
+  SfmOptions options;
+  options.images = dir.path() / "photos";
+  for (const char* name : {"a.jpg", "b.jpg", "c.jpg"}) WriteFile(options.images / name, "");
+  options.workspace = dir.path() / "work";
+  options.colmap_binary = (dir.path() / "bin" / "colmap").string();
+  WriteExecutable(options.colmap_binary, script);
+  options.exhaustive_max_images = 1;  // sequential
+  options.min_registered_images = 2;
+  std::vector<std::string> progress;
+  options.progress = [&](const std::string& line) { progress.push_back(line); };
+  const auto said = [&](const std::string& text) {
+    return std::any_of(progress.begin(), progress.end(), [&](const std::string& l) { return l.find(text) != std::string::npos; });
+  };
+
+  SfmResult r = RunSfm(options);
+  EXPECT_EQ(r.num_registered_images, 3);
+  EXPECT_TRUE(r.left_out.empty());
+  EXPECT_TRUE(said("2/3 images registered after sequential matching; matching the 1 left out with every other photo (2 pairs)"));
+  const std::string log = ReadFile(options.workspace / "colmap" / "colmap.log");
+  EXPECT_NE(log.find("pairs:\nc.jpg a.jpg\nc.jpg b.jpg\n"), std::string::npos) << log;
+  EXPECT_NE(log.find("arg=[image_registrator]"), std::string::npos);
+  EXPECT_NE(log.find("arg=[bundle_adjuster]"), std::string::npos);
+  EXPECT_FALSE(said("warning"));
+
+  progress.clear();
+  options.force = true;
+  options.second_pass = false;
+  r = RunSfm(options);
+  EXPECT_EQ(r.num_registered_images, 2);
+  EXPECT_EQ(r.left_out, std::vector<std::string>{"c.jpg"});
+  EXPECT_TRUE(said("sfm: left out: c.jpg"));
+  EXPECT_TRUE(said("warning: only 2 of 3 photos (66 %) are in the model; try --matcher exhaustive"));
 }
 
 TEST(ColmapRunner, FailingStepReportsExitCodeAndLogTail) {
