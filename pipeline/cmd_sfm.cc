@@ -19,7 +19,8 @@ void AddSfmCommand(CLI::App& app) {
   cmd->add_option("-w,--workspace", o->workspace, "Workspace folder")->required();
   cmd->add_option("--camera-model", o->camera_model, "COLMAP camera model for the photos")->capture_default_str();
   cmd->add_flag("--per-image-camera", [o](std::int64_t) { o->single_camera = false; },
-                "One camera per photo (default: one shared camera)");
+                "One camera per photo (default: one per group of photos that agree on size and EXIF make, model and focal "
+                "length; one for all when they all agree)");
   cmd->add_option("--matcher", o->matcher,
                   "auto (exhaustive up to --exhaustive-max images, else sequential), exhaustive or sequential")
       ->capture_default_str();

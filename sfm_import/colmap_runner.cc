@@ -25,6 +25,7 @@
 #include "common/atomic_file.h"
 #include "common/errors.h"
 #include "common/subprocess.h"
+#include "sfm_import/camera_groups.h"
 #include "sfm_import/camera_models.h"
 #include "sfm_import/colmap_model.h"
 
@@ -423,18 +424,35 @@ SfmResult RunSfm(const SfmOptions& options) {
 
   // (a) Features. CPU SIFT: this build of COLMAP has no CUDA, and GPU SIFT would need an
   // OpenGL context that a headless machine lacks.
+  // With a shared camera, one per group of photos that agree on size and EXIF camera
+  // (camera_groups.h): each group's extraction run (its own image list) adds one camera.
+  std::vector<CameraGroup> groups;
+  if (options.single_camera) {
+    groups = GroupByCamera(options.images, inputs);
+    Report(options, "sfm: " + DescribeGroups(groups));
+  }
   Report(options, StrCat("sfm: extracting features from ", n, " images (", colmap.string(), ")"));
-  {
-    const StepResult r = RunColmapStep(
-        colmap,
-        {"feature_extractor", "--database_path", database.string(), "--image_path",
-         options.images.string(), "--ImageReader.camera_model", options.camera_model,
-         "--ImageReader.single_camera", options.single_camera ? "1" : "0",
-         "--SiftExtraction.use_gpu", "0", "--SiftExtraction.max_image_size",
-         std::to_string(options.max_image_size), "--SiftExtraction.max_num_features",
-         std::to_string(options.max_num_features), "--SiftExtraction.num_threads", threads},
-        "features", ExtractionParser(), options, log, log_path);
+  const auto extract = [&](const std::vector<std::string>& list_args) {
+    std::vector<std::string> args = {"feature_extractor", "--database_path", database.string(), "--image_path",
+                                     options.images.string(), "--ImageReader.camera_model", options.camera_model,
+                                     "--ImageReader.single_camera", options.single_camera ? "1" : "0",
+                                     "--SiftExtraction.use_gpu", "0", "--SiftExtraction.max_image_size",
+                                     std::to_string(options.max_image_size), "--SiftExtraction.max_num_features",
+                                     std::to_string(options.max_num_features), "--SiftExtraction.num_threads", threads};
+    args.insert(args.end(), list_args.begin(), list_args.end());
+    const StepResult r = RunColmapStep(colmap, args, "features", ExtractionParser(), options, log, log_path);
     if (r.signal || r.exit_code != 0) ThrowStepFailed("feature_extractor", r, log_path);
+  };
+  if (groups.size() > 1) {
+    for (size_t g = 0; g < groups.size(); ++g) {
+      const fs::path list = colmap_dir / StrCat("camera_", g + 1, "_images.txt");
+      std::string text;
+      for (const std::string& name : groups[g].names) text += name + "\n";
+      WriteFileAtomically(list, text);
+      extract({"--image_list_path", list.string()});
+    }
+  } else {
+    extract({});
   }
 
   // (b) Matching. Exhaustive is quadratic in the number of images but robust to any capture

@@ -16,7 +16,9 @@ struct SfmOptions {
   std::filesystem::path workspace;  // gets colmap/ (database, log, all models) and sparse/0
   std::string colmap_binary = "colmap";  // name on PATH or a path
   std::string camera_model = "OPENCV";   // COLMAP camera model for extraction
-  bool single_camera = true;             // one shared camera (false: one per image)
+  // One camera per group of photos that agree on size and EXIF camera (camera_groups.h; one
+  // for all when they all agree); false: one per image.
+  bool single_camera = true;
   // Matcher: "auto" (exhaustive up to exhaustive_max_images, else sequential), "exhaustive",
   // "sequential". CPU exhaustive matching costs ~0.28 s per pair on 2 cores (84 photos: 16.5 min).
   std::string matcher = "auto";

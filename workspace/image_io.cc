@@ -73,6 +73,20 @@ ImageInfo ReadImageInfo(const fs::path& path) {
   return info;
 }
 
+CameraTags ReadCameraTags(const fs::path& path) {
+  auto in = OpenInput(path);
+  const OIIO::ImageSpec& spec = in->spec();
+  CameraTags t;
+  t.width = spec.width;
+  t.height = spec.height;
+  t.make = spec.get_string_attribute("Make");
+  t.model = spec.get_string_attribute("Model");
+  t.focal_mm = spec.get_float_attribute("Exif:FocalLength", 0.f);
+  t.time = spec.get_string_attribute("Exif:DateTimeOriginal");
+  in->close();
+  return t;
+}
+
 int64_t DecodedBytes(const ImageInfo& info) {
   return int64_t{info.width} * info.height * std::min(info.channels, 4) * static_cast<int64_t>(sizeof(float));
 }

@@ -6,6 +6,7 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <string>
 
 #include "workspace/image.h"
 
@@ -19,6 +20,16 @@ struct ImageInfo {
 // Reads only the header. Throws InputError if the file is not a readable image, or larger
 // than PERF reads (65536 pixels a side, 2^30 pixels).
 ImageInfo ReadImageInfo(const std::filesystem::path& path);
+
+// What a photo's header says about the camera that took it (EXIF where present; empty or 0
+// where not). Throws like ReadImageInfo.
+struct CameraTags {
+  int width = 0, height = 0;
+  std::string make, model;     // EXIF Make, Model
+  double focal_mm = 0;         // EXIF FocalLength
+  std::string time;            // EXIF DateTimeOriginal ("YYYY:MM:DD HH:MM:SS")
+};
+CameraTags ReadCameraTags(const std::filesystem::path& path);
 
 // Bytes ReadImage allocates for an image of this header.
 int64_t DecodedBytes(const ImageInfo& info);

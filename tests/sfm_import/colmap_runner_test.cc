@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "common/errors.h"
+#include "sfm_import/camera_groups.h"
 #include "sfm_import/colmap_model.h"
 
 namespace fs = std::filesystem;
@@ -723,6 +724,68 @@ exit 0
   EXPECT_EQ(r.left_out, std::vector<std::string>{"c.jpg"});
   EXPECT_TRUE(said("sfm: left out: c.jpg"));
   EXPECT_TRUE(said("warning: only 2 of 3 photos (66 %) are in the model; try --matcher exhaustive"));
+}
+
+// A small JPEG (or PNG) with the given EXIF camera tags (none when make is empty).
+void WriteTaggedPhoto(const fs::path& path, int w, int h, const std::string& make, float focal_mm) {
+  fs::create_directories(path.parent_path());
+  OIIO::ImageSpec spec(w, h, 3, OIIO::TypeDesc::UINT8);
+  if (!make.empty()) {
+    spec.attribute("Make", make);
+    spec.attribute("Model", "Model 1");
+    spec.attribute("Exif:FocalLength", focal_mm);
+  }
+  std::vector<unsigned char> pixels(static_cast<size_t>(w) * h * 3, 128);
+  auto out = OIIO::ImageOutput::create(path.string());
+  ASSERT_TRUE(out && out->open(path.string(), spec)) << path;
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, pixels.data()));
+  out->close();
+}
+
+// Photos from two zoom settings of one camera and a crop without EXIF: three cameras, each
+// extracted with its own image list; photos that all agree: one extraction, one camera.
+TEST(ColmapRunner, PhotosShareACameraOnlyWhereSizeAndExifAgree) {
+  TempDir dir("groups");
+  const fs::path photos = dir.path() / "photos";
+  WriteTaggedPhoto(photos / "a.jpg", 64, 48, "Canon", 35.f);
+  WriteTaggedPhoto(photos / "b.jpg", 64, 48, "Canon", 35.f);
+  WriteTaggedPhoto(photos / "c.jpg", 64, 48, "Canon", 50.f);
+  WriteTaggedPhoto(photos / "sub" / "d.png", 40, 30, "", 0.f);
+  const std::vector<std::string> names = {"a.jpg", "b.jpg", "c.jpg", "sub/d.png"};
+  const std::vector<CameraGroup> groups = GroupByCamera(photos, names);
+  ASSERT_EQ(groups.size(), 3u);
+  EXPECT_EQ(groups[0].names, (std::vector<std::string>{"a.jpg", "b.jpg"}));
+  EXPECT_EQ(groups[0].description, "64x48, Canon Model 1, 35 mm");
+  EXPECT_EQ(groups[1].names, std::vector<std::string>{"c.jpg"});
+  EXPECT_EQ(groups[2].description, "40x30, no EXIF camera");
+  EXPECT_EQ(DescribeGroups(groups),
+            "3 cameras from the photos' size and EXIF: 2 x 64x48, Canon Model 1, 35 mm; 1 x 64x48, Canon Model 1, "
+            "50 mm; 1 x 40x30, no EXIF camera");
+
+  SfmOptions options;
+  options.images = photos;
+  options.workspace = dir.path() / "work";
+  options.colmap_binary = (dir.path() / "bin" / "colmap").string();
+  WriteExecutable(options.colmap_binary, kFakeColmap);
+  options.min_registered_images = 2;
+  std::vector<std::string> progress;
+  options.progress = [&](const std::string& line) { progress.push_back(line); };
+  RunSfm(options);
+  EXPECT_NE(std::find(progress.begin(), progress.end(), "sfm: " + DescribeGroups(groups)), progress.end());
+  const std::string log = ReadFile(options.workspace / "colmap" / "colmap.log");
+  size_t runs = 0;
+  for (size_t at = log.find("arg=[feature_extractor]"); at != std::string::npos; at = log.find("arg=[feature_extractor]", at + 1)) ++runs;
+  EXPECT_EQ(runs, 3u);
+  EXPECT_EQ(ReadFile(options.workspace / "colmap" / "camera_1_images.txt"), "a.jpg\nb.jpg\n");
+  EXPECT_EQ(ReadFile(options.workspace / "colmap" / "camera_3_images.txt"), "sub/d.png\n");
+  EXPECT_NE(log.find("arg=[--image_list_path]"), std::string::npos);
+
+  fs::remove(photos / "c.jpg");
+  fs::remove_all(photos / "sub");
+  options.force = true;
+  RunSfm(options);
+  const std::string log2 = ReadFile(options.workspace / "colmap" / "colmap.log").substr(log.size());
+  EXPECT_EQ(log2.find("arg=[--image_list_path]"), std::string::npos) << "one group: one plain extraction";
 }
 
 TEST(ColmapRunner, FailingStepReportsExitCodeAndLogTail) {
