@@ -457,7 +457,7 @@ SfmResult RunSfm(const SfmOptions& options) {
 
   // (b) Matching. Exhaustive is quadratic in the number of images but robust to any capture
   // order; sequential assumes photos were taken in order (a walk around the object).
-  const bool exhaustive = options.matcher == "exhaustive" ||
+  bool exhaustive = options.matcher == "exhaustive" ||
                           (options.matcher == "auto" && n <= options.exhaustive_max_images);
   {
     std::vector<std::string> args;
@@ -485,51 +485,65 @@ SfmResult RunSfm(const SfmOptions& options) {
     }
   }
 
-  // (c) Incremental mapping.
-  Report(options, "sfm: mapping (incremental reconstruction)");
+  // (c) Incremental mapping. COLMAP writes one numbered folder per disconnected model; the one
+  // with the most images is the scene, the others are fragments it could not attach.
   const std::string too_few_hint =
       "photos need more overlap (each point seen in 3+ photos, neighbours sharing 60-80% of the "
       "view), more texture, or more photos; if they were not taken in order, try --matcher "
       "exhaustive";
-  {
+  std::optional<fs::path> best_dir;
+  ModelCounts best;
+  int num_models = 0;
+  bool no_initial_pair = false;
+  const auto map = [&] {
+    Report(options, "sfm: mapping (incremental reconstruction)");
+    fs::remove_all(models_dir, ec);
+    EnsureWritableDirectory(models_dir);
+    best_dir.reset();
+    best = {};
+    num_models = 0;
     const StepResult r = RunColmapStep(
         colmap,
         {"mapper", "--database_path", database.string(), "--image_path", options.images.string(),
          "--output_path", models_dir.string(), "--Mapper.num_threads", threads},
         "mapping", MapperParser(n), options, log, log_path);
-    if (r.signal || r.exit_code != 0) {
-      // COLMAP 3.8 exits with 1 when no initial pair could be found: a property of the photos,
-      // not a failure of the tool, so it gets the same message as a model that is too small.
-      if (!r.signal && r.saw("failed to create sparse model")) {
-        throw InputError(options.images.string(), "registered images", StrCat("0 of ", n),
-                         "COLMAP could not reconstruct any part of the scene (no pair of photos "
-                         "with enough matches; see " +
-                             log_path.string() + ")",
-                         too_few_hint);
+    // COLMAP 3.8 exits with 1 when no initial pair could be found: a property of the photos,
+    // not a failure of the tool.
+    no_initial_pair = !r.signal && r.exit_code != 0 && r.saw("failed to create sparse model");
+    if ((r.signal || r.exit_code != 0) && !no_initial_pair) ThrowStepFailed("mapper", r, log_path);
+    for (const auto& entry : fs::directory_iterator(models_dir, ec)) {
+      const std::string name = entry.path().filename().string();
+      if (!entry.is_directory() || name.empty() || name.find_first_not_of("0123456789") != std::string::npos) continue;
+      const auto counts = ReadModelCounts(entry.path());
+      if (!counts) continue;
+      ++num_models;
+      if (!best_dir || counts->num_images > best.num_images ||
+          (counts->num_images == best.num_images && counts->num_points > best.num_points)) {
+        best_dir = entry.path();
+        best = *counts;
       }
-      ThrowStepFailed("mapper", r, log_path);
     }
+  };
+  map();
+  // Sequential matching assumed the photos were taken in order (file names give no other clue
+  // when EXIF is stripped). A model of fewer than half of them says they were not: match the
+  // remaining pairs (COLMAP keeps the pairs already matched) and map again.
+  if (!exhaustive && options.matcher == "auto" && best.num_images < n / 2) {
+    Report(options, StrCat("sfm: sequential matching put only ", best.num_images, " of ", n,
+                           " photos in a model, so they were not taken in order: matching every pair and mapping again"));
+    const StepResult r = RunColmapStep(colmap,
+                                       {"exhaustive_matcher", "--database_path", database.string(), "--SiftMatching.use_gpu",
+                                        "0", "--SiftMatching.num_threads", threads},
+                                       "matching", ExhaustiveParser(), options, log, log_path);
+    if (r.signal || r.exit_code != 0) ThrowStepFailed("exhaustive_matcher", r, log_path);
+    exhaustive = true;
+    map();
   }
-
-  // COLMAP writes one numbered folder per disconnected model; the one with the most images is
-  // the scene, the others are fragments it could not attach.
-  std::optional<fs::path> best_dir;
-  ModelCounts best;
-  int num_models = 0;
-  for (const auto& entry : fs::directory_iterator(models_dir, ec)) {
-    const std::string name = entry.path().filename().string();
-    if (!entry.is_directory() || name.empty() ||
-        name.find_first_not_of("0123456789") != std::string::npos) {
-      continue;
-    }
-    const auto counts = ReadModelCounts(entry.path());
-    if (!counts) continue;
-    ++num_models;
-    if (!best_dir || counts->num_images > best.num_images ||
-        (counts->num_images == best.num_images && counts->num_points > best.num_points)) {
-      best_dir = entry.path();
-      best = *counts;
-    }
+  if (!best_dir && no_initial_pair) {
+    throw InputError(options.images.string(), "registered images", StrCat("0 of ", n),
+                     "COLMAP could not reconstruct any part of the scene (no pair of photos "
+                     "with enough matches; see " + log_path.string() + ")",
+                     too_few_hint);
   }
   if (!best_dir || best.num_images < options.min_registered_images) {
     throw InputError(

@@ -726,6 +726,61 @@ exit 0
   EXPECT_TRUE(said("warning: only 2 of 3 photos (66 %) are in the model; try --matcher exhaustive"));
 }
 
+// Photos not taken in order: sequential matching leaves most of them out of the model, so the
+// run matches every pair and maps again (the fake's mapper then finds them all).
+TEST(ColmapRunner, PhotosNotInOrderFallBackToEveryPair) {
+  TempDir dir("unordered");
+  const fs::path first = dir.path() / "first", full = dir.path() / "full";
+  WriteNamedModel(first, {"a.jpg"});
+  WriteNamedModel(full, {"a.jpg", "b.jpg", "c.jpg", "d.jpg"});
+  const fs::path marker = dir.path() / "matched_all";
+  const std::string script = StrCat(R"SH(#!/bin/sh
+PATH=/usr/bin:/bin:$PATH
+step="$1"
+echo "fake colmap $step"
+while [ $# -gt 0 ]; do [ "$1" = "--output_path" ] && out="$2"; shift; done
+case "$step" in
+  exhaustive_matcher) touch ")SH", marker.string(), R"SH(" ;;
+  mapper) mkdir -p "$out/0"
+    if [ -e ")SH", marker.string(), R"SH(" ]; then cp ")SH", full.string(), R"SH("/* "$out/0/"; else cp ")SH",
+                                    first.string(), R"SH("/* "$out/0/"; fi ;;
+esac
+exit 0
+)SH");
+  SfmOptions options;
+  options.images = dir.path() / "photos";
+  for (const char* name : {"a.jpg", "b.jpg", "c.jpg", "d.jpg"}) WriteFile(options.images / name, "");
+  options.workspace = dir.path() / "work";
+  options.colmap_binary = (dir.path() / "bin" / "colmap").string();
+  WriteExecutable(options.colmap_binary, script);
+  options.exhaustive_max_images = 2;  // sequential first
+  options.single_camera = false;
+  std::vector<std::string> progress;
+  options.progress = [&](const std::string& line) { progress.push_back(line); };
+  const SfmResult r = RunSfm(options);
+  EXPECT_EQ(r.num_registered_images, 4);
+  EXPECT_TRUE(fs::exists(marker));
+  EXPECT_NE(std::find(progress.begin(), progress.end(),
+                      "sfm: sequential matching put only 1 of 4 photos in a model, so they were not taken in order: "
+                      "matching every pair and mapping again"),
+            progress.end());
+  const std::string log = ReadFile(options.workspace / "colmap" / "colmap.log");
+  EXPECT_EQ(log.find("fake colmap matches_importer"), std::string::npos) << "no second pass after matching every pair";
+
+  // --matcher sequential means it: no fallback.
+  fs::remove(marker);
+  options.force = true;
+  options.matcher = "sequential";
+  options.second_pass = false;
+  try {
+    RunSfm(options);
+    ADD_FAILURE() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.value(), "1 of 4");
+  }
+  EXPECT_FALSE(fs::exists(marker));
+}
+
 // A small JPEG (or PNG) with the given EXIF camera tags (none when make is empty).
 void WriteTaggedPhoto(const fs::path& path, int w, int h, const std::string& make, float focal_mm) {
   fs::create_directories(path.parent_path());
