@@ -1,8 +1,8 @@
 // `perf sfm`'s defaults on the three kinds of photo set of issue 19, made from 24 consecutive
 // photos of shared/data/bonsai (a walk around the object, EXIF stripped): in capture order,
 // under shuffled names (a fixed permutation), and from three "cameras" (a third as they are, a
-// third centre-cropped to 80 %, a third downscaled to 60 %). Each must put at least 90 % of the photos in the
-// model with the defaults; the mixed set with one camera per group. Real colmap runs at small
+// third centre-cropped to 80 %, a third downscaled to 60 %). Each must put all photos but one at most
+// in the model with the defaults; the mixed set with one camera per group. Real colmap runs at small
 // sizes (a few minutes each on 2 cores): label slow.
 #include <gtest/gtest.h>
 
@@ -63,7 +63,9 @@ bool Said(const SfmRun& run, const std::string& text) {
 void ExpectMostRegistered(const SfmRun& run) {
   std::string log;
   for (const std::string& l : run.progress) log += l + "\n";
-  EXPECT_GE(run.result.num_registered_images, (9 * kPhotos + 9) / 10) << log;
+  // All but one at most: under shuffled names sequential matching alone (the old default) put 22
+  // of the 24 in the model (2026-12-02), the second pass the other 2.
+  EXPECT_GE(run.result.num_registered_images, kPhotos - 1) << log;
   std::printf("%d/%d registered in %.0f s\n%s", run.result.num_registered_images, kPhotos, run.result.seconds, log.c_str());
 }
 
