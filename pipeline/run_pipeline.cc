@@ -127,7 +127,7 @@ class Runner {
     so.force = o_.force;
     so.progress = [&](const std::string& line) {
       CheckStop();
-      Say("sfm: " + line);
+      Say(line.rfind("sfm: ", 0) == 0 ? line : "sfm: " + line);  // RunSfm's own lines already say so
     };
     const SfmResult r = RunSfm(so);
     s->reason = StrCat(r.num_registered_images, " of ", r.num_input_images, " photos registered");
