@@ -216,6 +216,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   result.fixed_background = ho.fixed_background;
   ho.solver.smooth_grid = o.smooth_grid >= 0 ? o.smooth_grid : ho.fixed_background ? 0.0 : kAutoSmoothGrid;
   ho.solver.smooth_shells = o.smooth_shells;
+  if (o.solver.type == SolverType::kAdam) ho.solver.smooth_grid = ho.solver.smooth_shells = 0;  // Gauss-Newton only
   const auto shape_of = [&](int level) { return LevelShape(ho, geometry.num_shells(), level); };
 
   EnsureWritableDirectory(o.workspace / "recon");
