@@ -3,8 +3,9 @@
 // 17.7-19.2 units from the cameras' median centre where the median camera is 3.8 away, seeing
 // 259-937 points where the median photo sees 1067. Training on one fits noise; scoring on one scores noise.
 //
-// Not wired into import yet: the next step marks them in scene.json (left out of training and
-// scoring, an option keeps them), and adds the photometric check after the first level.
+// perf import marks them "excluded" in scene.json (out of training and scoring; --keep-bad-poses
+// keeps them). A photometric test after the first level would not find them: the learned shells
+// fit a wrong pose about as well as the others (docs/tuning.md).
 #pragma once
 
 #include <string>
