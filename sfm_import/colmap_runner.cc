@@ -285,6 +285,14 @@ std::optional<std::vector<std::string>> LeftOut(const std::vector<std::string>& 
   return out;
 }
 
+// "71, 8 and 3", largest first.
+std::string ModelSizes(std::vector<int> sizes) {
+  std::sort(sizes.rbegin(), sizes.rend());
+  std::string out;
+  for (size_t i = 0; i < sizes.size(); ++i) out += StrCat(i == 0 ? "" : i + 1 == sizes.size() ? " and " : ", ", sizes[i]);
+  return out;
+}
+
 // "a.jpg, b.jpg, c.jpg and 4 more"
 std::string NameList(const std::vector<std::string>& names, size_t shown = 8) {
   std::string list;
@@ -494,6 +502,7 @@ SfmResult RunSfm(const SfmOptions& options) {
   std::optional<fs::path> best_dir;
   ModelCounts best;
   int num_models = 0;
+  std::vector<int> model_sizes;  // photos in each model COLMAP made
   bool no_initial_pair = false;
   const auto map = [&] {
     Report(options, "sfm: mapping (incremental reconstruction)");
@@ -502,6 +511,7 @@ SfmResult RunSfm(const SfmOptions& options) {
     best_dir.reset();
     best = {};
     num_models = 0;
+    model_sizes.clear();
     const StepResult r = RunColmapStep(
         colmap,
         {"mapper", "--database_path", database.string(), "--image_path", options.images.string(),
@@ -517,6 +527,7 @@ SfmResult RunSfm(const SfmOptions& options) {
       const auto counts = ReadModelCounts(entry.path());
       if (!counts) continue;
       ++num_models;
+      model_sizes.push_back(counts->num_images);
       if (!best_dir || counts->num_images > best.num_images ||
           (counts->num_images == best.num_images && counts->num_points > best.num_points)) {
         best_dir = entry.path();
@@ -590,6 +601,7 @@ SfmResult RunSfm(const SfmOptions& options) {
            [](const std::string&) { return std::optional<std::string>(); });
       const auto counts = ok ? ReadModelCounts(second) : std::nullopt;
       if (counts && counts->num_images > best.num_images) {
+        *std::max_element(model_sizes.begin(), model_sizes.end()) = counts->num_images;  // it grew
         best_dir = second;
         best = *counts;
       }
@@ -604,7 +616,7 @@ SfmResult RunSfm(const SfmOptions& options) {
   Report(
       options,
       StrCat("sfm: ", best.num_images, "/", n, " images registered, ", best.num_points, " points",
-             num_models > 1 ? StrCat(" (largest of ", num_models, " models)") : "", ", in ",
+             num_models > 1 ? StrCat(" (the largest of ", num_models, " models of ", ModelSizes(model_sizes), " photos)") : "", ", in ",
              static_cast<int>(result.seconds + 0.5), " s -> ", result.sparse_dir.string()));
   if (!result.left_out.empty()) Report(options, "sfm: left out: " + NameList(result.left_out));
   if (best.num_images < 0.9 * n) {

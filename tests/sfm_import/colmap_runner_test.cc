@@ -626,6 +626,9 @@ TEST(ColmapRunner, FakeColmapPicksLargestModelAndReplacesOldOne) {
   ASSERT_NE(at("features: 3/3 images"), progress.end());
   EXPECT_LT(at("features: 2/3 images"), at("features: 3/3 images"));
   EXPECT_NE(at("mapping: 3/2 images registered"), progress.end());
+  EXPECT_NE(std::find_if(progress.begin(), progress.end(),
+                         [](const std::string& l) { return l.find("(the largest of 2 models of 3 and 2 photos)") != std::string::npos; }),
+            progress.end());
 
   // Too few images for a stricter minimum.
   options.min_registered_images = 4;
