@@ -88,6 +88,10 @@ double VisibleFraction(const std::vector<BoundsCamera>& cameras, const Eigen::Ve
 
 double Median(std::vector<double> v) { return Percentile(v, 50.0); }
 
+bool IsRobustPoint(const BoundsPoint& p, const BoundsOptions& o) {
+  return p.track_length >= o.min_track_length && (p.error < 0 || p.error <= o.max_reproj_error);
+}
+
 bool ClosestPointToAxes(const std::vector<BoundsCamera>& cameras, Eigen::Vector3d* point) {
   // Minimises sum_i |(I - d_i d_i^T)(p - o_i)|^2: (sum P_i) p = sum P_i o_i.
   Eigen::Matrix3d a = Eigen::Matrix3d::Zero();
@@ -164,9 +168,7 @@ BoundsResult EstimateBounds(const std::vector<BoundsCamera>& cameras,
   // Robust sparse points: seen by several images, low reprojection error.
   std::vector<Eigen::Vector3d> inliers;
   for (const auto& p : points) {
-    if (p.track_length >= o.min_track_length && (p.error < 0 || p.error <= o.max_reproj_error)) {
-      inliers.push_back(p.xyz);
-    }
+    if (IsRobustPoint(p, o)) inliers.push_back(p.xyz);
   }
   if (inliers.size() < 20 && !points.empty()) {  // tiny models: take what there is
     inliers.clear();

@@ -61,6 +61,10 @@ struct BoundsResult {
   int num_points_used = 0;         // ROI points that defined the box (0: camera-only)
 };
 
+// A robust sparse point: seen by at least min_track_length images, with a reprojection error
+// of at most max_reproj_error (or unknown).
+bool IsRobustPoint(const BoundsPoint& point, const BoundsOptions& options);
+
 // The median of `values` (of an even count, the upper of the two middle ones), by nth_element.
 double Median(std::vector<double> values);
 

@@ -95,9 +95,7 @@ void PlaceBoundsAndShells(const ImportOptions& o, const std::vector<BoundsPoint>
     }
     std::vector<double> distances;
     for (const auto& p : points) {
-      if (p.track_length >= bo.min_track_length && (p.error < 0 || p.error <= bo.max_reproj_error)) {
-        distances.push_back((p.xyz - box.center).norm());
-      }
+      if (IsRobustPoint(p, bo)) distances.push_back((p.xyz - box.center).norm());
     }
     r->bounds.shells = PlaceShells(box, camera_radius, std::move(distances), bo);
   }
