@@ -466,7 +466,12 @@ SfmResult RunSfm(const SfmOptions& options) {
   // (b) Matching. Exhaustive is quadratic in the number of images but robust to any capture
   // order; sequential assumes photos were taken in order (a walk around the object).
   bool exhaustive = options.matcher == "exhaustive" ||
-                          (options.matcher == "auto" && n <= options.exhaustive_max_images);
+                    (options.matcher == "auto" && n <= options.exhaustive_max_images);
+  // A matcher's arguments with the SIFT matching settings every matching step shares.
+  const auto with_sift_matching = [&](std::vector<std::string> args) {
+    args.insert(args.end(), {"--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", threads});
+    return args;
+  };
   {
     std::vector<std::string> args;
     ProgressParser parser;
@@ -486,8 +491,7 @@ SfmResult RunSfm(const SfmOptions& options) {
               "1"};
       parser = SequentialParser();
     }
-    args.insert(args.end(), {"--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", threads});
-    const StepResult r = RunColmapStep(colmap, args, "matching", parser, options, log, log_path);
+    const StepResult r = RunColmapStep(colmap, with_sift_matching(args), "matching", parser, options, log, log_path);
     if (r.signal || r.exit_code != 0) {
       ThrowStepFailed(exhaustive ? "exhaustive_matcher" : "sequential_matcher", r, log_path);
     }
@@ -501,7 +505,6 @@ SfmResult RunSfm(const SfmOptions& options) {
       "exhaustive";
   std::optional<fs::path> best_dir;
   ModelCounts best;
-  int num_models = 0;
   std::vector<int> model_sizes;  // photos in each model COLMAP made
   bool no_initial_pair = false;
   const auto map = [&] {
@@ -510,7 +513,6 @@ SfmResult RunSfm(const SfmOptions& options) {
     EnsureWritableDirectory(models_dir);
     best_dir.reset();
     best = {};
-    num_models = 0;
     model_sizes.clear();
     const StepResult r = RunColmapStep(
         colmap,
@@ -526,7 +528,6 @@ SfmResult RunSfm(const SfmOptions& options) {
       if (!entry.is_directory() || name.empty() || name.find_first_not_of("0123456789") != std::string::npos) continue;
       const auto counts = ReadModelCounts(entry.path());
       if (!counts) continue;
-      ++num_models;
       model_sizes.push_back(counts->num_images);
       if (!best_dir || counts->num_images > best.num_images ||
           (counts->num_images == best.num_images && counts->num_points > best.num_points)) {
@@ -542,9 +543,7 @@ SfmResult RunSfm(const SfmOptions& options) {
   if (!exhaustive && options.matcher == "auto" && best.num_images < n / 2) {
     Report(options, StrCat("sfm: sequential matching put only ", best.num_images, " of ", n,
                            " photos in a model, so they were not taken in order: matching every pair and mapping again"));
-    const StepResult r = RunColmapStep(colmap,
-                                       {"exhaustive_matcher", "--database_path", database.string(), "--SiftMatching.use_gpu",
-                                        "0", "--SiftMatching.num_threads", threads},
+    const StepResult r = RunColmapStep(colmap, with_sift_matching({"exhaustive_matcher", "--database_path", database.string()}),
                                        "matching", ExhaustiveParser(), options, log, log_path);
     if (r.signal || r.exit_code != 0) ThrowStepFailed("exhaustive_matcher", r, log_path);
     exhaustive = true;
@@ -560,7 +559,7 @@ SfmResult RunSfm(const SfmOptions& options) {
     throw InputError(
         options.images.string(), "registered images", StrCat(best.num_images, " of ", n),
         StrCat("too few images registered (at least ", options.min_registered_images,
-               " needed; largest of ", num_models, " models in ", models_dir.string(), ")"),
+               " needed; largest of ", model_sizes.size(), " models in ", models_dir.string(), ")"),
         too_few_hint);
   }
 
@@ -591,8 +590,8 @@ SfmResult RunSfm(const SfmOptions& options) {
         ok = !r.signal && r.exit_code == 0;
         if (!ok) Report(options, StrCat("sfm: ", args.front(), " failed (see ", log_path.string(), "); keeping the first model"));
       };
-      step({"matches_importer", "--database_path", database.string(), "--match_list_path", pairs.string(),
-            "--match_type", "pairs", "--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", threads},
+      step(with_sift_matching({"matches_importer", "--database_path", database.string(), "--match_list_path",
+                               pairs.string(), "--match_type", "pairs"}),
            "matching", ExhaustiveParser());
       step({"image_registrator", "--database_path", database.string(), "--input_path", best_dir->string(),
             "--output_path", second.string(), "--Mapper.num_threads", threads},
@@ -616,7 +615,9 @@ SfmResult RunSfm(const SfmOptions& options) {
   Report(
       options,
       StrCat("sfm: ", best.num_images, "/", n, " images registered, ", best.num_points, " points",
-             num_models > 1 ? StrCat(" (the largest of ", num_models, " models of ", ModelSizes(model_sizes), " photos)") : "", ", in ",
+             model_sizes.size() > 1 ? StrCat(" (the largest of ", model_sizes.size(), " models of ", ModelSizes(model_sizes), " photos)")
+                                    : "",
+             ", in ",
              static_cast<int>(result.seconds + 0.5), " s -> ", result.sparse_dir.string()));
   if (!result.left_out.empty()) Report(options, "sfm: left out: " + NameList(result.left_out));
   if (best.num_images < 0.9 * n) {
