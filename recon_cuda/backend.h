@@ -181,9 +181,10 @@ class Backend {
   // (jacobian.h SkippableSample).
   virtual void RestrictJacobian(VecId /*free*/) {}
   // The smoothness term (smoothness.h) with weights w at v: out += L v unless out is kNoVector
-  // (out != v), diag += L's diagonal unless diag is kNoVector. Returns v^T L v / 2, the term's
-  // cost at v, deterministic like Dot.
-  virtual double Smoothness(VecId v, const SmoothnessWeights& w, VecId out, VecId diag) = 0;
+  // (out != v), diag += L's diagonal unless diag is kNoVector.
+  virtual void AddSmoothness(VecId v, const SmoothnessWeights& w, VecId out, VecId diag) = 0;
+  // Its cost at v, v^T L v / 2, deterministic like Dot.
+  virtual double SmoothnessCost(VecId v, const SmoothnessWeights& w) const = 0;
   // The sum of v's entries of each ParamKind (indexed by its value), deterministic like Dot.
   virtual std::array<double, 4> SumByKind(VecId v) const = 0;
   // One Adam step (Kingma & Ba) with per-kind learning rates, t = step number from 1.

@@ -87,8 +87,11 @@ class CpuBackend final : public Backend {
   void AxpyDiag(VecId y, double a, VecId d, VecId x) override { vectors_.AxpyDiag(y, a, d, x); }
   double Dot(VecId a, VecId b) const override { return vectors_.Dot(a, b); }
   double MaxAbs(VecId v) const override { return vectors_.MaxAbs(v); }
-  double Smoothness(VecId v, const SmoothnessWeights& w, VecId out, VecId diag) override {
-    return vectors_.Smoothness(v, level_.shape, w, out, diag);
+  void AddSmoothness(VecId v, const SmoothnessWeights& w, VecId out, VecId diag) override {
+    vectors_.AddSmoothness(v, level_.shape, w, out, diag);
+  }
+  double SmoothnessCost(VecId v, const SmoothnessWeights& w) const override {
+    return vectors_.SmoothnessCost(v, level_.shape, w);
   }
   std::array<double, 4> SumByKind(VecId v) const override { return vectors_.SumByKind(v, level_.shape); }
   void Project(VecId x) override { vectors_.Project(x, level_.shape); }

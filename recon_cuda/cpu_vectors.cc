@@ -160,21 +160,30 @@ void CpuVectors::AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings
   Project(x, shape);
 }
 
-double CpuVectors::Smoothness(VecId v, const VolumeShape& shape, const SmoothnessWeights& w, VecId out, VecId diag) {
+void CpuVectors::AddSmoothness(VecId v, const VolumeShape& shape, const SmoothnessWeights& w, VecId out, VecId diag) {
   PERF_CHECK(out != v);
   const SmoothnessLayout layout = MakeSmoothnessLayout(shape);
   const float* pv = (*this)[v].data();
   float* po = out == kNoVector ? nullptr : (*this)[out].data();
   float* pd = diag == kNoVector ? nullptr : (*this)[diag].data();
+  ForChunks([&](int64_t b, int64_t e) {
+    for (int64_t i = b; i < e; ++i) {
+      float lap, degree;
+      SmoothnessRow(layout, w, pv, i, &lap, &degree);
+      if (po) po[i] += lap;
+      if (pd) pd[i] += degree;
+    }
+  });
+}
+
+double CpuVectors::SmoothnessCost(VecId v, const VolumeShape& shape, const SmoothnessWeights& w) const {
+  const SmoothnessLayout layout = MakeSmoothnessLayout(shape);
+  const float* pv = (*this)[v].data();
   return ReduceChunks(
       [&](int64_t b, int64_t e) {
         double energy = 0;
-        for (int64_t i = b; i < e; ++i) {
-          float lap, degree;
-          energy += SmoothnessRow(layout, w, pv, i, &lap, &degree);
-          if (po) po[i] += lap;
-          if (pd) pd[i] += degree;
-        }
+        float lap, degree;
+        for (int64_t i = b; i < e; ++i) energy += SmoothnessRow(layout, w, pv, i, &lap, &degree);
         return energy;
       },
       [](double x, double y) { return x + y; });

@@ -43,7 +43,8 @@ class CpuVectors {
   void Project(VecId x, const VolumeShape& shape);
   void HoldParameters(VecId x, VecId g, VecId free, const VolumeShape& shape, bool fixed_shells, bool bounds);
   void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t, const VolumeShape& shape);
-  double Smoothness(VecId v, const VolumeShape& shape, const SmoothnessWeights& w, VecId out, VecId diag);
+  void AddSmoothness(VecId v, const VolumeShape& shape, const SmoothnessWeights& w, VecId out, VecId diag);
+  double SmoothnessCost(VecId v, const VolumeShape& shape, const SmoothnessWeights& w) const;
   std::array<double, 4> SumByKind(VecId v, const VolumeShape& shape) const;
 
   // fn(begin, end) over the vectors' elements, in parallel over fixed chunks.

@@ -164,15 +164,13 @@ class CudaBackend final : public Backend {
   }
   double Dot(VecId a, VecId b) const override { return cuda::Dot(ptr(a), ptr(b), n(), scratch_->Reduce()); }
   double MaxAbs(VecId v) const override { return cuda::MaxAbs(ptr(v), n(), scratch_->Reduce()); }
-  double Smoothness(VecId v, const SmoothnessWeights& w, VecId out, VecId diag) override {
+  void AddSmoothness(VecId v, const SmoothnessWeights& w, VecId out, VecId diag) override {
     PERF_CHECK(out != v);
-    SmoothnessLayout layout = MakeSmoothnessLayout(level_.shape);
-    if (level_.shape.bricks) {
-      layout.slot = bricks_.data();
-      layout.bricks = brick_list_.data();
-    }
-    return cuda::Smoothness(ptr(v), layout, w, out == kNoVector ? nullptr : ptr(out),
-                            diag == kNoVector ? nullptr : ptr(diag), n(), scratch_->Reduce());
+    cuda::AddSmoothness(ptr(v), DeviceSmoothnessLayout(), w, out == kNoVector ? nullptr : ptr(out),
+                        diag == kNoVector ? nullptr : ptr(diag), n());
+  }
+  double SmoothnessCost(VecId v, const SmoothnessWeights& w) const override {
+    return cuda::SmoothnessCost(ptr(v), DeviceSmoothnessLayout(), w, n(), scratch_->Reduce());
   }
   std::array<double, 4> SumByKind(VecId v) const override {
     return cuda::SumByKind(ptr(v), n(), level_.shape.GridParamCount(), scratch_->Reduce());
@@ -279,6 +277,16 @@ class CudaBackend final : public Backend {
                   " solver vectors ", Mib(e.vectors), ", ", p.rays->size(), " rays ", Mib(e.rays),
                   ", scratch and the kernels' local memory ", Mib(e.scratch), ") but only ", Mib(e.available), " are free on ", name_, "; ", hint,
                   ", a larger --downscale, or --device cpu");
+  }
+
+  // The smoothness stencil's layout with a sparse grid's tables on the device.
+  SmoothnessLayout DeviceSmoothnessLayout() const {
+    SmoothnessLayout layout = MakeSmoothnessLayout(level_.shape);
+    if (level_.shape.bricks) {
+      layout.slot = bricks_.data();
+      layout.bricks = brick_list_.data();
+    }
+    return layout;
   }
 
   // The level's volume at x as the kernels read it: a sparse grid's brick table on the device.

@@ -100,9 +100,11 @@ struct ReduceScratch {
 size_t ReduceTempBytes(int64_t n);
 double Dot(const float* a, const float* b, int64_t n, const ReduceScratch& s);
 double MaxAbs(const float* a, int64_t n, const ReduceScratch& s);
-// backend.h Smoothness (layout's tables on the device) and SumByKind.
-double Smoothness(const float* v, const SmoothnessLayout& layout, const SmoothnessWeights& w, float* out, float* diag,
-                  int64_t n, const ReduceScratch& s);
+// backend.h AddSmoothness, SmoothnessCost (layout's tables on the device) and SumByKind.
+void AddSmoothness(const float* v, const SmoothnessLayout& layout, const SmoothnessWeights& w, float* out, float* diag,
+                   int64_t n);
+double SmoothnessCost(const float* v, const SmoothnessLayout& layout, const SmoothnessWeights& w, int64_t n,
+                      const ReduceScratch& s);
 std::array<double, 4> SumByKind(const float* v, int64_t n, int64_t grid_params, const ReduceScratch& s);
 
 // Whether the kernels of this build can run on the current device (a binary built for sm_90 +

@@ -144,19 +144,22 @@ double Dot(const float* a, const float* b, int64_t n, const ReduceScratch& s) {
 double MaxAbs(const float* a, int64_t n, const ReduceScratch& s) { return Reduce(AbsTerm{a}, MaxD{}, n, s); }
 
 
-double Smoothness(const float* v, const SmoothnessLayout& layout, const SmoothnessWeights& w, float* out, float* diag,
-                  int64_t n, const ReduceScratch& s) {
-  if (out != nullptr || diag != nullptr) {
-    ForEach(
-        n,
-        [=] __device__(int64_t i) {
-          float lap, degree;
-          SmoothnessRow(layout, w, v, i, &lap, &degree);
-          if (out != nullptr) out[i] += lap;
-          if (diag != nullptr) diag[i] += degree;
-        },
-        "Smoothness");
-  }
+void AddSmoothness(const float* v, const SmoothnessLayout& layout, const SmoothnessWeights& w, float* out, float* diag,
+                   int64_t n) {
+  if (out == nullptr && diag == nullptr) return;
+  ForEach(
+      n,
+      [=] __device__(int64_t i) {
+        float lap, degree;
+        SmoothnessRow(layout, w, v, i, &lap, &degree);
+        if (out != nullptr) out[i] += lap;
+        if (diag != nullptr) diag[i] += degree;
+      },
+      "AddSmoothness");
+}
+
+double SmoothnessCost(const float* v, const SmoothnessLayout& layout, const SmoothnessWeights& w, int64_t n,
+                      const ReduceScratch& s) {
   return Reduce(SmoothnessTerm{layout, w, v}, AddD{}, n, s);
 }
 

@@ -123,7 +123,7 @@ int SolvePcg(const SolverOptions& o, Backend* b, const SmoothnessWeights& w, Sol
   int k = 0;
   while (k < o.max_cg_iterations) {
     b->MultiplyJtJ(kDir, kAp);
-    if (w.Any()) b->Smoothness(kDir, w, kAp, kNoVector);
+    if (w.Any()) b->AddSmoothness(kDir, w, kAp, kNoVector);
     b->Multiply(kAp, kFree);  // the system of the free parameters only
     ++summary->jtj_passes;
     if (o.damping > 0) b->AxpyDiag(kAp, o.damping, kDiag, kDir);
@@ -146,7 +146,7 @@ int SolvePcg(const SolverOptions& o, Backend* b, const SmoothnessWeights& w, Sol
 
 // The smoothness term's cost at v (0 when off).
 double SmoothnessCost(Backend* b, VecId v, const SmoothnessWeights& w) {
-  return w.Any() ? b->Smoothness(v, w, kNoVector, kNoVector) : 0.0;
+  return w.Any() ? b->SmoothnessCost(v, w) : 0.0;
 }
 
 // x(gamma) = P(x + gamma d) into kTrial.
@@ -183,7 +183,8 @@ void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const Iter
     if (o.type == SolverType::kGaussNewton) {
       if (it == 0) summary->smoothness = CalibrateSmoothness(o, b);
       if (summary->smoothness.Any()) {
-        const double e = b->Smoothness(kX, summary->smoothness, kG, kDiag);
+        const double e = b->SmoothnessCost(kX, summary->smoothness);
+        b->AddSmoothness(kX, summary->smoothness, kG, kDiag);
         lin.cost += e;
         lin.subset_cost += e / o.line_search_ray_stride;  // on the subset's scale, as the line search sees it
       }

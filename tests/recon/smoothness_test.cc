@@ -102,7 +102,8 @@ TEST(Smoothness, CostGradientAndDiagonalMatchCeres) {
   const int64_t n = s.p.shape.ParamCount();
   s.b->Fill(1, 0.f);
   s.b->Fill(2, 0.f);
-  const double cost = s.b->Smoothness(0, s.w, 1, 2);
+  s.b->AddSmoothness(0, s.w, 1, 2);
+  const double cost = s.b->SmoothnessCost(0, s.w);
   const std::vector<float> g = s.Get(1), diag = s.Get(2);
 
   // Ceres: one residual block per pair (a < b), each parameter its own block.
@@ -142,7 +143,7 @@ TEST(Smoothness, GradientIsTheCentralDifferenceAndTheHessianIsSymmetric) {
   SmoothLevel s;
   const int64_t n = s.p.shape.ParamCount();
   s.b->Fill(1, 0.f);
-  s.b->Smoothness(0, s.w, 1, kNoVector);
+  s.b->AddSmoothness(0, s.w, 1, kNoVector);
   const std::vector<float> g = s.Get(1);
   std::mt19937 rng(9);
   std::uniform_int_distribution<int64_t> pick(0, n - 1);
@@ -152,10 +153,10 @@ TEST(Smoothness, GradientIsTheCentralDifferenceAndTheHessianIsSymmetric) {
     const float h = 1e-2f;  // the cost is quadratic: central differences are exact up to rounding
     x[i] += h;
     s.b->Upload(3, x);
-    const double up = s.b->Smoothness(3, s.w, kNoVector, kNoVector);
+    const double up = s.b->SmoothnessCost(3, s.w);
     x[i] -= 2 * h;
     s.b->Upload(3, x);
-    const double down = s.b->Smoothness(3, s.w, kNoVector, kNoVector);
+    const double down = s.b->SmoothnessCost(3, s.w);
     EXPECT_NEAR(g[i], (up - down) / (2 * h), 2e-3 * (1 + std::abs(g[i]))) << i;
   }
   // <q, L p> = <p, L q> for random p, q.
@@ -169,12 +170,12 @@ TEST(Smoothness, GradientIsTheCentralDifferenceAndTheHessianIsSymmetric) {
   s.b->Upload(1, q);
   s.b->Fill(2, 0.f);
   s.b->Fill(3, 0.f);
-  s.b->Smoothness(0, s.w, 2, kNoVector);
-  s.b->Smoothness(1, s.w, 3, kNoVector);
+  s.b->AddSmoothness(0, s.w, 2, kNoVector);
+  s.b->AddSmoothness(1, s.w, 3, kNoVector);
   const double qlp = s.b->Dot(1, 2), plq = s.b->Dot(0, 3);
   EXPECT_NEAR(qlp, plq, 1e-4 * std::abs(qlp));
   // and p^T L p / 2 is the cost at p.
-  EXPECT_NEAR(s.b->Smoothness(0, s.w, kNoVector, kNoVector), 0.5 * s.b->Dot(0, 2), 1e-4 * s.b->Dot(0, 2));
+  EXPECT_NEAR(s.b->SmoothnessCost(0, s.w), 0.5 * s.b->Dot(0, 2), 1e-4 * s.b->Dot(0, 2));
 }
 
 TEST(Smoothness, SolverWithSmoothShellsFitsSmootherShells) {
