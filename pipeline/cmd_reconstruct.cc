@@ -2,6 +2,7 @@
 #include <CLI/CLI.hpp>
 #include <iostream>
 
+#include "common/comm.h"
 #include "common/errors.h"
 #include "pipeline/cli_choice.h"
 #include "pipeline/commands.h"
@@ -127,12 +128,16 @@ void AddReconstructCommand(CLI::App& app) {
     if (args->no_pyramid) o.pyramid = false;
     if (args->no_hold) o.solver.hold_at_bounds = false;
     if (args->no_alpha) o.residuals.use_alpha = false;
-    const auto lock = LockWorkspace(o.workspace, "reconstruct");
-    Progress progress("reconstruct", args->quiet);
+    // Under mpirun every rank fits its share of the photos; rank 0 holds the lock, writes and reports.
+    o.comm = &World();
+    const bool root = o.comm->IsRoot();
+    std::unique_ptr<WorkspaceLock> lock;
+    if (root) lock = LockWorkspace(o.workspace, "reconstruct");
+    Progress progress("reconstruct", args->quiet || !root);
     o.on_event = [&](const recon::ReconstructOptions::Event& e) { ShowReconstructEvent(progress, e); };
     const recon::ReconstructResult r = recon::Reconstruct(o);
     progress.Finish();
-    if (!args->quiet) std::cout << recon::ReconstructSummary(r);
+    if (!args->quiet && root) std::cout << recon::ReconstructSummary(r);
   });
 }
 

@@ -3,9 +3,30 @@
 #include <iostream>
 #include <new>
 
+#include "common/comm.h"
 #include "common/errors.h"
 #include "common/version.h"
 #include "pipeline/commands.h"
+
+namespace {
+
+// Under mpirun with several ranks: "error (rank 1 of 4)", so that a user sees which rank failed.
+std::string ErrorWord(const char* word) {
+  if (!perf::LaunchedByMpi() || perf::World().size() == 1) return word;
+  return perf::StrCat(word, " (rank ", perf::World().rank(), " of ", perf::World().size(), ")");
+}
+
+// A rank that fails ends every rank of the job (MPI_Abort): the others would wait for it in their
+// next sum for ever. A single process just exits with the code.
+int End(int code) {
+  if (perf::LaunchedByMpi() && perf::World().size() > 1) {
+    std::cerr.flush();
+    perf::World().Abort(code);
+  }
+  return code;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{
@@ -31,26 +52,28 @@ int main(int argc, char** argv) {
     // --help and --version are ParseErrors that exit 0; every other one is bad input.
     return app.exit(e) == 0 ? 0 : 2;
   } catch (const perf::InputError& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return 2;
+    std::cerr << ErrorWord("error") << ": " << e.what() << "\n";
+    return End(2);
   } catch (const perf::IoError& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return 3;
+    std::cerr << ErrorWord("error") << ": " << e.what() << "\n";
+    return End(3);
   } catch (const perf::ResourceError& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return 5;
+    std::cerr << ErrorWord("error") << ": " << e.what() << "\n";
+    return End(5);
   } catch (const perf::Interrupted& e) {
-    std::cerr << "stopped: " << e.what() << "\n";
-    return 130;
+    std::cerr << ErrorWord("stopped") << ": " << e.what() << "\n";
+    return End(130);
   } catch (const perf::InternalError& e) {
-    std::cerr << "error: " << e.what() << "\nThis is a bug in perf; please report it with the command line.\n";
-    return 1;
+    std::cerr << ErrorWord("error") << ": " << e.what()
+              << "\nThis is a bug in perf; please report it with the command line.\n";
+    return End(1);
   } catch (const std::bad_alloc&) {
-    std::cerr << "error: out of memory; use a smaller --max-size or --downscale, fewer --levels, or fewer threads (-j)\n";
-    return 5;
+    std::cerr << ErrorWord("error")
+              << ": out of memory; use a smaller --max-size or --downscale, fewer --levels, or fewer threads (-j)\n";
+    return End(5);
   } catch (const std::exception& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return 4;
+    std::cerr << ErrorWord("error") << ": " << e.what() << "\n";
+    return End(4);
   }
   return 0;
 }

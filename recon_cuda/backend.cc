@@ -18,12 +18,14 @@ bool CudaDeviceAvailable(std::string* name, std::string* reason) {
 #endif
 }
 
-std::unique_ptr<Backend> MakeBackend(DeviceChoice device, int threads) {
+std::unique_ptr<Backend> MakeBackend(DeviceChoice device, int threads, int cuda_device) {
   if (device != DeviceChoice::kCpu) {
     std::string reason;
     if (CudaDeviceAvailable(nullptr, &reason)) {
 #ifdef PERF_WITH_CUDA
-      return MakeCudaBackend(CudaBackendOptions{});
+      CudaBackendOptions o;
+      o.device = cuda_device;
+      return MakeCudaBackend(o);
 #endif
     }
     if (device == DeviceChoice::kCuda) {

@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "common/comm.h"
 #include "recon_cuda/device_choice.h"
 #include "recon_cuda/smoothness.h"
 #include "recon_cuda/training_data.h"
@@ -187,6 +188,9 @@ class Backend {
   virtual double SmoothnessCost(VecId v, const SmoothnessWeights& w) const = 0;
   // The sum of v's entries of each ParamKind (indexed by its value), deterministic like Dot.
   virtual std::array<double, 4> SumByKind(VecId v) const = 0;
+  // v = the sum of every rank's v (distributed_backend.h). The default sums a host copy; a
+  // backend whose memory the communicator reads (host vectors, NCCL's device memory) sums in place.
+  virtual void SumAcrossRanks(VecId v, Communicator& comm);
   // One Adam step (Kingma & Ba) with per-kind learning rates, t = step number from 1.
   virtual void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) = 0;
 
@@ -202,9 +206,10 @@ class Backend {
                               float min_box_opacity) = 0;
 };
 
-// threads: CPU worker threads, 0 = all. kCuda without a usable device (or in a build without
-// CUDA) throws ResourceError saying so.
-std::unique_ptr<Backend> MakeBackend(DeviceChoice device, int threads);
+// threads: CPU worker threads, 0 = all; cuda_device: the GPU (modulo the devices there are; a
+// rank passes its rank on the node, comm.h LocalRank). kCuda without a usable device (or in a
+// build without CUDA) throws ResourceError saying so.
+std::unique_ptr<Backend> MakeBackend(DeviceChoice device, int threads, int cuda_device = 0);
 
 // Whether the CUDA backend can run here: built with CUDA and a device visible to the runtime.
 // Never throws and is safe without a driver. name: the device's name when true; reason: why not

@@ -54,7 +54,7 @@ class CpuBackend final : public Backend {
     scratch_.clear();
     level_ = p;
     rays_ = {p.rays->cameras.data(), p.rays->pixels.data(), p.rays->colours.data(),
-             UsesAlpha(p) ? p.rays->alphas.data() : nullptr, p.rays->size()};
+             UsesAlpha(p) ? p.rays->alphas.data() : nullptr, p.rays->size(), p.rays->first_index};
     weight_ = OpacityResidualWeight(p);
     const MemoryEstimate e = EstimateMemory(p, num_vectors);
     if (!e.Fits()) {
@@ -80,6 +80,7 @@ class CpuBackend final : public Backend {
   void Upload(VecId v, std::span<const float> host) override { vectors_.Upload(v, host); }
   void Download(VecId v, std::span<float> host) const override { vectors_.Download(v, host); }
   void Fill(VecId v, float value) override { vectors_.Fill(v, value); }
+  void SumAcrossRanks(VecId v, Communicator& comm) override { comm.SumInPlace(vectors_[v]); }
   void Copy(VecId dst, VecId src) override { vectors_.Copy(dst, src); }
   void Axpy(VecId y, double a, VecId x) override { vectors_.Axpy(y, a, x); }
   void Xpby(VecId y, VecId x, double b) override { vectors_.Xpby(y, x, b); }

@@ -41,12 +41,14 @@ struct DeviceRays {
   DeviceBuffer<RayPixel> pixels;
   DeviceBuffer<uint8_t> colours;
   DeviceBuffer<uint8_t> alphas;  // empty when the level has no alpha residual
+  int64_t first_index = 0;       // RaySet::first_index
 
   DeviceRays(const RaySet& rays, bool use_alpha)
       : cameras(static_cast<int64_t>(rays.cameras.size())),
         pixels(rays.size()),
         colours(3 * rays.size()),
-        alphas(use_alpha ? rays.size() : 0) {
+        alphas(use_alpha ? rays.size() : 0),
+        first_index(rays.first_index) {
     PERF_CHECK(static_cast<int64_t>(rays.colours.size()) == 3 * rays.size());
     cameras.CopyFromHost(rays.cameras);
     pixels.CopyFromHost(rays.pixels);
@@ -54,7 +56,8 @@ struct DeviceRays {
     if (use_alpha) alphas.CopyFromHost(ToBytes(rays.alphas));
   }
   cuda::RaysView View() const {
-    return {cameras.data(), pixels.data(), colours.data(), alphas.size() > 0 ? alphas.data() : nullptr, pixels.size()};
+    return {cameras.data(), pixels.data(),         colours.data(), alphas.size() > 0 ? alphas.data() : nullptr,
+            pixels.size(),  first_index};
   }
 };
 
@@ -91,9 +94,12 @@ struct Scratch {
 class CudaBackend final : public Backend {
  public:
   explicit CudaBackend(const CudaBackendOptions& o) : options_(o) {
-    PERF_CUDA_CHECK(cudaSetDevice(o.device));
+    int count = 1;
+    PERF_CUDA_CHECK(cudaGetDeviceCount(&count));
+    options_.device = count > 0 ? o.device % count : 0;  // ranks beyond the devices share them
+    PERF_CUDA_CHECK(cudaSetDevice(options_.device));
     cudaDeviceProp prop;
-    PERF_CUDA_CHECK(cudaGetDeviceProperties(&prop, o.device));
+    PERF_CUDA_CHECK(cudaGetDeviceProperties(&prop, options_.device));
     name_ = prop.name;
     if (const char* e = cuda::KernelImageError()) {
       throw ResourceError(StrCat("the CUDA device ", name_, " (compute capability ", prop.major, ".", prop.minor,
@@ -152,6 +158,9 @@ class CudaBackend final : public Backend {
 
   void Upload(VecId v, std::span<const float> host) override { vec(v).CopyFromHost(host); }
   void Download(VecId v, std::span<float> host) const override { vec(v).CopyToHost(host); }
+  void SumAcrossRanks(VecId v, Communicator& comm) override {
+    if (!comm.SumDeviceInPlace(ptr(v), static_cast<size_t>(n()))) Backend::SumAcrossRanks(v, comm);
+  }
   void Fill(VecId v, float value) override { cuda::Fill(ptr(v), n(), value); }
   void Copy(VecId dst, VecId src) override { cuda::Copy(ptr(dst), ptr(src), n()); }
   void Axpy(VecId y, double a, VecId x) override { cuda::Axpy(ptr(y), static_cast<float>(a), ptr(x), n()); }

@@ -13,7 +13,7 @@
 namespace perf::recon {
 
 struct CudaBackendOptions {
-  int device = 0;  // CUDA device ordinal
+  int device = 0;  // CUDA device ordinal (modulo the devices there are: one rank per GPU of a node)
   // Device memory the backend may use; 0: what cudaMemGetInfo reports free (plus what this
   // backend already holds) less 5 %.
   int64_t max_memory = 0;

@@ -14,6 +14,7 @@
 #include "common/system_memory.h"
 #include "recon_cuda/box_check.h"
 #include "recon_cuda/checkpoint.h"
+#include "recon_cuda/distributed_backend.h"
 #include "recon_cuda/evaluation.h"
 #include "recon_cuda/hierarchy.h"
 #include "recon_cuda/previous_run.h"
@@ -152,17 +153,30 @@ HierarchyOptions ToHierarchy(const ReconstructOptions& o, int levels) {
   return h;
 }
 
-// The mean colour of the photos (--init-shells-from-photos).
-void MeanColour(const std::vector<PosedImage>& images, float colour[3]) {
-  double sum[3] = {0, 0, 0};
-  int64_t count = 0;
+// The mean colour of every rank's photos (--init-shells-from-photos).
+void MeanColour(const std::vector<PosedImage>& images, Communicator& comm, float colour[3]) {
+  double sum[4] = {0, 0, 0, 0};  // r, g, b, pixels
   for (const PosedImage& im : images) {
     for (size_t p = 0; p < im.image.pixels.size(); p += 3) {
       for (int c = 0; c < 3; ++c) sum[c] += im.image.pixels[p + c];
     }
-    count += static_cast<int64_t>(im.image.pixels.size() / 3);
+    sum[3] += static_cast<double>(im.image.pixels.size() / 3);
   }
-  for (int c = 0; c < 3; ++c) colour[c] = count > 0 ? static_cast<float>(sum[c] / count) : -1.f;
+  comm.SumInPlace(sum);
+  for (int c = 0; c < 3; ++c) colour[c] = sum[3] > 0 ? static_cast<float>(sum[c] / sum[3]) : -1.f;
+}
+
+// Every rank must read the same scene.json: a digest of its bytes compared across ranks.
+void CheckSameScene(Communicator& comm, const fs::path& scene_path) {
+  if (comm.size() == 1) return;
+  std::ifstream in(scene_path, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const double digest = static_cast<double>(std::hash<std::string>{}(bytes) & ((uint64_t{1} << 52) - 1));
+  if (!comm.Agree(digest)) {
+    throw InputError(scene_path.string(), "contents", "", StrCat("rank ", comm.rank(), " reads a scene.json that differs "
+                     "from another rank's"), "every rank must see the same workspace (a shared file system, or "
+                     "identical copies)");
+  }
 }
 
 }  // namespace
@@ -177,22 +191,36 @@ void SetHierarchyBackground(BackgroundChoice background, const Scene& scene, Hie
                          static_cast<float>(scene.background.z())};
 }
 
-TrainingViews ViewsForHierarchy(const std::vector<PosedImage>& train) {
+TrainingViews ViewsForHierarchy(const std::vector<PosedImage>& train, Communicator* comm,
+                                std::vector<ViewFrustum> all_views) {
   TrainingViews views;
-  for (const PosedImage& im : train) views.views.push_back({im.camera, im.image.width, im.image.height});
-  views.rays = [&train](int factor) {
-    if (factor == 1) return MakeRaySet(train);
-    std::vector<PosedImage> small;
-    for (const PosedImage& im : train) small.push_back(Downscaled(im, factor));
-    return MakeRaySet(small);
+  views.views = std::move(all_views);
+  if (comm == nullptr || comm->size() == 1) {
+    views.views.clear();
+    for (const PosedImage& im : train) views.views.push_back({im.camera, im.image.width, im.image.height});
+  }
+  views.rays = [&train, comm](int factor) {
+    RaySet rays;
+    if (factor == 1) {
+      rays = MakeRaySet(train);
+    } else {
+      std::vector<PosedImage> small;
+      for (const PosedImage& im : train) small.push_back(Downscaled(im, factor));
+      rays = MakeRaySet(small);
+    }
+    if (comm != nullptr) rays.first_index = comm->ShareOf(rays.size()).first;  // collective
+    return rays;
   };
   return views;
 }
 
 ReconstructResult Reconstruct(const ReconstructOptions& o) {
   o.Check();
+  SingleProcess single;
+  Communicator& comm = o.comm != nullptr ? *o.comm : single;
+  const bool root = comm.IsRoot();  // writes the workspace and reports
   const auto emit = [&](const ReconstructOptions::Event& e) {
-    if (o.on_event) o.on_event(e);
+    if (o.on_event && root) o.on_event(e);
   };
   const auto say = [&](const std::string& line) {
     ReconstructOptions::Event e;
@@ -202,10 +230,18 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
 
   const fs::path scene_path = o.workspace / "scene.json";
   const Scene scene = ReadScene(scene_path);
+  CheckSameScene(comm, scene_path);
   const VolumeGeometry geometry = VolumeGeometry::FromScene(scene);
-  std::unique_ptr<Backend> backend = MakeBackend(o.device, o.threads);
+  std::unique_ptr<Backend> backend = MakeBackend(o.device, o.threads, LocalRank());
+  DistributedBackend* ranks = nullptr;  // with several ranks: sums the passes across them
+  if (comm.size() > 1) {
+    auto d = std::make_unique<DistributedBackend>(std::move(backend), &comm);
+    ranks = d.get();
+    backend = std::move(d);
+  }
   ReconstructResult result;
   result.backend = backend->Describe();
+  result.ranks = comm.size();
   const std::vector<ViewFrustum> train_views = SplitViews(scene, Split::kTrain);
   result.levels_choice = ChooseLevels(o.levels, PixelsAcrossBox(train_views, geometry), o.start_resolution,
                                       o.max_resolution > 0 ? o.max_resolution : DefaultMaxResolution(backend->kind()));
@@ -219,10 +255,18 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   if (o.solver.type == SolverType::kAdam) ho.solver.smooth_grid = ho.solver.smooth_shells = 0;  // Gauss-Newton only
   const auto shape_of = [&](int level) { return LevelShape(ho, geometry.num_shells(), level); };
 
-  EnsureWritableDirectory(o.workspace / "recon");
-  RecoverPreviousRun(o.workspace);
+  if (root) {
+    EnsureWritableDirectory(o.workspace / "recon");
+    RecoverPreviousRun(o.workspace);
+  }
+  comm.Barrier();  // the other ranks read the checkpoints rank 0 has put back
   HierarchyStart start;
   const int last = LastCheckpointLevel(o.workspace);
+  if (!comm.Agree(last)) {
+    throw InputError((o.workspace / "recon").string(), "checkpoints", StrCat("last level ", last),
+                     StrCat("rank ", comm.rank(), " sees other checkpoints than another rank"),
+                     "every rank must see the same workspace (a shared file system)");
+  }
   if (o.resume && last >= 0) {
     const fs::path path = CheckpointPath(o.workspace, last);
     Checkpoint c = ReadCheckpoint(path);
@@ -249,31 +293,45 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   }
 
   CheckLevelsFit(*backend, geometry, ho, start.level);
-  say("loading images");
-  const std::vector<PosedImage> train = LoadImages(scene, o.workspace, Split::kTrain);
-  const std::vector<PosedImage> test = LoadImages(scene, o.workspace, Split::kTest);
-  if (train.empty()) {
+  if (train_views.empty()) {
     throw InputError(scene_path.string(), "images", "0 train images", "nothing to reconstruct from",
                      "re-run perf import with --holdout 0 or more images");
   }
+  if (static_cast<size_t>(comm.size()) > train_views.size()) {
+    throw InputError("mpirun", "-np", std::to_string(comm.size()),
+                     StrCat("more ranks than the ", train_views.size(), " training photos"),
+                     StrCat("run at most ", train_views.size(), " ranks"));
+  }
+  say(comm.size() > 1 ? StrCat("loading images (", comm.Describe(), ": each loads its share of the photos)")
+                      : std::string("loading images"));
+  const ImageShare share{comm.rank(), comm.size()};
+  const std::vector<PosedImage> train = LoadImages(scene, o.workspace, Split::kTrain, {}, share);
+  const std::vector<PosedImage> test = LoadImages(scene, o.workspace, Split::kTest, {}, share);
+  const int64_t test_views = static_cast<int64_t>(SplitViews(scene, Split::kTest).size());
   // A fresh start: an earlier run's checkpoints would be mistaken for this one's. They stay aside
   // until this run has a level of its own, and come back if it fails before.
   std::optional<PreviousRun> previous;
-  if (start.level == 0) previous.emplace(o.workspace);
-  JsonLog log(o.workspace / "recon" / "log.jsonl", start.level > 0, "reconstruction log");
-  if (start.level > 0) log.Write({{"event", "resume"}, {"level", start.level}});
+  if (start.level == 0 && root) previous.emplace(o.workspace);
+  std::optional<JsonLog> log;  // rank 0's
+  if (root) log.emplace(o.workspace / "recon" / "log.jsonl", start.level > 0, "reconstruction log");
+  const auto write_log = [&](const json& line) {
+    if (log) log->Write(line);
+  };
+  if (start.level > 0) write_log({{"event", "resume"}, {"level", start.level}});
+  // Rank 0's first held-out view (its share starts with the split's first image), else training view.
   const std::vector<PosedImage>& preview_views = test.empty() ? train : test;
   json excluded_views = json::array();
   for (const SceneImage& im : scene.images) {
     if (im.split == Split::kExcluded) excluded_views.push_back({{"name", im.name}, {"because", im.excluded_because}});
   }
-  say(StrCat("backend: ", result.backend, "; ", train.size(), " training and ", test.size(), " held-out views",
+  say(StrCat("backend: ", result.backend, "; ", train_views.size(), " training and ", test_views, " held-out views",
              excluded_views.empty() ? std::string()
                                     : StrCat(" (", excluded_views.size(), " left out on import: scene.json says why)"),
              "; ", levels, " levels from ", o.start_resolution, "^3"));
-  const TrainingViews views = ViewsForHierarchy(train);
+  const TrainingViews views = ViewsForHierarchy(train, &comm, train_views);
   say(result.levels_choice.Describe());
-  const bool fits_alpha = o.residuals.use_alpha && ImagesHaveAlpha(train);  // as every level's RaySet will
+  // As every level's RaySet will (every rank's photos: either all have alpha or the scene's do not).
+  const bool fits_alpha = o.residuals.use_alpha && !comm.Any(!ImagesHaveAlpha(train));
   const float opacity_weight = OpacityResidualWeight(o.residuals, fits_alpha);
   const std::string opacity_residual = opacity_weight <= 0 ? "off" : (fits_alpha ? "alpha" : "auxiliary");
   say(StrCat("opacity residual (weight ", opacity_weight, "): ",
@@ -285,7 +343,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                    ")", o.background == BackgroundChoice::kAuto ? ", the colour every photo's alpha was composited over" : "")
           : std::string("background: learned (environment shells)"));
 
-  if (start.level == 0 && o.init_shells_from_photos) MeanColour(train, ho.init.shell_colour);
+  if (start.level == 0 && o.init_shells_from_photos) MeanColour(train, comm, ho.init.shell_colour);
 
   double elapsed = 0;  // solver time so far (excludes held-out evaluation and previews)
   auto t_level = WallClock::now();
@@ -294,12 +352,20 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   double level_start_elapsed = 0, iter_time = 0;  // for the log's elapsed solver time
   int held_out_iteration = -1;  // the iteration whose held-out PSNR was logged last
   double held_out_psnr = 0;
+  // The mean PSNR over every rank's held-out views (collective).
   const auto held_out = [&](VecId params) {
     const auto t0 = WallClock::now();
-    const double psnr = MeanPsnr(ScoreViews(backend.get(), params, test, o.min_box_opacity));
+    double sum[2] = {0, 0};  // PSNR, views
+    for (const ViewScore& s : ScoreViews(backend.get(), params, test, o.min_box_opacity)) {
+      sum[0] += s.psnr;
+      sum[1] += 1;
+    }
+    comm.SumInPlace(sum);
     eval_seconds += SecondsSince(t0);
-    return psnr;
+    return sum[1] > 0 ? sum[0] / sum[1] : 0.0;
   };
+  int64_t summed_at_level = 0, summed_at_iteration = 0;  // bytes summed across ranks so far
+  const auto summed_bytes = [&] { return ranks != nullptr ? ranks->bytes_summed() : int64_t{0}; };
   HierarchyCallbacks cb;
   cb.level_started = [&](const HierarchyLevel& h) {
     lr = LevelReport{};
@@ -310,6 +376,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     held_out_iteration = -1;
     level_start_elapsed = elapsed + SecondsSince(t_level);  // setup (rays, SetLevel) counts
     iter_time = 0;
+    summed_at_level = summed_at_iteration = summed_bytes();
     const MemoryEstimate& mem = h.memory;
     say(StrCat("level ", h.level + 1, "/", levels, ": ", DescribeShape(h.shape), ", ", lr.rays, " rays",
                lr.image_downscale > 1 ? StrCat(" (images / ", lr.image_downscale, ")") : std::string(),
@@ -321,13 +388,18 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   cb.iteration = [&](const HierarchyLevel& h, const IterationSummary& s) {
     iter_time += s.seconds_total;
     json line = IterationJson(lr, h.solver, s, level_start_elapsed + iter_time);
+    if (ranks != nullptr) {
+      line["ranks"] = comm.size();
+      line["summed_bytes"] = summed_bytes() - summed_at_iteration;
+      summed_at_iteration = summed_bytes();
+    }
     const bool last_it = s.iteration + 1 == h.solver.max_iterations;
-    if (!test.empty() && o.eval_every > 0 && ((s.iteration + 1) % o.eval_every == 0 || last_it)) {
+    if (test_views > 0 && o.eval_every > 0 && ((s.iteration + 1) % o.eval_every == 0 || last_it)) {
       held_out_psnr = held_out(h.params);
       held_out_iteration = s.iteration;
       line["test_psnr"] = held_out_psnr;
     }
-    if (o.preview_every > 0 && ((s.iteration + 1) % o.preview_every == 0 || last_it)) {
+    if (root && o.preview_every > 0 && ((s.iteration + 1) % o.preview_every == 0 || last_it)) {
       const auto t0 = WallClock::now();
       const PosedImage& v = preview_views.front();
       const RenderOutput r = backend->Render(h.params, v.camera, v.image.width, v.image.height, o.min_box_opacity);
@@ -336,7 +408,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
       WriteImage(p, ToImage(r), PixelFormat::kUInt8);
       eval_seconds += SecondsSince(t0);
     }
-    log.Write(line);
+    write_log(line);
     ReconstructOptions::Event e;
     e.level = h.level;
     e.levels = levels;
@@ -350,6 +422,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   json box_faces = json::array();  // after the first level (box_check.h)
   std::string box_warning;
   cb.level_done = [&](const HierarchyLevel& h, const SolverSummary& summary, const std::vector<float>& x) {
+    if (ranks != nullptr) ranks->CheckInStep(h.params);
     if (h.level == 0) {
       const std::vector<BoxFace> faces = BoxFaces(h.shape, geometry, x);
       for (const BoxFace& f : faces) box_faces.push_back({{"face", f.name}, {"opaque_fraction", f.opaque_fraction}});
@@ -360,16 +433,18 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     lr.cost = summary.final_cost;
     lr.train_psnr = summary.per_iteration.empty() ? 0 : summary.per_iteration.back().train_psnr;
     lr.status = StatusName(summary.status);
-    if (!test.empty()) {
+    if (test_views > 0) {
       // The last iteration's, when the log has it; else now (the backend still holds x).
       lr.test_psnr = held_out_iteration == summary.iterations - 1 ? held_out_psnr : held_out(h.params);
     }
-    WriteCheckpoint(CheckpointPath(o.workspace, h.level),
-                    MakeCheckpoint(scene, h.level, h.shape, summary.iterations, o.solver.type, x));
+    if (root) {
+      WriteCheckpoint(CheckpointPath(o.workspace, h.level),
+                      MakeCheckpoint(scene, h.level, h.shape, summary.iterations, o.solver.type, x));
+    }
     if (previous) previous->Discard();
     lr.seconds = SecondsSince(t_level) - eval_seconds;
     elapsed += lr.seconds;
-    log.Write({{"event", "level"},
+    json level_line{{"event", "level"},
                {"level", h.level},
                {"n", h.shape.n},
                {"iterations", lr.iterations},
@@ -384,9 +459,16 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                  {"grid_density", summary.smoothness.grid_density},
                  {"shell_colour", summary.smoothness.shell_colour},
                  {"shell_opacity", summary.smoothness.shell_opacity}}},
-               {"report", summary.BriefReport()}});
+               {"report", summary.BriefReport()}};
+    if (ranks != nullptr) {
+      level_line["ranks"] = comm.size();
+      level_line["summed_bytes"] = summed_bytes() - summed_at_level;
+      level_line["summed_bytes_per_iteration"] =
+          summary.iterations > 0 ? (summed_bytes() - summed_at_level) / summary.iterations : 0;
+    }
+    write_log(level_line);
     say(StrCat("level ", h.level + 1, "/", levels, " done in ", lr.seconds, " s: ", summary.BriefReport(),
-               test.empty() ? std::string() : StrCat("; held-out PSNR ", lr.test_psnr, " dB")));
+               test_views == 0 ? std::string() : StrCat("; held-out PSNR ", lr.test_psnr, " dB")));
     result.levels.push_back(lr);
     result.solve_seconds += lr.seconds;
     result.final_checkpoint = CheckpointPath(o.workspace, h.level);
@@ -406,7 +488,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     }
   };
   SolveHierarchy(backend.get(), geometry, views, ho, std::move(start), cb);
-  if (result.already_complete) return result;
+  if (result.already_complete || !root) return result;
 
   json levels_json = json::array();
   for (const LevelReport& l : result.levels) {
@@ -427,6 +509,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   const json summary{{"format", "perf-recon"},
                      {"version", 1},
                      {"backend", result.backend},
+                     {"ranks", result.ranks},
                      {"solver", SolverName(o.solver.type)},
                      {"smooth_grid", ho.solver.smooth_grid},
                      {"smooth_shells", ho.solver.smooth_shells},

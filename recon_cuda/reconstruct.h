@@ -35,6 +35,9 @@ inline constexpr double kAutoSmoothGrid = 0.3;
 
 struct ReconstructOptions {
   std::filesystem::path workspace;
+  // The ranks of the job (comm.h; nullptr: one process). Each rank loads and fits its share of
+  // the photos; rank 0 alone writes the workspace and reports progress.
+  Communicator* comm = nullptr;
   DeviceChoice device = DeviceChoice::kAuto;
   int threads = 0;              // CPU worker threads, 0: all cores
   int levels = 0;               // 0: chosen from the photos (level_choice.h)
@@ -102,14 +105,17 @@ struct ReconstructResult {
   std::filesystem::path final_checkpoint;
   bool already_complete = false;    // --resume found every level done
   LevelChoice levels_choice;        // how many levels and why
+  int ranks = 1;                    // processes that fitted the photos (ReconstructOptions::comm)
   std::string memory_stop;          // automatic levels: why the hierarchy ended early (empty: it did not)
 };
 
 ReconstructResult Reconstruct(const ReconstructOptions& options);
 
 // The hierarchy's view of training photos (each level's rays from the photos downscaled by its
-// pyramid factor); `train` must outlive it.
-TrainingViews ViewsForHierarchy(const std::vector<PosedImage>& train);
+// pyramid factor); `train` must outlive it. With ranks (`comm` and every training view in
+// `all_views`), `train` is this rank's share and its rays are numbered among all ranks' rays.
+TrainingViews ViewsForHierarchy(const std::vector<PosedImage>& train, Communicator* comm = nullptr,
+                                std::vector<ViewFrustum> all_views = {});
 
 // A few lines for the terminal.
 std::string ReconstructSummary(const ReconstructResult& r);

@@ -29,11 +29,26 @@ std::vector<ViewFrustum> SplitViews(const Scene& scene, Split split) {
   return views;
 }
 
+IndexRange ShareOfSplit(const Scene& scene, Split split, ImageShare share) {
+  std::vector<double> pixels;
+  for (const SceneImage& im : scene.images) {
+    if (im.split != split) continue;
+    const SceneCamera& cam = scene.camera(im.camera_id);
+    pixels.push_back(static_cast<double>(cam.width) * cam.height);
+  }
+  return ContiguousShare(pixels, share.rank, share.size);
+}
+
 std::vector<PosedImage> LoadImages(const Scene& scene, const std::filesystem::path& workspace, Split split,
-                                   const std::function<void(int done, int total)>& progress) {
+                                   const std::function<void(int done, int total)>& progress, ImageShare share) {
   std::vector<const SceneImage*> chosen;
   for (const SceneImage& im : scene.images) {
     if (im.split == split) chosen.push_back(&im);
+  }
+  if (share.size > 1) {
+    const IndexRange mine = ShareOfSplit(scene, split, share);
+    chosen = std::vector<const SceneImage*>(chosen.begin() + static_cast<ptrdiff_t>(mine.begin),
+                                            chosen.begin() + static_cast<ptrdiff_t>(mine.end));
   }
   std::vector<PosedImage> out(chosen.size());
   std::atomic<int> done{0};

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "common/comm.h"
 #include "recon_cuda/ray_math.h"
 #include "recon_cuda/volume.h"
 #include "workspace/image.h"
@@ -24,11 +25,21 @@ struct PosedImage {
   Image alpha;  // 1 channel in [0, 1]: the photo's alpha (scene.json alpha_path), or empty
 };
 
-// Every image of `split` in the workspace, read with OpenImageIO and converted to RGB, with its
-// alpha image when scene.json has one. Throws InputError / IoError naming the image when one is
-// missing, unreadable or of the wrong size.
+// One rank's share of a split's images (distributed_backend.h): contiguous in scene.json order,
+// of about equal pixel counts (comm.h ContiguousShare). {0, 1}: every image.
+struct ImageShare {
+  int rank = 0, size = 1;
+};
+
+// The indices, among the images of `split` in scene.json order, of `share`'s images.
+IndexRange ShareOfSplit(const Scene& scene, Split split, ImageShare share);
+
+// Every image of `split` in the workspace (or only `share`'s), read with OpenImageIO and
+// converted to RGB, with its alpha image when scene.json has one. Throws InputError / IoError
+// naming the image when one is missing, unreadable or of the wrong size.
 std::vector<PosedImage> LoadImages(const Scene& scene, const std::filesystem::path& workspace, Split split,
-                                   const std::function<void(int done, int total)>& progress = {});
+                                   const std::function<void(int done, int total)>& progress = {},
+                                   ImageShare share = {});
 
 PinholeCamera<float> ToPinhole(const SceneCamera& camera, const Eigen::Matrix<double, 3, 4>& world_from_cam);
 
@@ -46,6 +57,9 @@ struct RaySet {
   std::vector<RayPixel> pixels;
   std::vector<float> colours;  // [size(), 3]
   std::vector<float> alphas;   // [size()] when ImagesHaveAlpha, else empty
+  // The index of ray 0 among all ranks' rays (0 in a single process; distributed_backend.h):
+  // jitter and ray subsets follow the global index, so that N ranks fit the rays one would.
+  int64_t first_index = 0;
   int64_t size() const { return static_cast<int64_t>(pixels.size()); }
   int64_t Bytes() const;
 };

@@ -22,6 +22,9 @@ struct TrainingRays {
   const Colour* colours;                // [count, 3]
   const Colour* alphas;                 // [count], or nullptr: no alpha residual (backend.h UsesAlpha)
   int64_t count;
+  // Ray 0's index among the rays of every rank (RaySet::first_index): ray i's jitter is the one
+  // ray first_index + i gets in a single process.
+  int64_t first_index;
 };
 
 struct TrainingRay {
@@ -34,7 +37,7 @@ template <class Colour>
 PERF_HD_INLINE TrainingRay RayOf(const TrainingRays<Colour>& rays, const BoxFrame<float>& box, int n, int64_t i,
                                  uint32_t seed, bool jitter, bool pixel_jitter) {
   const RayPixel px = rays.pixels[i];
-  const Jitter jit{seed, static_cast<uint32_t>(i), jitter, pixel_jitter};
+  const Jitter jit{seed, static_cast<uint32_t>(rays.first_index + i), jitter, pixel_jitter};
   return {PixelBoxRay(rays.cameras[px.camera], box, n, px.x, px.y, jit), jit};
 }
 
