@@ -372,7 +372,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     lr.level = h.level;
     lr.shape = h.shape;
     lr.image_downscale = h.image_downscale;
-    lr.rays = h.rays;
+    lr.rays = comm.size() > 1 ? comm.ShareOf(h.rays).total : h.rays;  // every rank's
     held_out_iteration = -1;
     level_start_elapsed = elapsed + SecondsSince(t_level);  // setup (rays, SetLevel) counts
     iter_time = 0;
@@ -380,7 +380,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     const MemoryEstimate& mem = h.memory;
     say(StrCat("level ", h.level + 1, "/", levels, ": ", DescribeShape(h.shape), ", ", lr.rays, " rays",
                lr.image_downscale > 1 ? StrCat(" (images / ", lr.image_downscale, ")") : std::string(),
-               "; memory: vectors ", FormatByteCount(mem.vectors), ", per-thread sums ", FormatByteCount(mem.scratch),
+               comm.size() > 1 ? "; memory per rank: vectors " : "; memory: vectors ", FormatByteCount(mem.vectors), ", per-thread sums ", FormatByteCount(mem.scratch),
                ", Jacobian cache ",
                backend->CachesJacobian() ? FormatByteCount(mem.jacobian_cache) : std::string("off (recomputing)"),
                mem.available > 0 ? StrCat(" of ", FormatByteCount(mem.available), " available") : std::string()));

@@ -15,6 +15,7 @@ PACKAGES=(
   libopenvdb-dev libboost-dev libopenvdb-tools  # volume export and meshing (+ vdb_print)
   libgtest-dev libgmock-dev libbenchmark-dev    # tests and benchmarks
   colmap                                 # photos -> sparse model (perf sfm), model_converter in tests
+  libopenmpi-dev openmpi-bin             # ranks across processes and nodes (mpirun perf reconstruct)
   clang                                  # libFuzzer target for the binary readers (optional)
 )
 
