@@ -8,6 +8,9 @@
 #include "pipeline/commands.h"
 #include "pipeline/stage_progress.h"
 #include "recon_cuda/reconstruct.h"
+#ifdef PERF_WITH_NCCL
+#include "recon_cuda/nccl_comm.h"
+#endif
 #include "recon_cuda/render_views.h"
 
 namespace perf {
@@ -130,6 +133,9 @@ void AddReconstructCommand(CLI::App& app) {
     if (args->no_alpha) o.residuals.use_alpha = false;
     // Under mpirun every rank fits its share of the photos; rank 0 holds the lock, writes and reports.
     o.comm = &World();
+#ifdef PERF_WITH_NCCL
+    o.device_comm = [](Communicator& host) { return recon::MakeNcclCommunicator(host); };
+#endif
     const bool root = o.comm->IsRoot();
     std::unique_ptr<WorkspaceLock> lock;
     if (root) lock = LockWorkspace(o.workspace, "reconstruct");

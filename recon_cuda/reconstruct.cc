@@ -234,8 +234,10 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   const VolumeGeometry geometry = VolumeGeometry::FromScene(scene);
   std::unique_ptr<Backend> backend = MakeBackend(o.device, o.threads, LocalRank());
   DistributedBackend* ranks = nullptr;  // with several ranks: sums the passes across them
+  std::unique_ptr<Communicator> device_comm;  // NCCL, for a CUDA backend
   if (comm.size() > 1) {
-    auto d = std::make_unique<DistributedBackend>(std::move(backend), &comm);
+    if (backend->kind() == BackendKind::kCuda && o.device_comm) device_comm = o.device_comm(comm);
+    auto d = std::make_unique<DistributedBackend>(std::move(backend), device_comm ? device_comm.get() : &comm);
     ranks = d.get();
     backend = std::move(d);
   }

@@ -13,6 +13,7 @@
 
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -38,6 +39,9 @@ struct ReconstructOptions {
   // The ranks of the job (comm.h; nullptr: one process). Each rank loads and fits its share of
   // the photos; rank 0 alone writes the workspace and reports progress.
   Communicator* comm = nullptr;
+  // With several ranks on the CUDA backend: makes the communicator that sums device memory where
+  // it lies (NCCL, nccl_comm.h) over `comm`; empty: the sums go through host copies.
+  std::function<std::unique_ptr<Communicator>(Communicator& host)> device_comm;
   DeviceChoice device = DeviceChoice::kAuto;
   int threads = 0;              // CPU worker threads, 0: all cores
   int levels = 0;               // 0: chosen from the photos (level_choice.h)
