@@ -4,6 +4,7 @@
 #include <csignal>
 #include <iostream>
 
+#include "common/comm.h"
 #include "common/errors.h"
 #include "pipeline/commands.h"
 #include "pipeline/run_pipeline.h"
@@ -63,11 +64,16 @@ void AddRunCommand(CLI::App& app) {
     }
     o.quiet = args->log_level == "quiet";
     o.stop = &g_stop;
-    const auto lock = LockWorkspace(o.workspace, "run", true);
+    // Under mpirun rank 0 runs the stages and holds the lock; the others join the reconstruction.
+    o.comm = &World();
+    const bool root = o.comm->IsRoot();
+    if (!root) o.quiet = true;
+    std::unique_ptr<WorkspaceLock> lock;
+    if (root) lock = LockWorkspace(o.workspace, "run", true);
     std::signal(SIGINT, OnInterrupt);
     const RunResult r = RunPipeline(o);
     std::signal(SIGINT, SIG_DFL);
-    if (!o.quiet) std::cout << RunSummary(o, r);
+    if (!o.quiet && root) std::cout << RunSummary(o, r);
   });
 }
 

@@ -66,6 +66,30 @@ class StageLog {
   JsonLog log_;
 };
 
+// The reconstruction stage's options from the run's (the same on every rank): it resumes when
+// the last checkpoint is newer than scene.json and --force was not given.
+recon::ReconstructOptions ReconstructOptionsFor(const RunOptions& o, const PresetSettings& preset) {
+  const int last = recon::LastCheckpointLevel(o.workspace);
+  const bool fresh = last >= 0 && NewerThan(recon::CheckpointPath(o.workspace, last), ModTime(o.workspace / "scene.json"));
+  recon::ReconstructOptions ro;
+  ro.workspace = o.workspace;
+  ro.comm = o.comm;
+  ro.device = o.device;
+  ro.threads = o.threads;
+  ro.levels = preset.levels;
+  ro.max_resolution = preset.max_resolution;
+  ro.iterations = preset.iterations;
+  ro.resume = fresh && !o.force;
+  return ro;
+}
+
+// A rank other than 0: waits for rank 0's sfm and import (and its removal of stale checkpoints),
+// then fits its share of the photos; rank 0 exports.
+void RunAsRank(const RunOptions& o) {
+  o.comm->Barrier();
+  recon::Reconstruct(ReconstructOptionsFor(o, PresetFor(o)));
+}
+
 class Runner {
  public:
   Runner(const RunOptions& o, RunResult* r) : o_(o), r_(r), log_(o.log_json), preset_(PresetFor(o)) {}
@@ -165,21 +189,13 @@ class Runner {
   }
 
   void Reconstruct(StageReport* s) {
-    const fs::path scene = o_.workspace / "scene.json";
     const int last = recon::LastCheckpointLevel(o_.workspace);
-    const bool fresh = last >= 0 && NewerThan(recon::CheckpointPath(o_.workspace, last), ModTime(scene));
-    recon::ReconstructOptions ro;
-    ro.workspace = o_.workspace;
-    ro.device = o_.device;
-    ro.threads = o_.threads;
-    ro.levels = preset_.levels;
-    ro.max_resolution = preset_.max_resolution;
-    ro.iterations = preset_.iterations;
-    ro.resume = fresh && !o_.force;
+    recon::ReconstructOptions ro = ReconstructOptionsFor(o_, preset_);
     if (!ro.resume) {
       // Checkpoints of an older import (or --force): start over, so none of them is exported.
       for (int k = 0; k <= last; ++k) fs::remove(recon::CheckpointPath(o_.workspace, k));
     }
+    if (o_.comm != nullptr) o_.comm->Barrier();  // the other ranks start from this workspace (RunAsRank)
     Progress progress("reconstruct", o_.quiet);
     ro.on_event = [&](const recon::ReconstructOptions::Event& e) {
       CheckStop();
@@ -320,6 +336,10 @@ PresetSettings PresetFor(const RunOptions& o) {
 
 RunResult RunPipeline(const RunOptions& o) {
   o.Check();
+  if (o.comm != nullptr && !o.comm->IsRoot()) {
+    RunAsRank(o);
+    return {};
+  }
   EnsureWritableDirectory(o.workspace);
   const auto start = WallClock::now();
   RunResult r;

@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "common/comm.h"
 #include "recon_cuda/device_choice.h"
 
 namespace perf {
@@ -32,6 +33,9 @@ struct RunOptions {
   bool quiet = false;
   std::filesystem::path log_json;  // JSON lines of stage events for scripts (empty: none)
   const std::atomic<bool>* stop = nullptr;  // set (by a signal handler) to stop at a safe point
+  // Under mpirun (comm.h): rank 0 runs every stage; the other ranks wait for its import and join
+  // only the reconstruction, each fitting its share of the photos. nullptr: one process.
+  Communicator* comm = nullptr;
 
   void Check() const;  // InputError naming the option
 };

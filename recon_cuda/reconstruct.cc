@@ -264,7 +264,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   comm.Barrier();  // the other ranks read the checkpoints rank 0 has put back
   HierarchyStart start;
   const int last = LastCheckpointLevel(o.workspace);
-  if (!comm.Agree(last)) {
+  if (!comm.Agree(last) || !comm.Agree(o.resume ? 1 : 0)) {
     throw InputError((o.workspace / "recon").string(), "checkpoints", StrCat("last level ", last),
                      StrCat("rank ", comm.rank(), " sees other checkpoints than another rank"),
                      "every rank must see the same workspace (a shared file system)");
