@@ -22,7 +22,8 @@ void AddSfmCommand(CLI::App& app) {
                 "One camera per photo (default: one per group of photos that agree on size and EXIF make, model and focal "
                 "length; one for all when they all agree)");
   cmd->add_option("--matcher", o->matcher,
-                  "auto (exhaustive up to --exhaustive-max images, else sequential), exhaustive or sequential")
+                  "auto (exhaustive up to --exhaustive-max images; beyond, sequential unless the photos' EXIF capture "
+                  "times go against their file names), exhaustive or sequential")
       ->capture_default_str();
   cmd->add_option("--exhaustive-max", o->exhaustive_max_images,
                   "Largest set matched exhaustively by --matcher auto (CPU: ~0.28 s per pair)")->capture_default_str();

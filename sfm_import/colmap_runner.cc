@@ -26,6 +26,7 @@
 #include "common/errors.h"
 #include "common/subprocess.h"
 #include "sfm_import/camera_groups.h"
+#include "sfm_import/capture_order.h"
 #include "sfm_import/camera_models.h"
 #include "sfm_import/colmap_model.h"
 
@@ -467,6 +468,12 @@ SfmResult RunSfm(const SfmOptions& options) {
   // order; sequential assumes photos were taken in order (a walk around the object).
   bool exhaustive = options.matcher == "exhaustive" ||
                     (options.matcher == "auto" && n <= options.exhaustive_max_images);
+  if (!exhaustive && options.matcher == "auto") {
+    // Beyond the exhaustive limit: do the photos' capture times say the names are in order?
+    const CaptureOrder order = ReadCaptureOrder(options.images, inputs);
+    Report(options, "sfm: " + order.Describe());
+    exhaustive = order.Known() && !order.NamesFollowTime();
+  }
   // A matcher's arguments with the SIFT matching settings every matching step shares.
   const auto with_sift_matching = [&](std::vector<std::string> args) {
     args.insert(args.end(), {"--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", threads});

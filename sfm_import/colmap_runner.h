@@ -19,8 +19,8 @@ struct SfmOptions {
   // One camera per group of photos that agree on size and EXIF camera (camera_groups.h; one
   // for all when they all agree); false: one per image.
   bool single_camera = true;
-  // Matcher: "auto" (exhaustive up to exhaustive_max_images, else sequential), "exhaustive",
-  // "sequential". CPU exhaustive matching costs ~0.28 s per pair on 2 cores (84 photos: 16.5 min).
+  // Matcher: "auto" (exhaustive up to exhaustive_max_images, else sequential unless EXIF capture
+  // times go against the file names: capture_order.h), "exhaustive", "sequential". CPU exhaustive matching costs ~0.28 s per pair on 2 cores (84 photos: 16.5 min).
   std::string matcher = "auto";
   int exhaustive_max_images = 40;
   int sequential_overlap = 10;           // SequentialMatching.overlap (quadratic overlap on)

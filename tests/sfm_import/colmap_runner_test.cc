@@ -22,6 +22,7 @@
 
 #include "common/errors.h"
 #include "sfm_import/camera_groups.h"
+#include "sfm_import/capture_order.h"
 #include "sfm_import/colmap_model.h"
 
 namespace fs = std::filesystem;
@@ -784,8 +785,10 @@ exit 0
   EXPECT_FALSE(fs::exists(marker));
 }
 
-// A small JPEG (or PNG) with the given EXIF camera tags (none when make is empty).
-void WriteTaggedPhoto(const fs::path& path, int w, int h, const std::string& make, float focal_mm) {
+// A small JPEG (or PNG) with the given EXIF camera tags (none when make is empty) and capture
+// time (none when empty).
+void WriteTaggedPhoto(const fs::path& path, int w, int h, const std::string& make, float focal_mm,
+                      const std::string& time = {}) {
   fs::create_directories(path.parent_path());
   OIIO::ImageSpec spec(w, h, 3, OIIO::TypeDesc::UINT8);
   if (!make.empty()) {
@@ -793,6 +796,7 @@ void WriteTaggedPhoto(const fs::path& path, int w, int h, const std::string& mak
     spec.attribute("Model", "Model 1");
     spec.attribute("Exif:FocalLength", focal_mm);
   }
+  if (!time.empty()) spec.attribute("Exif:DateTimeOriginal", time);
   std::vector<unsigned char> pixels(static_cast<size_t>(w) * h * 3, 128);
   auto out = OIIO::ImageOutput::create(path.string());
   ASSERT_TRUE(out && out->open(path.string(), spec)) << path;
@@ -844,6 +848,74 @@ TEST(ColmapRunner, PhotosShareACameraOnlyWhereSizeAndExifAgree) {
   RunSfm(options);
   const std::string log2 = ReadFile(options.workspace / "colmap" / "colmap.log").substr(log.size());
   EXPECT_EQ(log2.find("arg=[--image_list_path]"), std::string::npos) << "one group: one plain extraction";
+}
+
+TEST(CaptureOrder, TimesTellWhetherTheNamesFollowTheCapture) {
+  const std::string t0 = "2026:05:01 10:00:00", t1 = "2026:05:01 10:00:07", t2 = "2026:05:01 10:01:00",
+                    t3 = "2026:05:02 09:00:00";
+  CaptureOrder o = OrderFromTimes({t0, t1, t1, t2, t3});  // a burst of equal times is in order
+  EXPECT_TRUE(o.Known());
+  EXPECT_TRUE(o.NamesFollowTime());
+  EXPECT_EQ(o.backwards, 0);
+  o = OrderFromTimes({t3, t1, t2, t0});
+  EXPECT_TRUE(o.Known());
+  EXPECT_FALSE(o.NamesFollowTime());
+  EXPECT_EQ(o.pairs, 3);
+  EXPECT_EQ(o.backwards, 2);
+  EXPECT_EQ(o.Describe(), "the EXIF capture times do not follow the file names (2 of 3 consecutive photos by name go "
+                          "back in time): matching every pair");
+  o = OrderFromTimes({t0, "", t1, t2});  // 3 of 4 carry a time: under 90 %
+  EXPECT_FALSE(o.Known());
+  EXPECT_FALSE(o.NamesFollowTime());
+  // One photo of 21 out of place: 1 of 20 pairs goes back, within the 10 % allowed.
+  std::vector<std::string> walk;
+  for (int i = 0; i < 21; ++i) walk.push_back(StrCat("2026:05:01 10:", i < 10 ? "0" : "", i, ":00"));
+  std::swap(walk[5], walk[20]);
+  o = OrderFromTimes(walk);
+  EXPECT_EQ(o.backwards, 2);
+  EXPECT_TRUE(o.NamesFollowTime()) << o.Describe();
+  std::swap(walk[1], walk[15]);
+  EXPECT_FALSE(OrderFromTimes(walk).NamesFollowTime());
+}
+
+// Beyond the exhaustive limit, capture times that go against the names mean matching every pair
+// at once (no sequential pass to waste); times in name order mean sequential matching.
+TEST(ColmapRunner, CaptureTimesAgainstTheNamesMeanEveryPair) {
+  TempDir dir("times");
+  const fs::path photos = dir.path() / "photos";
+  const std::vector<std::string> times = {"2026:05:01 10:00:30", "2026:05:01 10:00:10", "2026:05:01 10:00:20",
+                                          "2026:05:01 10:00:00"};
+  const std::vector<std::string> names = {"a.jpg", "b.jpg", "c.jpg", "d.jpg"};
+  for (size_t i = 0; i < names.size(); ++i) WriteTaggedPhoto(photos / names[i], 64, 48, "Canon", 35.f, times[i]);
+  SfmOptions options;
+  options.images = photos;
+  options.workspace = dir.path() / "work";
+  options.colmap_binary = (dir.path() / "bin" / "colmap").string();
+  WriteExecutable(options.colmap_binary, kFakeColmap);
+  options.exhaustive_max_images = 2;
+  options.min_registered_images = 2;
+  options.second_pass = false;
+  std::vector<std::string> progress;
+  options.progress = [&](const std::string& line) { progress.push_back(line); };
+  const auto said = [&](const std::string& text) {
+    return std::any_of(progress.begin(), progress.end(), [&](const std::string& l) { return l.find(text) != std::string::npos; });
+  };
+  RunSfm(options);
+  std::string log = ReadFile(options.workspace / "colmap" / "colmap.log");
+  EXPECT_NE(log.find("arg=[exhaustive_matcher]"), std::string::npos) << log;
+  EXPECT_EQ(log.find("arg=[sequential_matcher]"), std::string::npos) << log;
+  EXPECT_TRUE(said("sfm: the EXIF capture times do not follow the file names (2 of 3"));
+
+  // The same photos with their times in name order.
+  std::vector<std::string> sorted = times;
+  std::sort(sorted.begin(), sorted.end());
+  for (size_t i = 0; i < names.size(); ++i) WriteTaggedPhoto(photos / names[i], 64, 48, "Canon", 35.f, sorted[i]);
+  progress.clear();
+  options.force = true;
+  RunSfm(options);
+  log = ReadFile(options.workspace / "colmap" / "colmap.log");
+  EXPECT_NE(log.find("arg=[sequential_matcher]"), std::string::npos) << log;
+  EXPECT_TRUE(said("sfm: the EXIF capture times follow the file names (0 of 3"));
 }
 
 TEST(ColmapRunner, FailingStepReportsExitCodeAndLogTail) {
