@@ -91,6 +91,24 @@ void MpiTest::CompareTwoRanksWithOneProcess(const std::string& device, int threa
 
 TEST_F(MpiTest, TwoRanksFitWhatOneProcessFits) { CompareTwoRanksWithOneProcess("cpu", 2); }
 
+// perf run under mpirun: rank 0 imports and exports, both ranks fit; one summary, one lock.
+TEST_F(MpiTest, TheWholePipelineOnTwoRanks) {
+  PERF_REQUIRE_DATA(lego, "lego");
+  const fs::path ws = dir_ / "run";
+  const test::CommandResult r = test::RunCommand(StrCat("timeout 300 ", kMpirun, " -np 2 ", test::PerfBinary(),
+                                                        " run --nerf ", lego / "transforms_train.json", " -w ", ws,
+                                                        " --max-size 50 --levels 1 --iterations 2 --device cpu -j 1"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json recon = json::parse(std::ifstream(ws / "recon" / "recon.json"));
+  EXPECT_EQ(recon["ranks"], 2);
+  EXPECT_GT(recon["test_psnr"].get<double>(), 15.0);
+  EXPECT_TRUE(fs::exists(ws / "volume.vdb"));
+  EXPECT_TRUE(fs::exists(ws / "report.html"));
+  size_t summaries = 0;
+  for (size_t at = r.output.find("Done in "); at != std::string::npos; at = r.output.find("Done in ", at + 1)) ++summaries;
+  EXPECT_EQ(summaries, 1u) << "rank 0 alone reports: " << r.output;
+}
+
 // Two GPUs, one per rank, summing with NCCL where the build has it (gpu: written, run where a
 // machine has two GPUs and MPI; skips elsewhere).
 class MpiGpuTest : public MpiTest {
