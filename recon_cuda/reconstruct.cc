@@ -382,7 +382,8 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     const MemoryEstimate& mem = h.memory;
     say(StrCat("level ", h.level + 1, "/", levels, ": ", DescribeShape(h.shape), ", ", lr.rays, " rays",
                lr.image_downscale > 1 ? StrCat(" (images / ", lr.image_downscale, ")") : std::string(),
-               comm.size() > 1 ? "; memory per rank: vectors " : "; memory: vectors ", FormatByteCount(mem.vectors), ", per-thread sums ", FormatByteCount(mem.scratch),
+               comm.size() > 1 ? "; memory per rank: vectors " : "; memory: vectors ", FormatByteCount(mem.vectors),
+               ", per-thread sums ", FormatByteCount(mem.scratch),
                ", Jacobian cache ",
                backend->CachesJacobian() ? FormatByteCount(mem.jacobian_cache) : std::string("off (recomputing)"),
                mem.available > 0 ? StrCat(" of ", FormatByteCount(mem.available), " available") : std::string()));
@@ -447,21 +448,21 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     lr.seconds = SecondsSince(t_level) - eval_seconds;
     elapsed += lr.seconds;
     json level_line{{"event", "level"},
-               {"level", h.level},
-               {"n", h.shape.n},
-               {"iterations", lr.iterations},
-               {"seconds", lr.seconds},
-               {"elapsed", elapsed},
-               {"cost", lr.cost},
-               {"train_psnr", lr.train_psnr},
-               {"test_psnr", lr.test_psnr},
-               {"status", lr.status},
-               {"smoothness_weights",
-                {{"grid_colour", summary.smoothness.grid_colour},
-                 {"grid_density", summary.smoothness.grid_density},
-                 {"shell_colour", summary.smoothness.shell_colour},
-                 {"shell_opacity", summary.smoothness.shell_opacity}}},
-               {"report", summary.BriefReport()}};
+                    {"level", h.level},
+                    {"n", h.shape.n},
+                    {"iterations", lr.iterations},
+                    {"seconds", lr.seconds},
+                    {"elapsed", elapsed},
+                    {"cost", lr.cost},
+                    {"train_psnr", lr.train_psnr},
+                    {"test_psnr", lr.test_psnr},
+                    {"status", lr.status},
+                    {"smoothness_weights",
+                     {{"grid_colour", summary.smoothness.grid_colour},
+                      {"grid_density", summary.smoothness.grid_density},
+                      {"shell_colour", summary.smoothness.shell_colour},
+                      {"shell_opacity", summary.smoothness.shell_opacity}}},
+                    {"report", summary.BriefReport()}};
     if (ranks != nullptr) {
       level_line["ranks"] = comm.size();
       level_line["summed_bytes"] = summed_bytes() - summed_at_level;
