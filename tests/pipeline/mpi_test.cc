@@ -2,6 +2,8 @@
 // every iteration and the same held-out PSNR; and a rank that fails (bad photo in its share, or
 // killed) ends every rank with an error instead of leaving the others waiting. Label `mpi`: skips
 // with a message where mpirun or an MPI build is missing, or without ../shared/data.
+// Built twice: mpi_test (the CPU cases) and, with PERF_MPI_TEST_GPU, mpi_gpu_test (label gpu: two
+// GPU ranks summing with NCCL against one GPU).
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -89,6 +91,7 @@ void MpiTest::CompareTwoRanksWithOneProcess(const std::string& device, int threa
   EXPECT_TRUE(fs::exists(two / "recon" / "level_1.perfvol"));
 }
 
+#if !PERF_MPI_TEST_GPU
 TEST_F(MpiTest, TwoRanksFitWhatOneProcessFits) { CompareTwoRanksWithOneProcess("cpu", 2); }
 
 // perf run under mpirun: rank 0 imports and exports, both ranks fit; one summary, one lock.
@@ -109,18 +112,7 @@ TEST_F(MpiTest, TheWholePipelineOnTwoRanks) {
   EXPECT_EQ(summaries, 1u) << "rank 0 alone reports: " << r.output;
 }
 
-// Two GPUs, one per rank, summing with NCCL where the build has it (gpu: written, run where a
-// machine has two GPUs and MPI; skips elsewhere).
-class MpiGpuTest : public MpiTest {
- protected:
-  void SetUp() override {
-    const test::CommandResult gpus = test::RunCommand("nvidia-smi -L | grep -c '^GPU'");
-    if (gpus.exit_code != 0 || std::atoi(gpus.output.c_str()) < 2) GTEST_SKIP() << "fewer than 2 GPUs; skipping";
-    MpiTest::SetUp();
-  }
-};
 
-TEST_F(MpiGpuTest, TwoGpuRanksFitWhatOneGpuFits) { CompareTwoRanksWithOneProcess("cuda", 1); }
 
 TEST_F(MpiTest, ARankThatCannotReadItsPhotoEndsEveryRank) {
   const fs::path ws = Workspace("bad");
@@ -169,6 +161,23 @@ TEST_F(MpiTest, AKilledRankEndsTheJob) {
     EXPECT_EQ(e.path().filename().string().find(".tmp"), std::string::npos) << e.path();
   }
 }
+
+#else  // mpi_gpu_test: the same fixture, label gpu
+
+// Two GPUs, one per rank, summing with NCCL where the build has it (gpu: written, run where a
+// machine has two GPUs and MPI; skips elsewhere).
+class MpiGpuTest : public MpiTest {
+ protected:
+  void SetUp() override {
+    const test::CommandResult gpus = test::RunCommand("nvidia-smi -L | grep -c '^GPU'");
+    if (gpus.exit_code != 0 || std::atoi(gpus.output.c_str()) < 2) GTEST_SKIP() << "fewer than 2 GPUs; skipping";
+    MpiTest::SetUp();
+  }
+};
+
+TEST_F(MpiGpuTest, TwoGpuRanksFitWhatOneGpuFits) { CompareTwoRanksWithOneProcess("cuda", 1); }
+
+#endif  // PERF_MPI_TEST_GPU
 
 }  // namespace
 }  // namespace perf
