@@ -2,6 +2,7 @@
 #include <CLI/CLI.hpp>
 #include <iostream>
 #include <new>
+#include <string_view>
 
 #include "common/comm.h"
 #include "common/errors.h"
@@ -46,6 +47,12 @@ int main(int argc, char** argv) {
   // option named in the message; also a workspace another perf command holds), 3 file system
   // (cannot read or write, disk full), 4 the work itself failed (e.g. the solver diverged),
   // 5 not enough memory, 130 stopped by Ctrl-C (resumable).
+  // Under mpirun only reconstruct and run use ranks; every other command runs on rank 0 alone
+  // (two ranks importing into one workspace would collide on its lock).
+  if (argc > 1 && perf::LaunchedByMpi()) {
+    const std::string_view command = argv[1];
+    if (command != "reconstruct" && command != "run" && !perf::World().IsRoot()) return 0;
+  }
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
