@@ -5,7 +5,6 @@
 #include <string_view>
 #include <vector>
 
-
 namespace perf {
 
 bool Communicator::Any(bool mine) {
