@@ -27,7 +27,8 @@ void AddReconstructCommand(CLI::App& app) {
   CLI::App* cmd = app.add_subcommand(
       "reconstruct",
       "Fit the voxel grid and environment shells to a workspace made by perf import: hierarchical "
-      "Gauss-Newton with preconditioned CG, coarse to fine, checkpointed after every level.");
+      "Gauss-Newton with preconditioned CG, coarse to fine, checkpointed after every level. Under mpirun "
+      "(mpirun -np N perf reconstruct WS) the ranks split the photos and sum every pass; rank 0 writes.");
   cmd->add_option("workspace", args->workspace, "Workspace folder (made by perf import)")->required();
   AddDeviceOptions(cmd, &o.device, &o.threads);
   cmd->add_option("--levels", o.levels,
