@@ -3,6 +3,7 @@
 #include <vector>
 
 #include "common/errors.h"
+#include "common/stopwatch.h"
 
 namespace perf::recon {
 
@@ -51,14 +52,19 @@ RaySubset DistributedBackend::Local(RaySubset global) const {
 
 void DistributedBackend::Sum(VecId v) {
   if (comm_->size() == 1) return;
+  const auto t0 = WallClock::now();
   inner_->SumAcrossRanks(v, *comm_);
+  sum_seconds_ += SecondsSince(t0);
   bytes_summed_ += level().shape.ParamCount() * static_cast<int64_t>(sizeof(float));
 }
 
 void DistributedBackend::Sum(PassStats* s) {
   if (comm_->size() == 1) return;
+  pass_seconds_ += s->seconds;
   double v[5] = {s->cost, s->colour_sse, static_cast<double>(s->rays), static_cast<double>(s->samples), s->subset_cost};
+  const auto t0 = WallClock::now();
   comm_->SumInPlace(v);
+  sum_seconds_ += SecondsSince(t0);
   bytes_summed_ += static_cast<int64_t>(sizeof(v));
   s->cost = v[0];
   s->colour_sse = v[1];

@@ -23,6 +23,10 @@ class DistributedBackend final : public Backend {
 
   // Bytes summed across ranks so far (each vector or scalar sum counted once, as sent by a rank).
   int64_t bytes_summed() const { return bytes_summed_; }
+  // This rank's seconds so far in its own passes, and in the sums (which include waiting for the
+  // slowest rank): their spread across ranks is the load imbalance.
+  double pass_seconds() const { return pass_seconds_; }
+  double sum_seconds() const { return sum_seconds_; }
   // Throws InternalError when the ranks' vectors v differ (they must never: a bug or a
   // non-deterministic reduction).
   void CheckInStep(VecId v) const;
@@ -78,6 +82,7 @@ class DistributedBackend final : public Backend {
   Communicator* comm_;
   int64_t first_index_ = 0;  // the level's RaySet::first_index
   int64_t bytes_summed_ = 0;
+  double pass_seconds_ = 0, sum_seconds_ = 0;
 };
 
 }  // namespace perf::recon

@@ -367,6 +367,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     return sum[1] > 0 ? sum[0] / sum[1] : 0.0;
   };
   int64_t summed_at_level = 0, summed_at_iteration = 0;  // bytes summed across ranks so far
+  double pass_at_level = 0, sum_at_level = 0;            // this rank's pass and sum seconds so far
   const auto summed_bytes = [&] { return ranks != nullptr ? ranks->bytes_summed() : int64_t{0}; };
   HierarchyCallbacks cb;
   cb.level_started = [&](const HierarchyLevel& h) {
@@ -379,6 +380,10 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     level_start_elapsed = elapsed + SecondsSince(t_level);  // setup (rays, SetLevel) counts
     iter_time = 0;
     summed_at_level = summed_at_iteration = summed_bytes();
+    if (ranks != nullptr) {
+      pass_at_level = ranks->pass_seconds();
+      sum_at_level = ranks->sum_seconds();
+    }
     const MemoryEstimate& mem = h.memory;
     say(StrCat("level ", h.level + 1, "/", levels, ": ", DescribeShape(h.shape), ", ", lr.rays, " rays",
                lr.image_downscale > 1 ? StrCat(" (images / ", lr.image_downscale, ")") : std::string(),
@@ -464,6 +469,14 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                       {"shell_opacity", summary.smoothness.shell_opacity}}},
                     {"report", summary.BriefReport()}};
     if (ranks != nullptr) {
+      // Every rank's seconds in its own passes and in the sums (waiting for the slowest included).
+      const size_t n = static_cast<size_t>(comm.size()), me = static_cast<size_t>(comm.rank());
+      std::vector<double> seconds(2 * n, 0.0);
+      seconds[me] = ranks->pass_seconds() - pass_at_level;
+      seconds[n + me] = ranks->sum_seconds() - sum_at_level;
+      comm.SumInPlace(seconds);
+      level_line["rank_pass_seconds"] = std::vector<double>(seconds.begin(), seconds.begin() + static_cast<ptrdiff_t>(n));
+      level_line["rank_sum_seconds"] = std::vector<double>(seconds.begin() + static_cast<ptrdiff_t>(n), seconds.end());
       level_line["ranks"] = comm.size();
       level_line["summed_bytes"] = summed_bytes() - summed_at_level;
       level_line["summed_bytes_per_iteration"] =

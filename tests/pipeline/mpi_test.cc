@@ -77,6 +77,11 @@ void MpiTest::CompareTwoRanksWithOneProcess(const std::string& device, int threa
     EXPECT_EQ(b[i]["ranks"], 2);
     EXPECT_GT(b[i]["summed_bytes"].get<int64_t>(), 0);
   }
+  for (const json& level : LogLines(two, "level")) {
+    ASSERT_EQ(level["rank_pass_seconds"].size(), 2u) << level.dump();
+    for (const json& s : level["rank_pass_seconds"]) EXPECT_GT(s.get<double>(), 0.0) << "every rank ran its passes";
+    EXPECT_EQ(level["rank_sum_seconds"].size(), 2u);
+  }
   const json ja = json::parse(std::ifstream(one / "recon" / "recon.json"));
   const json jb = json::parse(std::ifstream(two / "recon" / "recon.json"));
   EXPECT_EQ(jb["ranks"], 2);
