@@ -101,7 +101,9 @@ TEST(ContiguousShare, CoversEveryItemOnceInBlocksOfAboutEqualWeight) {
         const IndexRange s = ContiguousShare(w, r, size);
         EXPECT_EQ(s.begin, next) << n << " items, rank " << r << " of " << size;
         EXPECT_LE(s.begin, s.end);
-        if (n >= size) EXPECT_GT(s.size(), 0u) << n << " items, rank " << r << " of " << size;
+        if (n >= size) {
+          EXPECT_GT(s.size(), 0u) << n << " items, rank " << r << " of " << size;
+        }
         double mine = 0;
         for (size_t i = s.begin; i < s.end; ++i) mine += w[i];
         heaviest = std::max(heaviest, mine);
@@ -110,7 +112,9 @@ TEST(ContiguousShare, CoversEveryItemOnceInBlocksOfAboutEqualWeight) {
       EXPECT_EQ(next, static_cast<size_t>(n));
       // No block exceeds an equal share by more than one item's weight (3 at most), where
       // every block can hold an item.
-      if (n >= size) EXPECT_LE(heaviest, total / size + 3.0 + 1e-9) << n << " items, " << size << " ranks";
+      if (n >= size) {
+        EXPECT_LE(heaviest, total / size + 3.0 + 1e-9) << n << " items, " << size << " ranks";
+      }
     }
   }
 }
