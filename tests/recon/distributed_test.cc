@@ -1,13 +1,11 @@
-// Data parallelism without MPI: ranks as threads of one process (ThreadGroup below, a
+// Data parallelism without MPI: ranks as threads of one process (thread_group.h, a
 // Communicator over shared memory), each with its own CPU backend and its share of a synthetic
 // scene's photos, against one backend with every photo. The passes' sums, the solver's steps and
 // the ranks' parameters must agree; the photo shares must cover every photo once.
 #include <gtest/gtest.h>
 
 #include <algorithm>
-#include <barrier>
 #include <cmath>
-#include <thread>
 
 #include "common/comm.h"
 #include "common/errors.h"
@@ -15,62 +13,10 @@
 #include "recon_cuda/distributed_backend.h"
 #include "recon_cuda/solver.h"
 #include "tests/recon/synthetic_scene.h"
+#include "tests/recon/thread_group.h"
 
 namespace perf::recon {
 namespace {
-
-// `size` ranks that are threads: a sum copies every rank's values into a shared table and each
-// rank adds the rows in rank order (a fixed order, as comm.h promises).
-class ThreadGroup {
- public:
-  explicit ThreadGroup(int size) : size_(size), sync_(size), rows_(static_cast<size_t>(size)) {}
-
-  class Rank final : public Communicator {
-   public:
-    Rank(ThreadGroup* g, int rank) : g_(g), rank_(rank) {}
-    int rank() const override { return rank_; }
-    int size() const override { return g_->size_; }
-    std::string Describe() const override { return StrCat(g_->size_, " threads"); }
-    void SumInPlace(std::span<float> v) override { Reduce(v, [](double a, double b) { return a + b; }); }
-    void SumInPlace(std::span<double> v) override { Reduce(v, [](double a, double b) { return a + b; }); }
-    void MaxInPlace(std::span<double> v) override { Reduce(v, [](double a, double b) { return std::max(a, b); }); }
-    void Barrier() override { g_->sync_.arrive_and_wait(); }
-    void Abort(int) override { std::abort(); }
-
-   private:
-    template <class T, class Op>
-    void Reduce(std::span<T> v, Op op) {
-      g_->rows_[static_cast<size_t>(rank_)].assign(v.begin(), v.end());
-      Barrier();
-      for (size_t i = 0; i < v.size(); ++i) {
-        T acc = static_cast<T>(g_->rows_[0][i]);
-        for (int r = 1; r < g_->size_; ++r) acc = static_cast<T>(op(acc, static_cast<T>(g_->rows_[r][i])));
-        v[i] = acc;
-      }
-      Barrier();  // nobody overwrites a row before every rank has read it
-    }
-    ThreadGroup* g_;
-    int rank_;
-  };
-
-  // Runs body(rank communicator) on `size` threads and joins them.
-  template <class Body>
-  void Run(Body body) {
-    std::vector<std::thread> threads;
-    for (int r = 0; r < size_; ++r) {
-      threads.emplace_back([this, r, &body] {
-        Rank comm(this, r);
-        body(comm);
-      });
-    }
-    for (std::thread& t : threads) t.join();
-  }
-
- private:
-  int size_;
-  std::barrier<> sync_;
-  std::vector<std::vector<double>> rows_;
-};
 
 const test::SyntheticScene& Scene() {
   static const test::SyntheticScene scene(32, 16, 12, 24, 4);  // 12 views of 24 x 24, 3 held out
@@ -143,7 +89,7 @@ TEST(DistributedBackend, PassesSumToTheSingleProcessPasses) {
   const PassStats cost1 = one->Cost(0, 78u, every_seventh);
 
   for (int size : {2, 3}) {
-    ThreadGroup group(size);
+    test::ThreadGroup group(size);
     std::vector<std::vector<float>> g(size), d(size), jtjp(size);
     std::vector<PassStats> lin(static_cast<size_t>(size)), cost(static_cast<size_t>(size));
     group.Run([&](Communicator& comm) {
@@ -204,7 +150,7 @@ TEST(DistributedBackend, ASolveOnThreeRanksFollowsTheSingleProcess) {
   SolverSummary s1;
   Solve(so, one.get(), &x1, {}, &s1);
 
-  ThreadGroup group(3);
+  test::ThreadGroup group(3);
   std::vector<SolverSummary> s(3);
   std::vector<std::vector<float>> x(3, start);
   group.Run([&](Communicator& comm) {

@@ -30,11 +30,13 @@
 #include "recon_cuda/cpu_backend.h"
 #include "recon_cuda/cuda_backend.h"
 #include "recon_cuda/cuda_kernels.h"
+#include "recon_cuda/distributed_backend.h"
 #include "recon_cuda/solver.h"
 #include "recon_cuda/volume.h"
 #include "tests/recon/recon_test_util.h"
 #include "tests/recon/require_gpu.h"
 #include "tests/recon/synthetic_scene.h"
+#include "tests/recon/thread_group.h"
 
 namespace perf::recon {
 namespace {
@@ -479,6 +481,66 @@ TEST_F(GpuParityTest, SmoothnessTermAndASolveWithIt) {
   }
   EXPECT_NEAR(sum[1].smoothness.shell_colour, sum[0].smoothness.shell_colour, 1e-5 * sum[0].smoothness.shell_colour);
   EXPECT_NEAR(sum[1].final_cost, sum[0].final_cost, 1e-3 * sum[0].final_cost);
+}
+
+// Rays numbered from a global index (a rank's share, RaySet::first_index): the device's jitter
+// follows it as the CPU's does, and it matters (the same rays numbered from 0 jitter otherwise).
+TEST_F(GpuParityTest, RaysNumberedFromAGlobalIndex) {
+  TinyProblem p = Problem(41);
+  p.rays.first_index = 1237;
+  SetLevel(p.Level(), p.x);
+  const PassStats c = cpu->Linearize(kX, 3, kG, kD, RaySubset{5, 2});
+  const PassStats g = gpu->Linearize(kX, 3, kG, kD, RaySubset{5, 2});
+  ExpectStatsClose(g, c, "linearize, rays from 1237");
+  EXPECT_NEAR(g.subset_cost, c.subset_cost, 1e-5 * c.subset_cost);
+  ExpectClose(Get(gpu.get(), kG), Get(cpu.get(), kG), "J^T r, rays from 1237");
+  ExpectClose(Get(gpu.get(), kD), Get(cpu.get(), kD), "diag, rays from 1237");
+  const double from_1237 = gpu->Cost(kX, 3).cost;
+  p.rays.first_index = 0;
+  SetLevel(p.Level(), p.x);
+  EXPECT_NE(gpu->Cost(kX, 3).cost, from_1237) << "first_index must enter the device's jitter";
+}
+
+// Two ranks as threads, each with its own CUDA backend on this GPU and half of the rays, summing
+// through host copies (Backend::SumAcrossRanks): the passes equal one CUDA backend's.
+TEST_F(GpuParityTest, TwoRanksOnOneGpuSumToOneBackend) {
+  const TinyProblem p = Problem(43);
+  SetLevel(p.Level(), p.x);
+  const PassStats one = gpu->Linearize(kX, 8, kG, kD, RaySubset{3, 1});
+  const std::vector<float> g1 = Get(gpu.get(), kG), d1 = Get(gpu.get(), kD);
+  // Split the rays at a photo boundary, as ranks do.
+  const int64_t per_photo = p.rays.size() / static_cast<int64_t>(p.rays.cameras.size());
+  const int64_t half = per_photo * static_cast<int64_t>(p.rays.cameras.size() / 2);
+  std::vector<RaySet> parts(2);
+  for (int r = 0; r < 2; ++r) {
+    RaySet& part = parts[static_cast<size_t>(r)];
+    part.cameras = p.rays.cameras;  // the pixels keep their camera indices
+    const int64_t begin = r == 0 ? 0 : half, end = r == 0 ? half : p.rays.size();
+    part.pixels.assign(p.rays.pixels.begin() + begin, p.rays.pixels.begin() + end);
+    part.colours.assign(p.rays.colours.begin() + 3 * begin, p.rays.colours.begin() + 3 * end);
+    part.first_index = begin;
+  }
+  test::ThreadGroup group(2);
+  std::vector<PassStats> stats(2);
+  std::vector<std::vector<float>> g(2), d(2);
+  group.Run([&](Communicator& comm) {
+    const size_t r = static_cast<size_t>(comm.rank());
+    DistributedBackend b(MakeCudaBackend({}), &comm);
+    LevelProblem level = p.Level();
+    level.rays = &parts[r];
+    b.SetLevel(level, kVectors);
+    b.Upload(kX, p.x);
+    stats[r] = b.Linearize(kX, 8, kG, kD, RaySubset{3, 1});
+    g[r] = Get(&b, kG);
+    d[r] = Get(&b, kD);
+  });
+  for (size_t r = 0; r < 2; ++r) {
+    ExpectStatsClose(stats[r], one, "2 ranks against 1 (linearize)");
+    EXPECT_NEAR(stats[r].subset_cost, one.subset_cost, 1e-5 * one.subset_cost);
+    ExpectClose(g[r], g1, "J^T r summed over 2 ranks");
+    ExpectClose(d[r], d1, "diag summed over 2 ranks");
+    EXPECT_EQ(g[r], g[0]) << "every rank holds the same bits";
+  }
 }
 
 // A cudaMalloc that fails leaves its error as the runtime's last error; the error path clears
