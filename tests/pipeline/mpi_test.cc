@@ -165,6 +165,12 @@ TEST_F(MpiTest, AKilledRankEndsTheJob) {
   for (const auto& e : fs::directory_iterator(ws / "recon")) {
     EXPECT_EQ(e.path().filename().string().find(".tmp"), std::string::npos) << e.path();
   }
+  // And the job resumes on 2 ranks from what was written (from the start if no level was done).
+  const test::CommandResult resumed =
+      test::RunCommand(StrCat("timeout 300 ", kMpirun, " -np 2 ", Reconstruct(ws, 1), " --resume"));
+  EXPECT_EQ(resumed.exit_code, 0) << resumed.output;
+  EXPECT_TRUE(fs::exists(ws / "recon" / "level_1.perfvol"));
+  EXPECT_EQ(json::parse(std::ifstream(ws / "recon" / "recon.json"))["ranks"], 2);
 }
 
 #else  // mpi_gpu_test: the same fixture, label gpu
