@@ -6,8 +6,11 @@
 #pragma once
 
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
+
+#include "workspace/image_io.h"
 
 namespace perf {
 
@@ -16,10 +19,16 @@ struct CameraGroup {
   std::vector<std::string> names;  // relative to the images folder, as COLMAP names them
 };
 
-// Groups `names` (photos under `images`) by size, EXIF make, model and focal length, in the
-// order of their first photo. A photo whose header cannot be read gets a group of its own
-// ("unreadable"; COLMAP will skip it).
-std::vector<CameraGroup> GroupByCamera(const std::filesystem::path& images, const std::vector<std::string>& names);
+// The header tags (ReadCameraTags) of `names`, photos under `images`, read once for both the
+// grouping and the capture order (capture_order.h); nullopt where a header cannot be read
+// (COLMAP will skip that photo).
+std::vector<std::optional<CameraTags>> ReadPhotoTags(const std::filesystem::path& images,
+                                                     const std::vector<std::string>& names);
+
+// Groups `names` (with their `tags`, ReadPhotoTags) by size, EXIF make, model and focal length,
+// in the order of their first photo. A photo without tags gets a group of its own ("unreadable").
+std::vector<CameraGroup> GroupByCamera(const std::vector<std::string>& names,
+                                       const std::vector<std::optional<CameraTags>>& tags);
 
 // "3 cameras from the photos' size and EXIF: 28 x 1600x1200, Canon EOS 5D, 35 mm; ..."
 std::string DescribeGroups(const std::vector<CameraGroup>& groups);

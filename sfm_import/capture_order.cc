@@ -1,7 +1,6 @@
 #include "sfm_import/capture_order.h"
 
 #include "common/errors.h"
-#include "workspace/image_io.h"
 
 namespace perf {
 
@@ -35,16 +34,10 @@ CaptureOrder OrderFromTimes(const std::vector<std::string>& times) {
   return o;
 }
 
-CaptureOrder ReadCaptureOrder(const std::filesystem::path& images, const std::vector<std::string>& names) {
+CaptureOrder OrderFromTags(const std::vector<std::optional<CameraTags>>& tags) {
   std::vector<std::string> times;
-  times.reserve(names.size());
-  for (const std::string& name : names) {
-    try {
-      times.push_back(ReadCameraTags(images / name).time);
-    } catch (const Error&) {
-      times.emplace_back();  // COLMAP skips it; it says nothing of the order
-    }
-  }
+  times.reserve(tags.size());
+  for (const std::optional<CameraTags>& t : tags) times.push_back(t ? t->time : std::string());
   return OrderFromTimes(times);
 }
 

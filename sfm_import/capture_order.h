@@ -5,9 +5,11 @@
 // evidence (colmap_runner.cc).
 #pragma once
 
-#include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
+
+#include "workspace/image_io.h"
 
 namespace perf {
 
@@ -27,8 +29,8 @@ struct CaptureOrder {
 // times: "YYYY:MM:DD HH:MM:SS" (EXIF DateTimeOriginal) of the photos in name order, "" where none.
 CaptureOrder OrderFromTimes(const std::vector<std::string>& times);
 
-// The times of `names` (photos under `images`, in name order) read from their headers; an
-// unreadable header counts as no time.
-CaptureOrder ReadCaptureOrder(const std::filesystem::path& images, const std::vector<std::string>& names);
+// The same from the photos' header tags in name order (camera_groups.h ReadPhotoTags); a photo
+// without tags counts as one without a time.
+CaptureOrder OrderFromTags(const std::vector<std::optional<CameraTags>>& tags);
 
 }  // namespace perf

@@ -435,9 +435,14 @@ SfmResult RunSfm(const SfmOptions& options) {
   // OpenGL context that a headless machine lacks.
   // With a shared camera, one per group of photos that agree on size and EXIF camera
   // (camera_groups.h): each group's extraction run (its own image list) adds one camera.
+  // The photos' headers, read once: for the camera groups, and beyond the exhaustive limit for
+  // the capture order (b).
+  const bool order_matters = options.matcher == "auto" && n > options.exhaustive_max_images;
+  std::vector<std::optional<CameraTags>> tags;
+  if (options.single_camera || order_matters) tags = ReadPhotoTags(options.images, inputs);
   std::vector<CameraGroup> groups;
   if (options.single_camera) {
-    groups = GroupByCamera(options.images, inputs);
+    groups = GroupByCamera(inputs, tags);
     Report(options, "sfm: " + DescribeGroups(groups));
   }
   Report(options, StrCat("sfm: extracting features from ", n, " images (", colmap.string(), ")"));
@@ -468,9 +473,9 @@ SfmResult RunSfm(const SfmOptions& options) {
   // order; sequential assumes photos were taken in order (a walk around the object).
   bool exhaustive = options.matcher == "exhaustive" ||
                     (options.matcher == "auto" && n <= options.exhaustive_max_images);
-  if (!exhaustive && options.matcher == "auto") {
+  if (order_matters) {
     // Beyond the exhaustive limit: do the photos' capture times say the names are in order?
-    const CaptureOrder order = ReadCaptureOrder(options.images, inputs);
+    const CaptureOrder order = OrderFromTags(tags);
     Report(options, "sfm: " + order.Describe());
     exhaustive = order.Known() && !order.NamesFollowTime();
   }

@@ -814,7 +814,7 @@ TEST(ColmapRunner, PhotosShareACameraOnlyWhereSizeAndExifAgree) {
   WriteTaggedPhoto(photos / "c.jpg", 64, 48, "Canon", 50.f);
   WriteTaggedPhoto(photos / "sub" / "d.png", 40, 30, "", 0.f);
   const std::vector<std::string> names = {"a.jpg", "b.jpg", "c.jpg", "sub/d.png"};
-  const std::vector<CameraGroup> groups = GroupByCamera(photos, names);
+  const std::vector<CameraGroup> groups = GroupByCamera(names, ReadPhotoTags(photos, names));
   ASSERT_EQ(groups.size(), 3u);
   EXPECT_EQ(groups[0].names, (std::vector<std::string>{"a.jpg", "b.jpg"}));
   EXPECT_EQ(groups[0].description, "64x48, Canon Model 1, 35 mm");
