@@ -73,7 +73,7 @@ void AddRunCommand(CLI::App& app) {
     std::signal(SIGINT, OnInterrupt);
     const RunResult r = RunPipeline(o);
     std::signal(SIGINT, SIG_DFL);
-    if (!o.quiet && root) std::cout << RunSummary(o, r);
+    if (!o.quiet) std::cout << RunSummary(o, r);  // rank 0's (the others are quiet)
   });
 }
 

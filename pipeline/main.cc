@@ -11,16 +11,19 @@
 
 namespace {
 
+// Whether this process is one of several ranks (mpirun).
+bool SeveralRanks() { return perf::LaunchedByMpi() && perf::World().size() > 1; }
+
 // Under mpirun with several ranks: "error (rank 1 of 4)", so that a user sees which rank failed.
 std::string ErrorWord(const char* word) {
-  if (!perf::LaunchedByMpi() || perf::World().size() == 1) return word;
+  if (!SeveralRanks()) return word;
   return perf::StrCat(word, " (rank ", perf::World().rank(), " of ", perf::World().size(), ")");
 }
 
 // A rank that fails ends every rank of the job (MPI_Abort): the others would wait for it in their
 // next sum for ever. A single process just exits with the code.
 int End(int code) {
-  if (perf::LaunchedByMpi() && perf::World().size() > 1) {
+  if (SeveralRanks()) {
     std::cerr.flush();
     perf::World().Abort(code);
   }

@@ -195,8 +195,7 @@ TrainingViews ViewsForHierarchy(const std::vector<PosedImage>& train, Communicat
                                 std::vector<ViewFrustum> all_views) {
   TrainingViews views;
   views.views = std::move(all_views);
-  if (comm == nullptr || comm->size() == 1) {
-    views.views.clear();
+  if (views.views.empty()) {
     for (const PosedImage& im : train) views.views.push_back({im.camera, im.image.width, im.image.height});
   }
   views.rays = [&train, comm](int factor) {

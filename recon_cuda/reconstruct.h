@@ -116,8 +116,9 @@ struct ReconstructResult {
 ReconstructResult Reconstruct(const ReconstructOptions& options);
 
 // The hierarchy's view of training photos (each level's rays from the photos downscaled by its
-// pyramid factor); `train` must outlive it. With ranks (`comm` and every training view in
-// `all_views`), `train` is this rank's share and its rays are numbered among all ranks' rays.
+// pyramid factor); `train` must outlive it. all_views: every training view (SplitViews), when
+// `train` is only this rank's share (empty: train's own); with `comm`, the rays are numbered
+// among all ranks' rays.
 TrainingViews ViewsForHierarchy(const std::vector<PosedImage>& train, Communicator* comm = nullptr,
                                 std::vector<ViewFrustum> all_views = {});
 
