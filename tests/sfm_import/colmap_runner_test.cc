@@ -92,6 +92,11 @@ void WriteFakeModel(const fs::path& dir, uint64_t num_images, uint64_t num_point
   WriteFile(dir / "points3D.bin", LittleEndianCount(num_points));
 }
 
+// Whether a progress line contains `text`.
+bool Said(const std::vector<std::string>& progress, const std::string& text) {
+  return std::any_of(progress.begin(), progress.end(), [&](const std::string& l) { return l.find(text) != std::string::npos; });
+}
+
 void WriteExecutable(const fs::path& path, const std::string& script) {
   WriteFile(path, script);
   fs::permissions(path, fs::perms::owner_all, fs::perm_options::add);
@@ -706,9 +711,7 @@ exit 0
   options.min_registered_images = 2;
   std::vector<std::string> progress;
   options.progress = [&](const std::string& line) { progress.push_back(line); };
-  const auto said = [&](const std::string& text) {
-    return std::any_of(progress.begin(), progress.end(), [&](const std::string& l) { return l.find(text) != std::string::npos; });
-  };
+  const auto said = [&](const std::string& text) { return Said(progress, text); };
 
   SfmResult r = RunSfm(options);
   EXPECT_EQ(r.num_registered_images, 3);
@@ -897,9 +900,7 @@ TEST(ColmapRunner, CaptureTimesAgainstTheNamesMeanEveryPair) {
   options.second_pass = false;
   std::vector<std::string> progress;
   options.progress = [&](const std::string& line) { progress.push_back(line); };
-  const auto said = [&](const std::string& text) {
-    return std::any_of(progress.begin(), progress.end(), [&](const std::string& l) { return l.find(text) != std::string::npos; });
-  };
+  const auto said = [&](const std::string& text) { return Said(progress, text); };
   RunSfm(options);
   std::string log = ReadFile(options.workspace / "colmap" / "colmap.log");
   EXPECT_NE(log.find("arg=[exhaustive_matcher]"), std::string::npos) << log;
