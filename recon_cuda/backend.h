@@ -187,7 +187,7 @@ class Backend {
   // Its cost at v, v^T L v / 2, deterministic like Dot.
   virtual double SmoothnessCost(VecId v, const SmoothnessWeights& w) const = 0;
   // The sum of v's entries of each ParamKind (indexed by its value), deterministic like Dot.
-  virtual std::array<double, 4> SumByKind(VecId v) const = 0;
+  virtual std::array<double, kParamKinds> SumByKind(VecId v) const = 0;
   // v = the sum of every rank's v (distributed_backend.h). The default sums a host copy; a
   // backend whose memory the communicator reads (host vectors, NCCL's device memory) sums in place.
   virtual void SumAcrossRanks(VecId v, Communicator& comm);

@@ -19,7 +19,9 @@ static_assert(std::endian::native == std::endian::little, "checkpoints are writt
 constexpr char kMagic[8] = {'P', 'E', 'R', 'F', 'V', 'O', 'L', '\0'};
 constexpr uint32_t kHeaderBytesV1 = 8 + 4 + 4 + 6 * 4 + (3 + 9 + 3 + 3 + kMaxShells) * 8 + 8 + 8;
 static_assert(kHeaderBytesV1 == 264);
-constexpr uint32_t kHeaderBytes = kHeaderBytesV1 + 8;  // + the brick count
+constexpr uint32_t kHeaderBytesV2 = kHeaderBytesV1 + 8;  // + the brick count
+constexpr uint32_t kHeaderBytes = kHeaderBytesV2 + 8;    // + the exposure count (version 3)
+constexpr int64_t kMaxExposures = 1 << 20;
 
 constexpr uint64_t kFnvBasis = 0xcbf29ce484222325ull;
 uint64_t Fnv1a(const void* data, size_t n, uint64_t h = kFnvBasis) {
@@ -146,6 +148,7 @@ void WriteCheckpoint(std::ostream& out, const Checkpoint& c) {
   Put(&h, static_cast<uint64_t>(c.params.size()));
   Put(&h, Fnv1a(c.params.data(), c.params.size() * sizeof(float), Fnv1a(bricks.data(), bricks.size() * sizeof(uint32_t))));
   Put(&h, static_cast<int64_t>(c.shape.bricks ? static_cast<int64_t>(bricks.size()) : -1));
+  Put(&h, static_cast<int64_t>(c.shape.exposures));
   PERF_CHECK(h.size() == kHeaderBytes);
   out.write(h.data(), static_cast<std::streamsize>(h.size()));
   out.write(reinterpret_cast<const char*>(bricks.data()), static_cast<std::streamsize>(bricks.size() * sizeof(uint32_t)));
@@ -158,13 +161,13 @@ Checkpoint ReadCheckpoint(std::istream& in, const std::string& name) {
   if (!in.read(magic, 8)) r.Truncated("magic");
   if (std::memcmp(magic, kMagic, 8) != 0) r.Bad("magic", std::string(magic, strnlen(magic, 8)), "not a PERF volume checkpoint");
   const uint32_t version = r.Get<uint32_t>("version");
-  if (version != 1 && version != kCheckpointVersion) {
+  if (version < 1 || version > kCheckpointVersion) {
     throw InputError(name, "version", std::to_string(version),
                      StrCat("this perf reads checkpoint versions 1 to ", kCheckpointVersion),
                      "re-run perf reconstruct with this version of perf");
   }
   const uint32_t header = r.Get<uint32_t>("header bytes");
-  const uint32_t expected_header = version == 1 ? kHeaderBytesV1 : kHeaderBytes;
+  const uint32_t expected_header = version == 1 ? kHeaderBytesV1 : version == 2 ? kHeaderBytesV2 : kHeaderBytes;
   if (header != expected_header) r.Bad("header bytes", std::to_string(header), StrCat("expected ", expected_header));
   Checkpoint c;
   c.level = r.Get<int32_t>("level");
@@ -214,6 +217,11 @@ Checkpoint ReadCheckpoint(std::istream& in, const std::string& name) {
   } else if (num_bricks != -1) {
     r.Bad("bricks", StrCat(num_bricks), "must be -1 (dense) or a brick count");
   }
+  const int64_t exposures = version < 3 ? 0 : r.Get<int64_t>("exposures");
+  if (exposures < 0 || exposures > kMaxExposures) {
+    r.Bad("exposures", StrCat(exposures), StrCat("must be 0 to ", kMaxExposures, " photos"));
+  }
+  c.shape.exposures = static_cast<int>(exposures);
   // The parameter count the shape implies, before the brick list is read (it needs only B).
   const int64_t grid_params = num_bricks >= 0 ? SparseGridParams(num_bricks) : GridParamCount(c.shape.n);
   const int64_t expected = grid_params + (c.shape.ParamCount() - c.shape.GridParamCount());

@@ -2,10 +2,10 @@
 // self-describing so that export and render need nothing else (the box and shells in world
 // units travel with the values).
 //
-// Format (version 2, little-endian):
+// Format (version 3, little-endian):
 //   char[8]  magic "PERFVOL\0"
-//   u32      version (2; version 1 files, always dense, are still read)
-//   u32      header bytes (this fixed header: 272; version 1: 264)
+//   u32      version (3; versions 1, always dense, and 2, without exposures, are still read)
+//   u32      header bytes (this fixed header: 280; version 2: 272; version 1: 264)
 //   i32      level, n, m, num_shells, iterations (GN iterations or Adam steps run at the level)
 //   i32      solver (0 Gauss-Newton, 1 Adam)
 //   f64[3]   box centre, f64[9] box rotation (world_from_box, row-major), f64[3] box size
@@ -13,6 +13,7 @@
 //   u64      parameter count (= VolumeShape::ParamCount)
 //   u64      FNV-1a 64 of the brick list's bytes then the parameter bytes
 //   i64      B: -1 for a dense grid, else the number of active bricks (not in version 1)
+//   i64      photos whose exposures follow the shells (VolumeShape::exposures; from version 3)
 //   u32[B]   the active bricks' indices (ray_types.h BrickOf), ascending: their slot order
 //   f32[count] parameters, layout of ray_types.h
 // The reader checks every field and names the file and field on any mismatch, and checks the
@@ -28,7 +29,7 @@
 
 namespace perf::recon {
 
-inline constexpr uint32_t kCheckpointVersion = 2;
+inline constexpr uint32_t kCheckpointVersion = 3;
 
 struct Checkpoint {
   int level = 0;

@@ -54,7 +54,8 @@ class CpuBackend final : public Backend {
     scratch_.clear();
     level_ = p;
     rays_ = {p.rays->cameras.data(), p.rays->pixels.data(), p.rays->colours.data(),
-             UsesAlpha(p) ? p.rays->alphas.data() : nullptr, p.rays->size(), p.rays->first_index};
+             UsesAlpha(p) ? p.rays->alphas.data() : nullptr, p.rays->size(), p.rays->first_index,
+             ExposureSlots(p)};
     weight_ = OpacityResidualWeight(p);
     const MemoryEstimate e = EstimateMemory(p, num_vectors);
     if (!e.Fits()) {
@@ -94,7 +95,7 @@ class CpuBackend final : public Backend {
   double SmoothnessCost(VecId v, const SmoothnessWeights& w) const override {
     return vectors_.SmoothnessCost(v, level_.shape, w);
   }
-  std::array<double, 4> SumByKind(VecId v) const override { return vectors_.SumByKind(v, level_.shape); }
+  std::array<double, kParamKinds> SumByKind(VecId v) const override { return vectors_.SumByKind(v, level_.shape); }
   void Project(VecId x) override { vectors_.Project(x, level_.shape); }
   void HoldParameters(VecId x, VecId g, VecId free, bool bounds) override {
     vectors_.HoldParameters(x, g, free, level_.shape, level_.fixed_shells, bounds);
@@ -170,6 +171,7 @@ class CpuBackend final : public Backend {
         const BoxRay<float>& ray = tr.ray;
         const SampleJ* samples;
         const ShellJ* shells;
+        const float* h;
         int count;
         if (recorded_) {
           const BlockJ& b = blocks_[block];
@@ -178,12 +180,15 @@ class CpuBackend final : public Backend {
           samples = b.samples.data() + first;
           count = static_cast<int>(b.end[r] - first);
           shells = &b.shells[r * k_shells];
+          h = &b.h[3 * r];
         } else {
           RecomputeRow(vol, tr, i, s);
           samples = s.row.samples.data();
           count = static_cast<int>(s.row.samples.size());
           shells = s.row.shells.data();
+          h = s.row.h.data();
         }
+        const RayExposure<float> e = ExposureAt(vol, i, h);
         float u[4] = {0, 0, 0, 0};
         TexelSample<float> ts[kMaxShells];
         for (int k = 0; k < k_shells; ++k) {
@@ -196,12 +201,16 @@ class CpuBackend final : public Backend {
           w[j] = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(samples[j].t));
           AddJpSample(pp, w[j], samples[j].sp, u);
         }
+        FinishJp(e, pp, u);
+        float uv[4];
+        VolumeU(e, u, uv);
         for (int k = 0; k < k_shells; ++k) {
           if (shells[k].coord.face < 0) continue;
-          ScatterJtuShell(ts[k], shells[k].sp, u, sink);
+          ScatterJtuShell(ts[k], shells[k].sp, uv, sink);
         }
         // Direct scatter: measured faster here than merging cells (CellMerger) first.
-        for (int j = 0; j < count; ++j) ScatterJtuSample(w[j], samples[j].sp, u, sink);
+        for (int j = 0; j < count; ++j) ScatterJtuSample(w[j], samples[j].sp, uv, sink);
+        ScatterJtuExposure(e, u, sink);
         bs.rays += 1;
         bs.samples += count;
       }
@@ -221,8 +230,9 @@ class CpuBackend final : public Backend {
       int64_t i = begin + ((subset.offset - begin % subset.stride) + subset.stride) % subset.stride;
       for (; i < end; i += subset.stride) {
         const TrainingRay tr = TrainingRayOf(i, seed);
-        const RayOutput<float> fwd = Forward(vol, tr.ray, tr.jit, &level_.rays->colours[3 * i], weight_,
-                                             level_.residuals.stop_transmittance, nullptr, AlphaOf(rays_, i));
+        const RayOutput<float> fwd =
+            Forward(vol, tr.ray, tr.jit, &level_.rays->colours[3 * i], weight_, level_.residuals.stop_transmittance,
+                    nullptr, AlphaOf(rays_, i), TransformAt(vol, i));
         bs.Add(fwd);
       }
       return bs;
@@ -279,20 +289,47 @@ class CpuBackend final : public Backend {
       const TrainingRay tr = TrainingRayOf(i, seed);
       const BoxRay<float>& ray = tr.ray;
       const Jitter& jit = tr.jit;
-      const RayOutput<float> fwd = Forward(vol, ray, jit, &level_.rays->colours[3 * i], weight_,
-                                           level_.residuals.stop_transmittance, s.record.data(), AlphaOf(rays_, i));
-      LinearizeVisitor<kDiag> v{{fwd.residual[0], fwd.residual[1], fwd.residual[2], fwd.residual[3]},
+      const ColourTransform<float> xf = TransformAt(vol, i);
+      const RayOutput<float> fwd =
+          Forward(vol, ray, jit, &level_.rays->colours[3 * i], weight_, level_.residuals.stop_transmittance,
+                  s.record.data(), AlphaOf(rays_, i), xf);
+      const RayExposure<float> e = ExposureOfRay(vol.ExposureStart(), ExposureSlotOf(rays_, i), xf, fwd.h);
+      LinearizeVisitor<kDiag> v{{},
+                                {},
                                 AddSink{s.acc.data(), kDiag ? 1 : 0, 0},
                                 AddSink{kDiag ? s.acc.data() : nullptr, 1, 4},
-                                {},
                                 out,
                                 out ? &out->shells[(i - begin) * level_.shape.num_shells] : nullptr};
+      VolumeU(e, fwd.residual, v.r);
+      GainSquared(e, v.g2);
       Backward(vol, ray, jit, fwd, v, s.record.data());
       v.Finish();
-      if (out) out->end[i - begin] = static_cast<uint32_t>(out->samples.size());
+      ScatterJtuExposure(e, fwd.residual, v.g);
+      if constexpr (kDiag) AddDiagExposure(e, v.d);
+      if (out) {
+        out->end[i - begin] = static_cast<uint32_t>(out->samples.size());
+        for (int c = 0; c < 3; ++c) out->h[3 * (i - begin) + c] = fwd.h[c];
+      }
       bs.Add(fwd, subset.Contains(i));
     }
     return bs;
+  }
+
+  // The exposure slots the level's rays read (RaySet::exposure_slot), or nullptr when the level
+  // solves no exposures.
+  static const int32_t* ExposureSlots(const LevelProblem& p) {
+    if (p.shape.exposures == 0) return nullptr;
+    PERF_CHECK_MSG(p.rays->exposure_slot.size() == p.rays->cameras.size(), "exposure slots for every camera");
+    for (int32_t slot : p.rays->exposure_slot) PERF_CHECK(slot >= 0 && slot < p.shape.exposures);
+    return p.rays->exposure_slot.data();
+  }
+  // Ray i's photo's colour transform at vol's parameters, and its exposure's partials given H.
+  ColourTransform<float> TransformAt(const VolumeView<float>& vol, int64_t i) const {
+    return TransformOf(vol.params, vol.ExposureStart(), ExposureSlotOf(rays_, i));
+  }
+  RayExposure<float> ExposureAt(const VolumeView<float>& vol, int64_t i, const float* h) const {
+    const int slot = ExposureSlotOf(rays_, i);
+    return ExposureOfRay(vol.ExposureStart(), slot, TransformOf(vol.params, vol.ExposureStart(), slot), h);
   }
 
   // Ray i in the iteration of `seed` (training_ray.h, as the CUDA passes read it).
@@ -306,6 +343,7 @@ class CpuBackend final : public Backend {
     b->samples.clear();
     b->end.assign(rays, 0);
     b->shells.assign(rays * level_.shape.num_shells, ShellJ{{-1, 0.f, 0.f}, {}});
+    b->h.assign(3 * rays, 0.f);
   }
 
   // The partials of ray i at the linearisation point, into s.row (no recorded Jacobian).
@@ -317,6 +355,7 @@ class CpuBackend final : public Backend {
                                          level_.residuals.stop_transmittance, s.record.data(), AlphaOf(rays_, i));
     RecordOnly visitor{&s.row};
     Backward(vol, ray, jit, fwd, visitor, s.record.data());
+    for (int c = 0; c < 3; ++c) s.row.h[c] = fwd.h[c];
   }
   // Records a ray's partials without scattering anything.
   struct RecordOnly {
@@ -369,7 +408,8 @@ class CpuBackend final : public Backend {
     int64_t samples = 0;
     for (int64_t c : per_block) samples += c;
     return samples * static_cast<int64_t>(sizeof(SampleJ)) +
-           n * (static_cast<int64_t>(sizeof(uint32_t)) + p.shape.num_shells * static_cast<int64_t>(sizeof(ShellJ)));
+           n * (static_cast<int64_t>(sizeof(uint32_t) + 3 * sizeof(float)) +
+                p.shape.num_shells * static_cast<int64_t>(sizeof(ShellJ)));
   }
 
   uint64_t BeginPass() { return ++pass_; }

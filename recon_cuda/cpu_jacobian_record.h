@@ -41,6 +41,7 @@ struct BlockJ {
   std::vector<SampleJ> samples;
   std::vector<uint32_t> end;  // [rays]: one past the ray's last sample in `samples`
   std::vector<ShellJ> shells;  // [rays, num_shells]
+  std::vector<float> h;        // [rays, 3] the composited colour H (the exposure's partials)
 };
 
 struct Scratch {
@@ -58,15 +59,16 @@ struct Scratch {
 template <bool kDiag>
 struct LinearizeVisitor {
   static constexpr int K = 9;  // J^T r values, then the 5 row values of diag
-  float r[4];
+  float r[4];          // the residuals the volume's partials multiply (jacobian.h VolumeU)
+  float g2[3];         // the squared gains of the ray's photo (jacobian.h GainSquared)
   AddSink g, d;
-  CellMerger<float, K> merger;
   BlockJ* out;         // nullptr: nothing recorded
   ShellJ* out_shells;  // [num_shells] of this ray
+  CellMerger<float, K> merger{};
 
   void Shell(int k, const CubeCoord<float>& c, const TexelSample<float>& ts, const ShellPartials<float>& sp) {
     ScatterJtuShell(ts, sp, r, g);
-    if constexpr (kDiag) AddDiagShell(ts, sp, d);
+    if constexpr (kDiag) AddDiagShell(ts, sp, g2, d);
     if (out_shells) out_shells[k] = {c, sp};
   }
   void Sample(int, const MarchStep<float>& st, const GridSample<float>& gs, const SamplePartials<float>& sp) {
@@ -83,7 +85,7 @@ struct LinearizeVisitor {
   // A cell's merged sums are complete.
   void operator()(int64_t cell, const float* acc) {
     g.Add4(GridParam(cell, 0), acc[0], acc[1], acc[2], acc[3]);
-    AddDiagFromRow(cell, acc + 4, d);
+    AddDiagFromRow(cell, acc + 4, g2, d);
   }
   void Finish() {
     if constexpr (kDiag) merger.Finish(*this);

@@ -189,10 +189,10 @@ double CpuVectors::SmoothnessCost(VecId v, const VolumeShape& shape, const Smoot
       [](double x, double y) { return x + y; });
 }
 
-std::array<double, 4> CpuVectors::SumByKind(VecId v, const VolumeShape& shape) const {
+std::array<double, kParamKinds> CpuVectors::SumByKind(VecId v, const VolumeShape& shape) const {
   const float* pv = (*this)[v].data();
-  std::array<double, 4> sums{};
-  for (int kind = 0; kind < 4; ++kind) {
+  std::array<double, kParamKinds> sums{};
+  for (int kind = 0; kind < kParamKinds; ++kind) {
     sums[kind] = ReduceChunks(
         [&](int64_t b, int64_t e) {
           double s = 0;

@@ -45,7 +45,7 @@ class CpuVectors {
   void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t, const VolumeShape& shape);
   void AddSmoothness(VecId v, const VolumeShape& shape, const SmoothnessWeights& w, VecId out, VecId diag);
   double SmoothnessCost(VecId v, const VolumeShape& shape, const SmoothnessWeights& w) const;
-  std::array<double, 4> SumByKind(VecId v, const VolumeShape& shape) const;
+  std::array<double, kParamKinds> SumByKind(VecId v, const VolumeShape& shape) const;
 
   // fn(begin, end) over the vectors' elements, in parallel over fixed chunks.
   template <class Fn>

@@ -24,7 +24,7 @@ std::string Mib(int64_t bytes) { return StrCat((bytes + (1 << 20) - 1) >> 20, " 
 // Device bytes of the level's training rays: cameras, pixels, 8-bit colours and, when the level
 // fits the alpha (UsesAlpha), 8-bit alphas.
 int64_t RayBytes(const LevelProblem& p) {
-  return static_cast<int64_t>(p.rays->cameras.size() * sizeof(PinholeCamera<float>)) +
+  return static_cast<int64_t>(p.rays->cameras.size() * (sizeof(PinholeCamera<float>) + sizeof(int32_t))) +
          p.rays->size() * static_cast<int64_t>(sizeof(RayPixel) + 3 + (UsesAlpha(p) ? 1 : 0));
 }
 
@@ -41,23 +41,35 @@ struct DeviceRays {
   DeviceBuffer<RayPixel> pixels;
   DeviceBuffer<uint8_t> colours;
   DeviceBuffer<uint8_t> alphas;  // empty when the level has no alpha residual
+  DeviceBuffer<int32_t> exposure_slot;  // empty when the level solves no exposures
   int64_t first_index = 0;       // RaySet::first_index
 
-  DeviceRays(const RaySet& rays, bool use_alpha)
+  DeviceRays(const RaySet& rays, bool use_alpha, int exposures)
       : cameras(static_cast<int64_t>(rays.cameras.size())),
         pixels(rays.size()),
         colours(3 * rays.size()),
         alphas(use_alpha ? rays.size() : 0),
+        exposure_slot(exposures > 0 ? static_cast<int64_t>(rays.cameras.size()) : 0),
         first_index(rays.first_index) {
     PERF_CHECK(static_cast<int64_t>(rays.colours.size()) == 3 * rays.size());
     cameras.CopyFromHost(rays.cameras);
     pixels.CopyFromHost(rays.pixels);
     colours.CopyFromHost(ToBytes(rays.colours));
     if (use_alpha) alphas.CopyFromHost(ToBytes(rays.alphas));
+    if (exposures > 0) {
+      PERF_CHECK(rays.exposure_slot.size() == rays.cameras.size());
+      for (int32_t slot : rays.exposure_slot) PERF_CHECK(slot >= 0 && slot < exposures);
+      exposure_slot.CopyFromHost(rays.exposure_slot);
+    }
   }
   cuda::RaysView View() const {
-    return {cameras.data(), pixels.data(),         colours.data(), alphas.size() > 0 ? alphas.data() : nullptr,
-            pixels.size(),  first_index};
+    return {cameras.data(),
+            pixels.data(),
+            colours.data(),
+            alphas.size() > 0 ? alphas.data() : nullptr,
+            pixels.size(),
+            first_index,
+            exposure_slot.size() > 0 ? exposure_slot.data() : nullptr};
   }
 };
 
@@ -147,7 +159,7 @@ class CudaBackend final : public Backend {
       brick_list_ = DeviceBuffer<int64_t>(p.shape.bricks->ActiveBricks());
       brick_list_.CopyFromHost(p.shape.bricks->bricks);
     }
-    rays_ = std::make_unique<DeviceRays>(*p.rays, UsesAlpha(p));
+    rays_ = std::make_unique<DeviceRays>(*p.rays, UsesAlpha(p), p.shape.exposures);
     scratch_ = std::make_unique<Scratch>(p.rays->size(), p.shape.ParamCount());
     held_ = e.Total();
     return e;
@@ -181,18 +193,22 @@ class CudaBackend final : public Backend {
   double SmoothnessCost(VecId v, const SmoothnessWeights& w) const override {
     return cuda::SmoothnessCost(ptr(v), DeviceSmoothnessLayout(), w, n(), scratch_->Reduce());
   }
-  std::array<double, 4> SumByKind(VecId v) const override {
-    return cuda::SumByKind(ptr(v), n(), level_.shape.GridParamCount(), scratch_->Reduce());
+  std::array<double, kParamKinds> SumByKind(VecId v) const override {
+    return cuda::SumByKind(ptr(v), n(), level_.shape.GridParamCount(), level_.shape.ExposureStart(), scratch_->Reduce());
   }
-  void Project(VecId x) override { cuda::Project(ptr(x), n(), level_.shape.GridParamCount()); }
+  void Project(VecId x) override {
+    cuda::Project(ptr(x), n(), level_.shape.GridParamCount(), level_.shape.ExposureStart());
+  }
   void HoldParameters(VecId x, VecId g, VecId free, bool bounds) override {
-    cuda::HoldParameters(ptr(x), ptr(g), ptr(free), n(), level_.shape.GridParamCount(), level_.fixed_shells, bounds);
+    cuda::HoldParameters(ptr(x), ptr(g), ptr(free), n(), level_.shape.GridParamCount(), level_.shape.ExposureStart(),
+                         level_.fixed_shells, bounds);
   }
   void Multiply(VecId y, VecId m) override { cuda::Multiply(ptr(y), ptr(m), n()); }
   // Nothing is recorded: JtJpKernel skips the samples on the fly (jacobian.h SkippableSample).
   void RestrictJacobian(VecId free) override { restrict_to_ = ptr(free); }
   void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) override {
-    cuda::AdamStep(ptr(x), ptr(g), ptr(m), ptr(v), AdamCoefficientsAt(s, t), n(), level_.shape.GridParamCount());
+    cuda::AdamStep(ptr(x), ptr(g), ptr(m), ptr(v), AdamCoefficientsAt(s, t), n(), level_.shape.GridParamCount(),
+                   level_.shape.ExposureStart());
   }
 
   PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset) override {

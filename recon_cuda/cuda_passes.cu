@@ -62,10 +62,11 @@ struct ScatterVisitor {
   AtomicSink g, d;
   CellMerger<float, K> merger;
   const float* free = nullptr;
+  float g2[3] = {1, 1, 1};  // the squared gains of the ray's photo (jacobian.h GainSquared)
 
   __device__ void Shell(int, const CubeCoord<float>&, const TexelSample<float>& ts, const ShellPartials<float>& sp) {
     ScatterJtuShell(ts, sp, u, g);
-    if constexpr (kDiag) AddDiagShell(ts, sp, d);
+    if constexpr (kDiag) AddDiagShell(ts, sp, g2, d);
   }
   __device__ void Sample(int, const MarchStep<float>&, const GridSample<float>& gs, const SamplePartials<float>& sp) {
     if (free && SkippableSample(gs, sp, free)) return;
@@ -77,7 +78,7 @@ struct ScatterVisitor {
   // A cell's merged sums are complete.
   __device__ void operator()(int64_t cell, const float* acc) {
     g.Add4(GridParam(cell, 0), acc[0], acc[1], acc[2], acc[3]);
-    if constexpr (kDiag) AddDiagFromRow(cell, acc + 4, d);
+    if constexpr (kDiag) AddDiagFromRow(cell, acc + 4, g2, d);
   }
   __device__ void Finish() { merger.Finish(*this); }
 };
@@ -97,6 +98,40 @@ struct JpVisitor {
     ++used;
   }
 };
+
+// A ray's exposure entries (jacobian.h ScatterJtuExposure, AddDiagExposure), kept in registers
+// until WarpAddExposure: base is the photo's first exposure parameter (-1: none).
+struct ExposureSums {
+  int64_t base = -1;
+  float v[kExposureValues] = {0, 0, 0, 0, 0, 0, 0, 0};
+  __device__ __forceinline__ void Add4(int64_t i, float x, float y, float z, float w) {
+    float* p = v + (i - base);
+    p[0] += x;
+    p[1] += y;
+    p[2] += z;
+    p[3] += w;
+  }
+};
+
+// Adds every lane's ExposureSums to dst. Every ray of a photo adds to the same 8 values, and a
+// warp's rays are usually of one photo (the rays go photo by photo, tile by tile): then the warp
+// sums them with shuffles and one lane adds, instead of 32 atomics on one address. Call from
+// every lane of the warp (lanes without a ray pass base -1).
+__device__ void WarpAddExposure(ExposureSums& e, float* dst) {
+  constexpr unsigned kAll = 0xffffffffu;
+  const long long first = __shfl_sync(kAll, static_cast<long long>(e.base), 0);
+  if (__all_sync(kAll, e.base == first)) {
+    if (first < 0) return;
+    for (int k = 0; k < kExposureValues; ++k)
+      for (int offset = 16; offset > 0; offset >>= 1) e.v[k] += __shfl_down_sync(kAll, e.v[k], offset);
+    if ((threadIdx.x & 31) != 0) return;
+  } else if (e.base < 0) {
+    return;
+  }
+  AtomicSink sink{dst};
+  sink.Add4(e.base, e.v[0], e.v[1], e.v[2], e.v[3]);
+  sink.Add4(e.base + 4, e.v[4], e.v[5], e.v[6], e.v[7]);
+}
 
 struct SumStats {
   __device__ __forceinline__ RayStats operator()(const RayStats& a, const RayStats& b) const {
@@ -128,18 +163,29 @@ __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, flo
                                                                int offset, RayStats* partials) {
   const int64_t i = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   RayStats mine;
+  ExposureSums eg, ed;
   if (i < in.rays.count) {
     const TrainingRay r = MakeRay(in, i);
     float target[3];
     TargetOf(in.rays, i, target);
+    const int slot = ExposureSlotOf(in.rays, i);
+    const ColourTransform<float> xf = TransformOf(in.vol.params, in.vol.ExposureStart(), slot);
     const RayOutput<float> fwd =
-        Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in.rays, i));
-    ScatterVisitor<kDiag> v{{fwd.residual[0], fwd.residual[1], fwd.residual[2], fwd.residual[3]}, {g}, {diag}, {}};
+        Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in.rays, i), xf);
+    const RayExposure<float> e = ExposureOfRay(in.vol.ExposureStart(), slot, xf, fwd.h);
+    ScatterVisitor<kDiag> v{{0, 0, 0, 0}, {g}, {diag}, {}};
+    VolumeU(e, fwd.residual, v.u);
+    GainSquared(e, v.g2);
     Backward(in.vol, r.ray, r.jit, fwd, v);
     v.Finish();
+    eg.base = ed.base = e.param;
+    ScatterJtuExposure(e, fwd.residual, eg);
+    if constexpr (kDiag) AddDiagExposure(e, ed);
     mine = StatsOf(fwd);
     if (i % stride == offset) mine.subset_cost = mine.cost;
   }
+  WarpAddExposure(eg, g);
+  if constexpr (kDiag) WarpAddExposure(ed, diag);
   WriteBlockStats(mine, partials);
 }
 
@@ -147,18 +193,26 @@ __global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const fl
                                                           float* out, RayStats* partials) {
   const int64_t i = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   RayStats mine;
+  ExposureSums eo;
   if (i < in.rays.count) {
     const TrainingRay r = MakeRay(in, i);
     // The partials depend on the forward's transmittances and colours, not on the target (and
-    // on whether the ray has an alpha, not on its value).
+    // on whether the ray has an alpha, not on its value); the exposure's on H.
     const float zero[3] = {0, 0, 0};
     const RayOutput<float> fwd =
         Forward(in.vol, r.ray, r.jit, zero, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in.rays, i));
+    const int slot = ExposureSlotOf(in.rays, i);
+    const RayExposure<float> e = ExposureOfRay(in.vol.ExposureStart(), slot,
+                                               TransformOf(in.vol.params, in.vol.ExposureStart(), slot), fwd.h);
     JpVisitor jp{p, free, {0, 0, 0, 0}};
     Backward(in.vol, r.ray, r.jit, fwd, jp);
-    ScatterVisitor<false> v{{jp.u[0], jp.u[1], jp.u[2], jp.u[3]}, {out}, {nullptr}, {}, free};
+    FinishJp(e, p, jp.u);
+    ScatterVisitor<false> v{{0, 0, 0, 0}, {out}, {nullptr}, {}, free};
+    VolumeU(e, jp.u, v.u);
     Backward(in.vol, r.ray, r.jit, fwd, v);
     v.Finish();
+    eo.base = e.param;
+    ScatterJtuExposure(e, jp.u, eo);
     mine.rays = 1;
     // The samples that enter the product, as the CPU backend counts them when it records the
     // Jacobian (after RestrictJacobian it visits only the samples it kept; recomputing, it counts
@@ -166,6 +220,7 @@ __global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const fl
     // samples/s is not a march rate.
     mine.samples = jp.used;
   }
+  WarpAddExposure(eo, out);
   WriteBlockStats(mine, partials);
 }
 
@@ -179,7 +234,9 @@ __global__ void __launch_bounds__(kRayThreads) CostKernel(PassInput in, int64_t 
     const TrainingRay r = MakeRay(in, i);
     float target[3];
     TargetOf(in.rays, i, target);
-    mine = StatsOf(Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in.rays, i)));
+    const ColourTransform<float> xf = TransformOf(in.vol.params, in.vol.ExposureStart(), ExposureSlotOf(in.rays, i));
+    mine = StatsOf(
+        Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in.rays, i), xf));
   }
   WriteBlockStats(mine, partials);
 }

@@ -58,7 +58,7 @@ class DistributedBackend final : public Backend {
     inner_->AddSmoothness(v, w, out, diag);
   }
   double SmoothnessCost(VecId v, const SmoothnessWeights& w) const override { return inner_->SmoothnessCost(v, w); }
-  std::array<double, 4> SumByKind(VecId v) const override { return inner_->SumByKind(v); }
+  std::array<double, kParamKinds> SumByKind(VecId v) const override { return inner_->SumByKind(v); }
   void SumAcrossRanks(VecId v, Communicator& comm) override { inner_->SumAcrossRanks(v, comm); }
   void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) override {
     inner_->AdamStep(x, g, m, v, s, t);

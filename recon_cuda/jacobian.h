@@ -178,6 +178,81 @@ class CellMerger {
   bool distinct_ = false;
 };
 
+// A ray's photo exposure (ray_types.h ExposureParam, ray_math.h ColourTransform): with
+// r_c = g_c H_c + b_c - C_c and g_c = 1 + gamma_c, the volume's partials of r_c are g_c times
+// those of H_c (Backward's), and d r_c / d gamma_c = H_c, d r_c / d b_c = 1. param < 0: the
+// photo's exposure is not solved (g = 1, no exposure entries), and every function below then
+// leaves the volume's values exactly as they were.
+template <class T>
+struct RayExposure {
+  int64_t param = -1;  // the photo's gamma_r
+  T gain[3] = {1, 1, 1};
+  T h[3] = {0, 0, 0};  // H at the linearisation point
+};
+
+// The transform that parameters `params` give the photo of exposure slot `slot` (< 0: identity).
+template <class T>
+PERF_HD_INLINE ColourTransform<T> TransformOf(const T* params, int64_t exposure_start, int slot) {
+  ColourTransform<T> xf;
+  if (slot < 0) return xf;
+  const T* e = params + ExposureParam(exposure_start, slot);
+  for (int c = 0; c < 3; ++c) {
+    xf.gain[c] = 1 + e[c];
+    xf.offset[c] = e[4 + c];
+  }
+  return xf;
+}
+
+template <class T>
+PERF_HD_INLINE RayExposure<T> ExposureOfRay(int64_t exposure_start, int slot, const ColourTransform<T>& xf,
+                                            const T* h) {
+  RayExposure<T> e;
+  if (slot < 0) return e;
+  e.param = ExposureParam(exposure_start, slot);
+  for (int c = 0; c < 3; ++c) {
+    e.gain[c] = xf.gain[c];
+    e.h[c] = h[c];
+  }
+  return e;
+}
+
+// The residual vector the volume's partials multiply: (g_c u_c, u_L).
+template <class T>
+PERF_HD_INLINE void VolumeU(const RayExposure<T>& e, const T u[4], T out[4]) {
+  for (int c = 0; c < 3; ++c) out[c] = e.gain[c] * u[c];
+  out[3] = u[3];
+}
+
+// u = J_ray p from the volume's gathers `u` (of H; AddJpSample, AddJpShell): the colour entries
+// become g_c u_c + H_c p[gamma_c] + p[b_c].
+template <class T>
+PERF_HD_INLINE void FinishJp(const RayExposure<T>& e, const T* p, T u[4]) {
+  if (e.param < 0) return;
+  for (int c = 0; c < 3; ++c) u[c] = e.gain[c] * u[c] + e.h[c] * p[e.param + c] + p[e.param + 4 + c];
+}
+
+// The exposure's share of J^T u (u: the ray's residuals, or J p): H_c u_c to gamma_c, u_c to b_c.
+template <class T, class Sink>
+PERF_HD_INLINE void ScatterJtuExposure(const RayExposure<T>& e, const T u[4], Sink& sink) {
+  if (e.param < 0) return;
+  sink.Add4(e.param, e.h[0] * u[0], e.h[1] * u[1], e.h[2] * u[2], T(0));
+  sink.Add4(e.param + 4, u[0], u[1], u[2], T(0));
+}
+
+// The exposure's share of diag(J^T J): H_c^2 and 1 (one row entry each per ray).
+template <class T, class Sink>
+PERF_HD_INLINE void AddDiagExposure(const RayExposure<T>& e, Sink& sink) {
+  if (e.param < 0) return;
+  sink.Add4(e.param, e.h[0] * e.h[0], e.h[1] * e.h[1], e.h[2] * e.h[2], T(0));
+  sink.Add4(e.param + 4, T(1), T(1), T(1), T(0));
+}
+
+// The squared gains g_c^2 that scale the volume's diagonal entries of colour residual c.
+template <class T>
+PERF_HD_INLINE void GainSquared(const RayExposure<T>& e, T g2[3]) {
+  for (int c = 0; c < 3; ++c) g2[c] = e.gain[c] * e.gain[c];
+}
+
 // The row values whose merged sums give, squared, a cell's diag(J^T J) share: the colour entry
 // dc (the same for the three colour residuals) and sigma's entries for the 4 residuals.
 template <class T>
@@ -188,16 +263,19 @@ PERF_HD_INLINE void RowValues(const SamplePartials<T>& sp, T* v) {
   v[3] = sp.ds[2];
   v[4] = sp.dl;
 }
-// diag entries of a cell from its merged row values (RowValues order).
+// diag entries of a cell from its merged row values (RowValues order); g2: the squared gains of
+// the ray's photo (GainSquared; 1 without exposure): colour residual c's row entries are g_c times
+// H_c's, and g_c is the same for every sample of the ray, so it factors out of the merged sums.
 template <class T, class Sink>
-PERF_HD_INLINE void AddDiagFromRow(int64_t cell, const T* row, Sink& sink) {
+PERF_HD_INLINE void AddDiagFromRow(int64_t cell, const T* row, const T* g2, Sink& sink) {
   const T c = row[0] * row[0];
-  sink.Add4(GridParam(cell, 0), c, c, c, row[1] * row[1] + row[2] * row[2] + row[3] * row[3] + row[4] * row[4]);
+  sink.Add4(GridParam(cell, 0), g2[0] * c, g2[1] * c, g2[2] * c,
+            g2[0] * row[1] * row[1] + g2[1] * row[2] * row[2] + g2[2] * row[3] * row[3] + row[4] * row[4]);
 }
 
 // A shell's texels are reached by one lookup per ray: only repeats at the face border merge.
 template <class T, class Sink>
-PERF_HD_INLINE void AddDiagShell(const TexelSample<T>& ts, const ShellPartials<T>& sp, Sink& sink) {
+PERF_HD_INLINE void AddDiagShell(const TexelSample<T>& ts, const ShellPartials<T>& sp, const T* g2, Sink& sink) {
   for (int q = 0; q < 4; ++q) {
     bool seen = false;
     for (int j = 0; j < q; ++j) seen = seen || ts.param[j] == ts.param[q];
@@ -205,8 +283,10 @@ PERF_HD_INLINE void AddDiagShell(const TexelSample<T>& ts, const ShellPartials<T
     T w = 0;
     for (int j = q; j < 4; ++j) w += ts.param[j] == ts.param[q] ? ts.w[j] : T(0);
     const T c = w * sp.de;
-    const T a = sp.opaque ? T(0) : w * w * (sp.da[0] * sp.da[0] + sp.da[1] * sp.da[1] + sp.da[2] * sp.da[2]);
-    sink.Add4(ts.param[q], c * c, c * c, c * c, a);
+    const T a = sp.opaque ? T(0)
+                          : w * w * (g2[0] * sp.da[0] * sp.da[0] + g2[1] * sp.da[1] * sp.da[1] +
+                                     g2[2] * sp.da[2] * sp.da[2]);
+    sink.Add4(ts.param[q], g2[0] * c * c, g2[1] * c * c, g2[2] * c * c, a);
   }
 }
 

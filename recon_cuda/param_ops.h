@@ -9,20 +9,34 @@
 
 namespace perf::recon {
 
-// Which of the 4 channels of parameter i is what (for per-kind learning rates and bounds).
-enum class ParamKind { kGridColour, kGridDensity, kShellColour, kShellOpacity };
+// What parameter i is (for per-kind learning rates, bounds and the smoothness weights).
+enum class ParamKind { kGridColour, kGridDensity, kShellColour, kShellOpacity, kExposureGain, kExposureOffset };
+inline constexpr int kParamKinds = 6;
 
-// grid_params: GridParamCount(n), where the shells' texels start (layout in ray_types.h).
-PERF_HD_INLINE ParamKind KindOfParam(int64_t grid_params, int64_t i) {
+// grid_params: where the shells' texels start (GridParamCount(n), or the sparse grid's);
+// exposure_start: where the exposures start (layout in ray_types.h). An exposure group's
+// zeros count as gain / offset entries (they never move).
+PERF_HD_INLINE ParamKind KindOfParam(int64_t grid_params, int64_t exposure_start, int64_t i) {
+  if (i >= exposure_start) {
+    return (i - exposure_start) % kExposureValues < 4 ? ParamKind::kExposureGain : ParamKind::kExposureOffset;
+  }
   const bool fourth = i % 4 == 3;
   return i < grid_params ? (fourth ? ParamKind::kGridDensity : ParamKind::kGridColour)
                          : (fourth ? ParamKind::kShellOpacity : ParamKind::kShellColour);
 }
 
-// The valid range of one parameter: sigma >= 0, colours and opacities in [0, 1].
-PERF_HD_INLINE float ProjectToValid(ParamKind kind, float v) {
-  return kind == ParamKind::kGridDensity ? Max(v, 0.f) : Clamp(v, 0.f, 1.f);
+// The valid range of a kind: sigma >= 0, colours and opacities in [0, 1], a photo's gain 1 + gamma
+// in [0.5, 2] and its offset in [-0.5, 0.5] (wider would mean a badly exposed or wrong photo).
+PERF_HD_INLINE float LowerBound(ParamKind kind) {
+  return kind == ParamKind::kExposureGain ? -0.5f : kind == ParamKind::kExposureOffset ? -0.5f : 0.f;
 }
+PERF_HD_INLINE float UpperBound(ParamKind kind) {
+  return kind == ParamKind::kGridDensity ? 3.0e38f
+         : kind == ParamKind::kExposureGain ? 1.f
+         : kind == ParamKind::kExposureOffset ? 0.5f
+                                              : 1.f;
+}
+PERF_HD_INLINE float ProjectToValid(ParamKind kind, float v) { return Clamp(v, LowerBound(kind), UpperBound(kind)); }
 
 // Whether parameter x (gradient g, kind `kind`) is held for one iteration, given whether the
 // shells are fixed (a known background) and whether bounds are active: the active set of a
@@ -34,8 +48,8 @@ PERF_HD_INLINE float ProjectToValid(ParamKind kind, float v) {
 PERF_HD_INLINE bool HeldParameter(ParamKind kind, float x, float g, bool fixed_shells, bool bounds) {
   if (fixed_shells && (kind == ParamKind::kShellColour || kind == ParamKind::kShellOpacity)) return true;
   if (!bounds) return false;
-  if (x <= 0 && g > 0) return true;
-  return kind != ParamKind::kGridDensity && x >= 1 && g < 0;
+  if (x <= LowerBound(kind) && g > 0) return true;
+  return x >= UpperBound(kind) && g < 0;
 }
 
 // One Adam step (Kingma & Ba) in scalars: the host computes the bias corrections once per step.

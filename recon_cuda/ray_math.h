@@ -54,6 +54,10 @@ struct VolumeView {
   PERF_HD_INLINE int64_t GridParams() const {
     return brick_slot ? SparseGridParams(active_bricks) : GridParamCount(n);
   }
+  // Where the photos' exposures start in params (ray_types.h ExposureParam).
+  PERF_HD_INLINE int64_t ExposureStart() const {
+    return GridParams() + 4 * static_cast<int64_t>(num_shells) * 6 * m * m;
+  }
 };
 
 // A ray in two coordinate systems sharing one parameter t, which is world distance from the
@@ -301,7 +305,7 @@ struct RayOutput {
   T t_box;        // transmittance through the box only
   T depth;        // optical depth through the box, sum sigma_i delta_i
   T shells[3];    // S, the shells' colour before the box's transmittance
-  T residual[4];  // H - C (3), then L (AuxResidual)
+  T residual[4];  // gain H + offset - C (3; ColourTransform), then L (AuxResidual)
   T dl_dt;        // dL / dT_box
   int count;      // samples composited (the march may stop early, and skip empty bricks)
   int end;        // the march index after the last sample considered (Backward walks back from it)
@@ -330,16 +334,25 @@ PERF_HD_INLINE void AuxResidual(T t_box, T lambda, T alpha, T* l, T* dl_dt) {
   }
 }
 
+// A photo's colour transform (issue 16, per-photo exposure): the photo shows gain_c H_c + offset_c
+// of the composited colour H. The identity for photos whose exposure is not solved.
+template <class T>
+struct ColourTransform {
+  T gain[3] = {1, 1, 1};
+  T offset[3] = {0, 0, 0};
+};
+
 // Front to back (paper eq. 3-4): alpha_i = 1 - exp(-sigma_i delta_i), T_i = exp(-sum_{j<i}
 // sigma_j delta_j), H = sum_i T_i alpha_i c_i + T_box S. target: the pixel colour C [3].
 // stop: the march ends once T_i < stop (early ray termination; 0 marches the whole box). What is
 // left behind then weighs less than `stop`, and the derivatives are those of the truncated sum.
 // record: optional [MakeMarch(vol, ray).count] scratch that Backward can read instead of
 // recomputing (the first `count` entries are written). alpha: the photo's alpha at the pixel, or < 0 when unknown (AuxResidual).
+// xf: the photo's colour transform; the colour residuals are gain_c H_c + offset_c - C_c (h stays H).
 template <class T>
 PERF_HD RayOutput<T> Forward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitter& jit, const T* target,
                              T lambda, T stop = T(0), typename Identity<SampleRecord<T>>::type* record = nullptr,
-                             T alpha = T(-1)) {
+                             T alpha = T(-1), const ColourTransform<T>& xf = ColourTransform<T>{}) {
   RayOutput<T> out;
   const March<T> march = MakeMarch(vol, ray);
   T depth = 0, trans = 1;
@@ -373,7 +386,7 @@ PERF_HD RayOutput<T> Forward(const VolumeView<T>& vol, const BoxRay<T>& ray, con
   for (int c = 0; c < 3; ++c) {
     out.shells[c] = shells.s[c];
     out.h[c] += out.t_box * shells.s[c];
-    out.residual[c] = out.h[c] - target[c];
+    out.residual[c] = xf.gain[c] * out.h[c] + xf.offset[c] - target[c];
   }
   AuxResidual(out.t_box, lambda, alpha, &out.residual[3], &out.dl_dt);
   return out;

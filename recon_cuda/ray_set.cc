@@ -15,7 +15,8 @@ const RaySet& NoRays() {
 }
 
 int64_t RaySet::Bytes() const {
-  return static_cast<int64_t>(cameras.size() * sizeof(PinholeCamera<float>) + pixels.size() * sizeof(RayPixel) +
+  return static_cast<int64_t>(cameras.size() * (sizeof(PinholeCamera<float>) + sizeof(int32_t)) +
+                              pixels.size() * sizeof(RayPixel) +
                               (colours.size() + alphas.size()) * sizeof(float));
 }
 
@@ -43,6 +44,7 @@ RaySet MakeRaySet(const std::vector<PosedImage>& images) {
   for (size_t c = 0; c < images.size(); ++c) {
     const Image& img = images[c].image;
     rays.cameras.push_back(images[c].camera);
+    rays.exposure_slot.push_back(static_cast<int32_t>(c));
     for (int ty = 0; ty < img.height; ty += kTile) {
       for (int tx = 0; tx < img.width; tx += kTile) {
         for (int y = ty; y < std::min(ty + kTile, img.height); ++y) {

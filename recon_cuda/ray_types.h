@@ -106,7 +106,8 @@ PERF_HD_INLINE T Uniform01(uint32_t seed, uint32_t ray, uint32_t sample) {
 // Parameter layout (one flat vector x per backend, DESIGN.md "Representation"):
 //   grid cell (i, j, k), x fastest, cell = (k N + j) N + i, holds (r, g, b, sigma) at 4 cell + ch;
 //   after the grid, shell s (0 innermost), face f (see shells.h), texel (u, v) holds (r, g, b, a)
-//   at 4 N^3 + 4 ((s 6 + f) M^2 + v M + u) + ch.
+//   at 4 N^3 + 4 ((s 6 + f) M^2 + v M + u) + ch;
+//   after the shells, the photos' exposures when solved (ExposureParam).
 // 64-bit indices: 4 N^3 overflows 32 bits from N = 1024.
 PERF_HD_INLINE int64_t GridCell(int n, int i, int j, int k) {
   return (static_cast<int64_t>(k) * n + j) * n + i;
@@ -122,6 +123,15 @@ PERF_HD_INLINE int64_t ShellParam(int n, int m, int shell, int face, int u, int 
 }
 PERF_HD_INLINE int64_t ParamCount(int n, int m, int num_shells) {
   return GridParamCount(n) + 4 * static_cast<int64_t>(num_shells) * 6 * m * m;
+}
+// Per-photo exposure (issue 16), after the shells: training photo `slot` (its index among the
+// scene's training photos, scene.json order) holds kExposureValues values at
+// exposure_start + 8 slot: the gain offsets gamma (r, g, b), 0, the colour offsets b (r, g, b), 0.
+// Its pixels are modelled as (1 + gamma_c) H_c + b_c (ray_math.h ColourTransform). The two
+// zeros keep each group of 4 aligned (float4 atomics); they stay 0 (no residual depends on them).
+inline constexpr int kExposureValues = 8;
+PERF_HD_INLINE int64_t ExposureParam(int64_t exposure_start, int slot) {
+  return exposure_start + static_cast<int64_t>(kExposureValues) * slot;
 }
 
 // Brick-sparse grids (DESIGN.md "Representation"; issue 15): the N^3 cells are grouped in bricks

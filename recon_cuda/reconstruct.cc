@@ -207,7 +207,11 @@ TrainingViews ViewsForHierarchy(const std::vector<PosedImage>& train, Communicat
       for (const PosedImage& im : train) small.push_back(Downscaled(im, factor));
       rays = MakeRaySet(small);
     }
-    if (comm != nullptr) rays.first_index = comm->ShareOf(rays.size()).first;  // collective
+    if (comm != nullptr) {  // collectives: every rank calls both
+      rays.first_index = comm->ShareOf(rays.size()).first;
+      const int64_t first_image = comm->ShareOf(static_cast<int64_t>(train.size())).first;
+      for (int32_t& slot : rays.exposure_slot) slot += static_cast<int32_t>(first_image);
+    }
     return rays;
   };
   return views;

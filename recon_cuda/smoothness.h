@@ -16,17 +16,22 @@
 
 namespace perf::recon {
 
-// The weight w of each kind's pairs (0: no smoothness for that kind).
+// The weight w of each kind's pairs (0: no smoothness for that kind). The photos' exposures have
+// no neighbours: their weight is a prior's, the residual sqrt(w) x_i (gain 1, offset 0), which
+// fixes the gauge (all gains against all colours) and keeps the transforms near the identity.
 struct SmoothnessWeights {
-  float grid_colour = 0, grid_density = 0, shell_colour = 0, shell_opacity = 0;
+  float grid_colour = 0, grid_density = 0, shell_colour = 0, shell_opacity = 0, exposure = 0;
 
-  PERF_HD_INLINE bool Any() const { return grid_colour > 0 || grid_density > 0 || shell_colour > 0 || shell_opacity > 0; }
+  PERF_HD_INLINE bool Any() const {
+    return grid_colour > 0 || grid_density > 0 || shell_colour > 0 || shell_opacity > 0 || exposure > 0;
+  }
   PERF_HD_INLINE float Of(ParamKind k) const {
     switch (k) {
       case ParamKind::kGridColour: return grid_colour;
       case ParamKind::kGridDensity: return grid_density;
       case ParamKind::kShellColour: return shell_colour;
-      default: return shell_opacity;
+      case ParamKind::kShellOpacity: return shell_opacity;
+      default: return exposure;
     }
   }
 };
@@ -36,6 +41,7 @@ struct SmoothnessWeights {
 struct SmoothnessLayout {
   int n = 0, m = 0, num_shells = 0;
   int64_t grid_params = 0;
+  int64_t exposure_start = 0;       // where the exposures start (VolumeShape::ExposureStart)
   const int32_t* slot = nullptr;    // [(n/8)^3] brick table (BrickGrid::slot)
   const int64_t* bricks = nullptr;  // [active bricks] brick index of each slot (BrickGrid::bricks)
 };
@@ -112,13 +118,19 @@ PERF_HD_INLINE int ParamNeighbours(const SmoothnessLayout& l, int64_t i, int64_t
 
 // Parameter i's row of the term at v: *lap = w sum_j (v_i - v_j) (row i of L v), *degree = w
 // times the number of neighbours (L's diagonal), and the return value is i's share of
-// v^T L v / 2 (each pair's w (v_a - v_b)^2 / 2 split between its two ends).
+// v^T L v / 2 (each pair's w (v_a - v_b)^2 / 2 split between its two ends). An exposure's row is
+// its prior's: w v_i, w and w v_i^2 / 2.
 PERF_HD_INLINE double SmoothnessRow(const SmoothnessLayout& l, const SmoothnessWeights& weights, const float* v,
                                     int64_t i, float* lap, float* degree) {
   *lap = 0;
   *degree = 0;
-  const float w = weights.Of(KindOfParam(l.grid_params, i));
+  const float w = weights.Of(KindOfParam(l.grid_params, l.exposure_start, i));
   if (!(w > 0)) return 0;
+  if (i >= l.exposure_start) {  // the prior: L = w I
+    *lap = w * v[i];
+    *degree = w;
+    return 0.5 * w * static_cast<double>(v[i]) * v[i];
+  }
   int64_t nbr[6];
   const int count = ParamNeighbours(l, i, nbr);
   float sum = 0;

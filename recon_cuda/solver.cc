@@ -95,7 +95,7 @@ SmoothnessWeights CalibrateSmoothness(const SolverOptions& o, Backend* b) {
   SmoothnessWeights w;
   if (o.smooth_grid <= 0 && o.smooth_shells <= 0) return w;
   const VolumeShape& shape = b->level().shape;
-  const std::array<double, 4> sums = b->SumByKind(kDiag);
+  const std::array<double, kParamKinds> sums = b->SumByKind(kDiag);
   const double cells = static_cast<double>(shape.StoredCells());
   const double texels = static_cast<double>(shape.ParamCount() - shape.GridParamCount()) / 4;
   const auto mean = [&](ParamKind k, double count) { return count > 0 ? sums[static_cast<int>(k)] / count : 0.0; };

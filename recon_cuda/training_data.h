@@ -60,6 +60,10 @@ struct RaySet {
   // The index of ray 0 among all ranks' rays (0 in a single process; distributed_backend.h):
   // jitter and ray subsets follow the global index, so that N ranks fit the rays one would.
   int64_t first_index = 0;
+  // [cameras.size()] each camera's exposure slot when the level solves the photos' exposures
+  // (VolumeShape::exposures): its photo's index among all training photos. MakeRaySet numbers
+  // the images it is given from 0; a rank's share adds its first image's index.
+  std::vector<int32_t> exposure_slot;
   int64_t size() const { return static_cast<int64_t>(pixels.size()); }
   int64_t Bytes() const;
 };

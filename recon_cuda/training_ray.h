@@ -25,6 +25,8 @@ struct TrainingRays {
   // Ray 0's index among the rays of every rank (RaySet::first_index): ray i's jitter is the one
   // ray first_index + i gets in a single process.
   int64_t first_index;
+  // Each camera's exposure slot (ray_types.h ExposureParam), or nullptr: no exposure is solved.
+  const int32_t* exposure_slot;
 };
 
 struct TrainingRay {
@@ -50,6 +52,12 @@ PERF_HD_INLINE void TargetOf(const TrainingRays<Colour>& rays, int64_t i, float 
 template <class Colour>
 PERF_HD_INLINE float AlphaOf(const TrainingRays<Colour>& rays, int64_t i) {
   return rays.alphas ? ColourValue(rays.alphas[i]) : -1.f;
+}
+
+// The exposure slot of ray i's photo, or -1 (not solved).
+template <class Colour>
+PERF_HD_INLINE int ExposureSlotOf(const TrainingRays<Colour>& rays, int64_t i) {
+  return rays.exposure_slot ? rays.exposure_slot[rays.pixels[i].camera] : -1;
 }
 
 // A ray's share of the cost, in double from the float residuals: 0.5 |r|^2 over the colour and

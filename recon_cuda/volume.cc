@@ -60,6 +60,7 @@ SmoothnessLayout MakeSmoothnessLayout(const VolumeShape& shape) {
   l.m = shape.m;
   l.num_shells = shape.num_shells;
   l.grid_params = shape.GridParamCount();
+  l.exposure_start = shape.ExposureStart();
   if (shape.bricks) {
     l.slot = shape.bricks->slot.data();
     l.bricks = shape.bricks->bricks.data();
@@ -82,6 +83,8 @@ std::vector<float> InitialParams(const VolumeShape& shape, const VolumeGeometry&
         x[i] = c >= 0 ? c : unit(rng);
         break;
       }
+      case ParamKind::kExposureGain:
+      case ParamKind::kExposureOffset: x[i] = 0; break;  // the identity
       default: x[i] = unit(rng); break;
     }
   }
@@ -90,7 +93,7 @@ std::vector<float> InitialParams(const VolumeShape& shape, const VolumeGeometry&
 }
 
 void SetBackgroundShells(const VolumeShape& shape, const float colour[3], std::span<float> params) {
-  for (int64_t i = shape.GridParamCount(); i < shape.ParamCount(); ++i) {
+  for (int64_t i = shape.GridParamCount(); i < shape.ExposureStart(); ++i) {
     params[i] = KindOf(shape, i) == ParamKind::kShellOpacity ? 1.f : colour[i % 4];
   }
 }
@@ -123,6 +126,10 @@ std::vector<float> Resample(const VolumeShape& from, std::span<const float> para
   PERF_CHECK(static_cast<int64_t>(params.size()) == from.ParamCount());
   PERF_CHECK(from.num_shells == to.num_shells);
   std::vector<float> out(static_cast<size_t>(to.ParamCount()));
+  // The photos' exposures carry over as they are (the same photos at every level).
+  if (from.exposures == to.exposures) {
+    std::copy(params.begin() + from.ExposureStart(), params.end(), out.begin() + to.ExposureStart());
+  }
   const std::vector<Axis> g = AxisWeights(from.n, to.n);
   ForEachStoredCell(to, [&](int i, int j, int k, int64_t to_cell) {
     double v[4] = {0, 0, 0, 0};
@@ -178,6 +185,7 @@ std::string DescribeShape(const VolumeShape& shape) {
   } else {
     s << shape.ParamCount() << " parameters)";
   }
+  if (shape.exposures > 0) s << ", exposures of " << shape.exposures << " photos";
   return s.str();
 }
 

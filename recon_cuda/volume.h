@@ -28,24 +28,29 @@ struct VolumeShape {
   int m = 32;          // texels per cube-map face side
   int num_shells = 0;  // <= kMaxShells
   std::shared_ptr<const BrickGrid> bricks;  // a brick-sparse grid (brick_grid.h); nullptr: dense
+  int exposures = 0;   // training photos whose exposure is solved (ray_types.h ExposureParam); 0: none
 
   VolumeShape() = default;
-  VolumeShape(int n_, int m_, int num_shells_, std::shared_ptr<const BrickGrid> bricks_ = nullptr)
-      : n(n_), m(m_), num_shells(num_shells_), bricks(std::move(bricks_)) {}
+  VolumeShape(int n_, int m_, int num_shells_, std::shared_ptr<const BrickGrid> bricks_ = nullptr, int exposures_ = 0)
+      : n(n_), m(m_), num_shells(num_shells_), bricks(std::move(bricks_)), exposures(exposures_) {}
 
   bool sparse() const { return bricks != nullptr; }
   // Where the shells start: 4 n^3, or 4 values per cell of the active bricks.
   int64_t GridParamCount() const { return bricks ? bricks->GridParams() : recon::GridParamCount(n); }
-  int64_t ParamCount() const { return GridParamCount() + 4 * static_cast<int64_t>(num_shells) * 6 * m * m; }
+  // Where the exposures start: after the shells.
+  int64_t ExposureStart() const { return GridParamCount() + 4 * static_cast<int64_t>(num_shells) * 6 * m * m; }
+  int64_t ParamCount() const { return ExposureStart() + static_cast<int64_t>(kExposureValues) * exposures; }
   int64_t StoredCells() const { return GridParamCount() / 4; }
+  int64_t ShellTexels() const { return (ExposureStart() - GridParamCount()) / 4; }
   // The bricks holding parameters: the active ones, or every brick of a dense grid.
   int64_t StoredBricks() const { return bricks ? bricks->ActiveBricks() : BrickCount(n); }
-  // The next level of the hierarchy: every resolution doubled, the grid dense.
-  VolumeShape Doubled() const { return {2 * n, 2 * m, num_shells}; }
+  // The next level of the hierarchy: every resolution doubled, the grid dense, the same photos.
+  VolumeShape Doubled() const { return {2 * n, 2 * m, num_shells, nullptr, exposures}; }
   // The same resolutions with these bricks active (nullptr: dense).
-  VolumeShape WithBricks(std::shared_ptr<const BrickGrid> b) const { return {n, m, num_shells, std::move(b)}; }
+  VolumeShape WithBricks(std::shared_ptr<const BrickGrid> b) const { return {n, m, num_shells, std::move(b), exposures}; }
+  VolumeShape WithExposures(int photos) const { return {n, m, num_shells, bricks, photos}; }
   bool operator==(const VolumeShape& o) const {
-    return n == o.n && m == o.m && num_shells == o.num_shells &&
+    return n == o.n && m == o.m && num_shells == o.num_shells && exposures == o.exposures &&
            (bricks == o.bricks || (bricks && o.bricks && *bricks == *o.bricks));
   }
 };
@@ -136,8 +141,10 @@ void ForEachStoredCell(const VolumeShape& shape, F&& f) {
   shape.bricks->ForEachCell(f);
 }
 
-// Which of the 4 channels of parameter i is what (param_ops.h).
-inline ParamKind KindOf(const VolumeShape& shape, int64_t i) { return KindOfParam(shape.GridParamCount(), i); }
+// What parameter i is (param_ops.h).
+inline ParamKind KindOf(const VolumeShape& shape, int64_t i) {
+  return KindOfParam(shape.GridParamCount(), shape.ExposureStart(), i);
+}
 
 // "128^3 grid, 4 shells of 6 x 128^2 texels (33.8 M parameters)"; a sparse grid says
 // "128^3 grid (310 of 4096 bricks), ...".

@@ -95,6 +95,38 @@ TEST(CeresCheckTest, GradientCheckerAcceptsTheRayJacobian) {
   EXPECT_FALSE(bad.Probe(params, 1e-6, &results));
 }
 
+// Per-photo exposures (issue 16): the transformed residuals' Jacobian, the volume's partials
+// times the gains and the exposures' own columns, against Ceres' central differences.
+TEST(CeresCheckTest, GradientCheckerAcceptsTheExposures) {
+  test::TinyProblem p(22, 2, 2, 3, 4, 3);
+  p.AddExposures(23);
+  const RaysCost cost(p, 99, 0.1, true);
+  ceres::NumericDiffOptions nd;
+  const std::vector<const ceres::Manifold*>* no_manifolds = nullptr;
+  ceres::GradientChecker checker(&cost, no_manifolds, nd);
+  std::vector<double> x(p.x.begin(), p.x.end());
+  const double* params[] = {x.data()};
+  ceres::GradientChecker::ProbeResults results;
+  EXPECT_TRUE(checker.Probe(params, 1e-6, &results)) << results.error_log;
+  EXPECT_LT(results.maximum_relative_error, 1e-6);
+  const auto& jac = results.jacobians[0];
+  int gains = 0, offsets = 0, volume = 0;
+  for (int r = 0; r < jac.rows(); ++r) {
+    for (int c = 0; c < jac.cols(); ++c) {
+      if (std::abs(jac(r, c)) <= 1e-4) continue;
+      if (c < p.shape.ExposureStart()) {
+        ++volume;
+      } else {
+        ((c - p.shape.ExposureStart()) % kExposureValues < 4 ? gains : offsets)++;
+      }
+    }
+  }
+  // Every colour residual has a gain and an offset entry (3 per ray each); the volume's too.
+  EXPECT_EQ(offsets, 3 * p.rays.size());
+  EXPECT_GT(gains, 2 * p.rays.size());
+  EXPECT_GT(volume, 100);
+}
+
 TEST(CeresCheckTest, GaussNewtonKeepsUpWithCeresOnATinyProblem) {
   // Targets rendered from a random "true" volume; both solvers start from the same other volume,
   // without jitter (a fixed objective), with the same bounds (sigma >= 0, colours and opacities

@@ -70,7 +70,7 @@ std::string FieldOfError(const std::string& bytes) {
 TEST(CheckpointTest, RoundTripsThroughStreamAndFile) {
   const Checkpoint c = Sample();
   const std::string bytes = Bytes(c);
-  EXPECT_EQ(bytes.size(), 272 + 4 * c.params.size());
+  EXPECT_EQ(bytes.size(), 280 + 4 * c.params.size());
   std::istringstream in(bytes);
   ExpectEqual(ReadCheckpoint(in, "mem"), c);
   test::TempDir dir;
@@ -120,10 +120,44 @@ TEST(CheckpointTest, DamageIsNamed) {
   EXPECT_EQ(FieldOfError(shells), "num_shells");
 }
 
-// The sample's 272-byte header claiming an n^3 grid and m^2 texels per face (two shells), with
+TEST(CheckpointTest, ExposuresTravelAndVersionTwoFilesReadWithout) {
+  Checkpoint c = Sample();
+  c.shape.exposures = 3;
+  c.params.resize(c.shape.ParamCount());
+  for (int k = 0; k < 3 * kExposureValues; ++k) c.params[c.shape.ExposureStart() + k] = 0.01f * (k % 4 == 3 ? 0 : k);
+  const std::string bytes = Bytes(c);
+  EXPECT_EQ(bytes.size(), 280 + 4 * c.params.size());
+  std::istringstream in(bytes);
+  const Checkpoint back = ReadCheckpoint(in, "mem");
+  EXPECT_EQ(back.shape.exposures, 3);
+  ExpectEqual(back, c);
+
+  std::string negative = bytes;
+  const int64_t minus = -2;
+  std::memcpy(&negative[272], &minus, 8);
+  EXPECT_EQ(FieldOfError(negative), "exposures");
+  std::string more = bytes;  // the count no longer matches the parameters
+  const int64_t four = 4;
+  std::memcpy(&more[272], &four, 8);
+  EXPECT_EQ(FieldOfError(more), "parameter count");
+
+  // A version 2 file: the same header without the exposure count; it has no exposures.
+  const Checkpoint plain = Sample();
+  const std::string v3 = Bytes(plain);
+  std::string v2 = v3.substr(0, 272) + v3.substr(280);
+  const uint32_t two = 2, header = 272;
+  std::memcpy(&v2[8], &two, 4);
+  std::memcpy(&v2[12], &header, 4);
+  std::istringstream in2(v2);
+  const Checkpoint old = ReadCheckpoint(in2, "v2");
+  EXPECT_EQ(old.shape.exposures, 0);
+  ExpectEqual(old, plain);
+}
+
+// The sample's 280-byte header claiming an n^3 grid and m^2 texels per face (two shells), with
 // the matching parameter count, and no parameters after it.
 std::string HugeHeader(int32_t n, int32_t m) {
-  std::string h = Bytes(Sample()).substr(0, 272);
+  std::string h = Bytes(Sample()).substr(0, 280);
   std::memcpy(&h[20], &n, 4);
   std::memcpy(&h[24], &m, 4);
   const uint64_t count = static_cast<uint64_t>(ParamCount(n, m, 2));
@@ -145,7 +179,7 @@ Checkpoint SparseSample() {
 TEST(CheckpointTest, SparseGridsRoundTripAndVersion1StillReads) {
   const Checkpoint c = SparseSample();
   const std::string bytes = Bytes(c);
-  EXPECT_EQ(bytes.size(), 272 + 3 * 4 + 4 * c.params.size());
+  EXPECT_EQ(bytes.size(), 280 + 3 * 4 + 4 * c.params.size());
   std::istringstream in(bytes);
   const Checkpoint back = ReadCheckpoint(in, "mem");
   ExpectEqual(back, c);
@@ -155,7 +189,7 @@ TEST(CheckpointTest, SparseGridsRoundTripAndVersion1StillReads) {
 
   // A version 1 file (dense, no brick count): what version 1 wrote for the dense sample.
   std::string v1 = Bytes(Sample());
-  v1.erase(264, 8);
+  v1.erase(264, 16);  // the brick count and the exposure count
   const uint32_t one = 1, header = 264;
   std::memcpy(&v1[8], &one, 4);
   std::memcpy(&v1[12], &header, 4);
@@ -167,18 +201,18 @@ TEST(CheckpointTest, DamagedBrickListsAreNamed) {
   const std::string good = Bytes(SparseSample());
   std::string order = good;
   const uint32_t four = 4;
-  std::memcpy(&order[272 + 8], &four, 4);  // bricks 1, 4, 4
+  std::memcpy(&order[280 + 8], &four, 4);  // bricks 1, 4, 4
   EXPECT_EQ(FieldOfError(order), "bricks");
   std::string beyond = good;
   const uint32_t eight = 8;
-  std::memcpy(&beyond[272 + 8], &eight, 4);  // brick 8 of 8
+  std::memcpy(&beyond[280 + 8], &eight, 4);  // brick 8 of 8
   EXPECT_EQ(FieldOfError(beyond), "bricks");
   std::string count = good;
   const int64_t nine = 9;
   std::memcpy(&count[264], &nine, 8);  // more bricks than the grid has
   EXPECT_EQ(FieldOfError(count), "bricks");
   std::string flipped = good;
-  flipped[272] ^= 0x02;  // brick 1 becomes 3: still ascending, but not what the checksum covers
+  flipped[280] ^= 0x02;  // brick 1 becomes 3: still ascending, but not what the checksum covers
   EXPECT_EQ(FieldOfError(flipped), "checksum");
   std::string odd = good;
   odd[20] = 12;  // n = 12: not a multiple of 8

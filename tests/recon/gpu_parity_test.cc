@@ -465,7 +465,7 @@ TEST_F(GpuParityTest, SmoothnessTermAndASolveWithIt) {
     EXPECT_NEAR(cost[1], cost[0], 1e-5 * cost[0]);
     ExpectClose(Get(gpu.get(), kG), Get(cpu.get(), kG), "L x");
     ExpectClose(Get(gpu.get(), kD), Get(cpu.get(), kD), "diag(L)");
-    const std::array<double, 4> sc = cpu->SumByKind(kX), sg = gpu->SumByKind(kX);
+    const std::array<double, kParamKinds> sc = cpu->SumByKind(kX), sg = gpu->SumByKind(kX);
     for (int i = 0; i < 4; ++i) EXPECT_NEAR(sg[i], sc[i], 1e-6 * std::abs(sc[i])) << "kind " << i;
   }
   SolverOptions o;

@@ -70,6 +70,21 @@ struct TinyProblem {
     }
   }
 
+  // Solves every camera's exposure (VolumeShape::exposures): random gains 1 + gamma and offsets,
+  // and camera k in slot (k + 1) % cameras (so that slots and cameras differ).
+  void AddExposures(uint32_t seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> gamma(-0.3f, 0.3f), offset(-0.1f, 0.1f);
+    const int cameras = static_cast<int>(rays.cameras.size());
+    shape = shape.WithExposures(cameras);
+    rays.exposure_slot.clear();
+    for (int k = 0; k < cameras; ++k) rays.exposure_slot.push_back((k + 1) % cameras);
+    for (int k = 0; k < cameras; ++k) {
+      for (int v = 0; v < kExposureValues; ++v) x.push_back(v % 4 == 3 ? 0.f : v < 4 ? gamma(rng) : offset(rng));
+    }
+    EXPECT_EQ(static_cast<int64_t>(x.size()), shape.ParamCount());
+  }
+
   // Pixel jitter on by default so that the tests cover the jittered ray as well. lambda weighs
   // the fourth residual of either kind (the paper's term, or the alpha one where rays carry alpha).
   LevelProblem Level(float lambda = 0.1f, bool pixel_jitter = true) const {
@@ -112,21 +127,41 @@ struct DenseJacobian {
       // The rays' alpha when they carry one (the backends' default use_alpha), else the paper's term.
       const double alpha = p.rays.alphas.empty() ? -1.0 : p.rays.alphas[i];
       const RayOutput<double> out = Forward(vol, ray, jit, target, lambda, 0.0, nullptr, alpha);
+      // With exposures, the photo shows (1 + gamma_c) H_c + b_c (ray_types.h ExposureParam):
+      // written out here from H, the volume's partials of H times the gain, and H and 1 for the
+      // exposure's own columns.
+      const int64_t e = p.shape.exposures > 0
+                            ? p.shape.ExposureStart() + kExposureValues * int64_t{p.rays.exposure_slot[px.camera]}
+                            : -1;
+      double gain[3] = {1, 1, 1}, residual[4] = {out.residual[0], out.residual[1], out.residual[2], out.residual[3]};
+      if (e >= 0) {
+        for (int c = 0; c < 3; ++c) {
+          gain[c] = 1 + x[e + c];
+          residual[c] = gain[c] * out.h[c] + x[e + 4 + c] - target[c];
+        }
+      }
       std::vector<std::vector<double>> j(4, std::vector<double>(x.size(), 0.0));
       auto f = [&](int64_t idx, double a, double b, double c, double d) {
-        j[0][idx] += a;
-        j[1][idx] += b;
-        j[2][idx] += c;
+        j[0][idx] += gain[0] * a;
+        j[1][idx] += gain[1] * b;
+        j[2][idx] += gain[2] * c;
         j[3][idx] += d;
       };
       auto g = [&](int64_t idx, double a, double b, double c, double d) {
         f(idx, a, b, c, d);
+        a *= gain[0], b *= gain[1], c *= gain[2];
         naive_diag_terms.push_back({idx, a * a + b * b + c * c + d * d});
       };
       BackwardPerParam(vol, ray, jit, out, g);
+      if (e >= 0) {
+        for (int c = 0; c < 3; ++c) {
+          j[c][e + c] = out.h[c];
+          j[c][e + 4 + c] = 1;
+        }
+      }
       for (int r = 0; r < 4; ++r) {
         rows.push_back(std::move(j[r]));
-        residuals.push_back(out.residual[r]);
+        residuals.push_back(residual[r]);
       }
     }
   }

@@ -71,12 +71,14 @@ TEST(Smoothness, SparseGridNeighboursAreTheDenseGridsStoredOnes) {
   EXPECT_EQ(across_bricks, 2 * 64);  // bricks 0 and 1 share one 8 x 8 face
 }
 
-// A level of the CPU backend without rays, x random in the valid range.
+// A level of the CPU backend without rays, x random in the valid range, with one photo's
+// exposure (whose weight is a prior's: smoothness.h).
 struct SmoothLevel {
   test::TinyProblem p{5, 8, 3, 1, 2, 2};
   std::unique_ptr<Backend> b = MakeCpuBackend({});
-  SmoothnessWeights w{0.7f, 0.3f, 1.3f, 0.9f};
+  SmoothnessWeights w{0.7f, 0.3f, 1.3f, 0.9f, 0.5f};
   SmoothLevel() {
+    p.AddExposures(3);
     b->SetLevel(LevelProblem{p.shape, p.geometry, nullptr, {}}, 4);
     b->Upload(0, p.x);
   }
@@ -84,6 +86,16 @@ struct SmoothLevel {
     std::vector<float> h(p.shape.ParamCount());
     b->Download(v, h);
     return h;
+  }
+};
+
+// One exposure's prior residual sqrt(w) x.
+struct PriorResidual {
+  double sqrt_w;
+  template <class T>
+  bool operator()(const T* a, T* r) const {
+    r[0] = T(sqrt_w) * a[0];
+    return true;
   }
 };
 
@@ -114,7 +126,14 @@ TEST(Smoothness, CostGradientAndDiagonalMatchCeres) {
   std::vector<double> degree(n, 0.0);
   for (int64_t i = 0; i < n; ++i) problem.AddParameterBlock(&x[i], 1);
   int64_t pairs = 0;
-  for (int64_t i = 0; i < n; ++i) {
+  for (int64_t i = s.p.shape.ExposureStart(); i < n; ++i) {
+    const double w = s.w.Of(KindOf(s.p.shape, i));
+    EXPECT_EQ(w, 0.5);
+    degree[i] = w;
+    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<PriorResidual, 1, 1>(new PriorResidual{std::sqrt(w)}),
+                             nullptr, &x[i]);
+  }
+  for (int64_t i = 0; i < s.p.shape.ExposureStart(); ++i) {
     int64_t nbr[6];
     const int count = ParamNeighbours(layout, i, nbr);
     const double w = s.w.Of(KindOf(s.p.shape, i));
@@ -147,8 +166,9 @@ TEST(Smoothness, GradientIsTheCentralDifferenceAndTheHessianIsSymmetric) {
   const std::vector<float> g = s.Get(1);
   std::mt19937 rng(9);
   std::uniform_int_distribution<int64_t> pick(0, n - 1);
-  for (int t = 0; t < 40; ++t) {
-    const int64_t i = t < 4 ? n - 1 - t : pick(rng);  // the last shell's texels, and any
+  for (int t = 0; t < 48; ++t) {
+    // The exposure's values, the last shell's texels, and any.
+    const int64_t i = t < kExposureValues ? n - 1 - t : t < 12 ? s.p.shape.ExposureStart() - 1 - t : pick(rng);
     std::vector<float> x = s.p.x;
     const float h = 1e-2f;  // the cost is quadratic: central differences are exact up to rounding
     x[i] += h;

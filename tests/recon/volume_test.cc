@@ -127,6 +127,38 @@ TEST(VolumeTest, InitialParamsAreRandomValidAndFaint) {
   }
 }
 
+// The photos' exposures (ray_types.h ExposureParam): they start at the identity, carry over to
+// the next level as they are, and are kept in their range (gain 0.5 to 2, offset +-0.5).
+TEST(VolumeTest, ExposuresStartAtTheIdentityCarryOverAndStayInRange) {
+  VolumeGeometry g;
+  g.box.size = {1, 1, 1};
+  g.box.world_from_box = {{1, 0, 0, 0, 1, 0, 0, 0, 1}};
+  g.shell_radii = {2, 4};
+  const VolumeShape s(4, 2, 2, nullptr, 3);
+  EXPECT_EQ(s.ParamCount(), ParamCount(4, 2, 2) + 3 * kExposureValues);
+  EXPECT_EQ(s.ExposureStart(), ParamCount(4, 2, 2));
+  std::vector<float> x = InitialParams(s, g, {});
+  for (int64_t i = s.ExposureStart(); i < s.ParamCount(); ++i) EXPECT_EQ(x[i], 0.f) << i;
+  const int64_t e = ExposureParam(s.ExposureStart(), 1);
+  EXPECT_EQ(KindOf(s, e), ParamKind::kExposureGain);
+  EXPECT_EQ(KindOf(s, e + 4), ParamKind::kExposureOffset);
+  EXPECT_EQ(KindOf(s, s.ExposureStart() - 1), ParamKind::kShellOpacity);
+  x[e] = 5.f;       // a gain of 6
+  x[e + 1] = 0.2f;  // 1.2
+  x[e + 4] = -0.7f;
+  x[e + 5] = 0.1f;
+  ProjectToValidRange(s, x);
+  EXPECT_EQ(x[e], 1.f);
+  EXPECT_EQ(x[e + 1], 0.2f);
+  EXPECT_EQ(x[e + 4], -0.5f);
+  EXPECT_EQ(x[e + 5], 0.1f);
+  const VolumeShape next = s.Doubled();
+  EXPECT_EQ(next.exposures, 3);
+  const std::vector<float> y = Resample(s, x, next);
+  EXPECT_TRUE(std::equal(x.begin() + s.ExposureStart(), x.end(), y.begin() + next.ExposureStart(), y.end()));
+  EXPECT_NE(DescribeShape(s).find("exposures of 3 photos"), std::string::npos) << DescribeShape(s);
+}
+
 TEST(VolumeTest, GeometryFromSceneAndItsErrors) {
   Scene scene;
   scene.box.center = {1, 2, 3};
