@@ -166,11 +166,14 @@ EvalResult RunEval(const EvalOptions& o) {
   r.checkpoint = l.path;
 
   const std::vector<recon::PosedImage> test = recon::LoadImages(scene, o.workspace, Split::kTest);
+  // Each held-out render as its nearest training photo was exposed (recon/exposure.h).
+  const recon::PhotoExposures exposures = recon::ExposuresOf(l, scene);
   std::vector<ReportStripView> strip;
   int masked_views = 0;
   for (const recon::PosedImage& v : test) {
-    const recon::RenderOutput render =
+    recon::RenderOutput render =
         l.backend->Render(LoadedCheckpoint::kParams, v.camera, v.image.width, v.image.height, o.min_box_opacity);
+    if (!exposures.empty()) recon::ApplyTransform(exposures.Nearest(v.camera), &render);
     const Image image = recon::ToImage(render);
     const ImageScores s = ScoreImage(image, v.image, Binarize(recon::OpacityImage(render), o.mask_threshold));
     r.views.push_back({v.name, s});

@@ -108,6 +108,14 @@ void AddReconstructCommand(CLI::App& app) {
                    {"learn", BackgroundChoice::kLearn}},
                   "Shells: learn them, or keep them fixed at scene.json's background colour (auto: fixed when "
                   "every photo had alpha)");
+  using recon::ExposureChoice;
+  AddChoiceOption(cmd, "--exposure", &o.exposure,
+                  {{"auto", ExposureChoice::kAuto}, {"on", ExposureChoice::kOn}, {"off", ExposureChoice::kOff}},
+                  "Solve a gain and an offset per colour channel for every training photo (auto: for COLMAP "
+                  "photos, not for NeRF json scenes); held-out views take their nearest training photo's");
+  cmd->add_option("--exposure-prior", o.solver.exposure_prior,
+                  "Weight of the prior that keeps the photos' exposures near the identity, relative to the photos")
+      ->capture_default_str();
   cmd->add_flag("--no-alpha", args->no_alpha,
                 "Ignore the photos' alpha: the opacity residual is the paper's auxiliary term (default: where every "
                 "photo had alpha, the box opacity fits it)");

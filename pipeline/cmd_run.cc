@@ -6,6 +6,7 @@
 
 #include "common/comm.h"
 #include "common/errors.h"
+#include "pipeline/cli_choice.h"
 #include "pipeline/commands.h"
 #include "pipeline/run_pipeline.h"
 
@@ -47,6 +48,10 @@ void AddRunCommand(CLI::App& app) {
   cmd->add_option("--iterations", o.iterations, "Override the preset: Gauss-Newton iterations per level");
   AddDeviceOptions(cmd, &o.device, &o.threads);
   cmd->add_flag("--force", o.force, "Re-run every stage even when its outputs are up to date");
+  using recon::ExposureChoice;
+  AddChoiceOption(cmd, "--exposure", &o.exposure,
+                  {{"auto", ExposureChoice::kAuto}, {"on", ExposureChoice::kOn}, {"off", ExposureChoice::kOff}},
+                  "Solve each photo's exposure (gain and offset per channel; auto: for COLMAP photos)");
   cmd->add_flag("--keep-bad-poses", o.keep_bad_poses,
                 "Train and score on COLMAP photos whose pose looks wrong too (by default they are left out and named)");
   cmd->add_option("--log-level", args->log_level, "info (progress and summary) or quiet (errors only)")

@@ -79,6 +79,7 @@ recon::ReconstructOptions ReconstructOptionsFor(const RunOptions& o, const Prese
   ro.levels = preset.levels;
   ro.max_resolution = preset.max_resolution;
   ro.iterations = preset.iterations;
+  ro.exposure = o.exposure;
   ro.resume = fresh && !o.force;
   return ro;
 }

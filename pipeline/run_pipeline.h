@@ -28,6 +28,7 @@ struct RunOptions {
   int threads = 0;
   bool force = false;
   bool keep_bad_poses = false;  // import: train and score on photos whose pose looks wrong too
+  recon::ExposureChoice exposure = recon::ExposureChoice::kAuto;  // reconstruct: per-photo exposure
   // Overrides of the preset (0: the preset's).
   int max_size = 0, levels = 0, iterations = 0, max_resolution = 0;
   bool quiet = false;

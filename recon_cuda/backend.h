@@ -166,6 +166,9 @@ class Backend {
   // Deterministic (independent of the thread count) in double.
   virtual double Dot(VecId a, VecId b) const = 0;
   virtual double MaxAbs(VecId v) const = 0;
+  // The same over the volume's entries alone (grid and shells; not the photos' exposures, whose
+  // diagonal entries sum a whole photo and would dwarf every other).
+  virtual double MaxAbsVolume(VecId v) const = 0;
   // x = valid(x): sigma >= 0, colours and opacities in [0, 1].
   virtual void Project(VecId x) = 0;
   // free = 0 where a parameter is held for this iteration (param_ops.h HeldParameter: a fixed

@@ -89,6 +89,7 @@ class CpuBackend final : public Backend {
   void AxpyDiag(VecId y, double a, VecId d, VecId x) override { vectors_.AxpyDiag(y, a, d, x); }
   double Dot(VecId a, VecId b) const override { return vectors_.Dot(a, b); }
   double MaxAbs(VecId v) const override { return vectors_.MaxAbs(v); }
+  double MaxAbsVolume(VecId v) const override { return vectors_.MaxAbs(v, level_.shape.ExposureStart()); }
   void AddSmoothness(VecId v, const SmoothnessWeights& w, VecId out, VecId diag) override {
     vectors_.AddSmoothness(v, level_.shape, w, out, diag);
   }

@@ -116,12 +116,13 @@ double CpuVectors::Dot(VecId a, VecId b) const {
       [](double x, double y) { return x + y; });
 }
 
-double CpuVectors::MaxAbs(VecId v) const {
+double CpuVectors::MaxAbs(VecId v, int64_t count) const {
   const float* p = (*this)[v].data();
+  const int64_t end = count < 0 ? size() : std::min(count, size());
   return ReduceChunks(
       [&](int64_t lo, int64_t hi) {
         float m = 0;
-        for (int64_t i = lo; i < hi; ++i) m = std::max(m, std::abs(p[i]));
+        for (int64_t i = lo; i < std::min(hi, end); ++i) m = std::max(m, std::abs(p[i]));
         return static_cast<double>(m);
       },
       [](double x, double y) { return std::max(x, y); });

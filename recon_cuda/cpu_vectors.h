@@ -38,7 +38,7 @@ class CpuVectors {
   void AxpyDiag(VecId y, double a, VecId d, VecId x);
   void Multiply(VecId y, VecId m);
   double Dot(VecId a, VecId b) const;
-  double MaxAbs(VecId v) const;
+  double MaxAbs(VecId v, int64_t count = -1) const;  // of the first `count` entries (-1: all)
   // The operations that know what each parameter is (param_ops.h).
   void Project(VecId x, const VolumeShape& shape);
   void HoldParameters(VecId x, VecId g, VecId free, const VolumeShape& shape, bool fixed_shells, bool bounds);

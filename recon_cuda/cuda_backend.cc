@@ -185,6 +185,9 @@ class CudaBackend final : public Backend {
   }
   double Dot(VecId a, VecId b) const override { return cuda::Dot(ptr(a), ptr(b), n(), scratch_->Reduce()); }
   double MaxAbs(VecId v) const override { return cuda::MaxAbs(ptr(v), n(), scratch_->Reduce()); }
+  double MaxAbsVolume(VecId v) const override {
+    return cuda::MaxAbs(ptr(v), level_.shape.ExposureStart(), scratch_->Reduce());
+  }
   void AddSmoothness(VecId v, const SmoothnessWeights& w, VecId out, VecId diag) override {
     PERF_CHECK(out != v);
     cuda::AddSmoothness(ptr(v), DeviceSmoothnessLayout(), w, out == kNoVector ? nullptr : ptr(out),

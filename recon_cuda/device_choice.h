@@ -11,6 +11,11 @@ enum class DeviceChoice { kAuto, kCpu, kCuda };
 // photo had an alpha channel (e.g. NeRF synthetic), learned otherwise.
 enum class BackgroundChoice { kAuto, kFixed, kLearn };
 
+// Per-photo exposure (--exposure, issue 16): solve each training photo's gain and offset per
+// channel with the volume, or not; kAuto solves them for photos from COLMAP (real captures) and
+// not for NeRF json scenes (synthetic renders share one exposure).
+enum class ExposureChoice { kAuto, kOn, kOff };
+
 // Which of a workspace's photos a command renders or scores (--split).
 enum class ViewSplit { kTest, kTrain, kAll };
 

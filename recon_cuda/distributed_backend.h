@@ -50,6 +50,7 @@ class DistributedBackend final : public Backend {
   void AxpyDiag(VecId y, double a, VecId d, VecId x) override { inner_->AxpyDiag(y, a, d, x); }
   double Dot(VecId a, VecId b) const override { return inner_->Dot(a, b); }
   double MaxAbs(VecId v) const override { return inner_->MaxAbs(v); }
+  double MaxAbsVolume(VecId v) const override { return inner_->MaxAbsVolume(v); }
   void Project(VecId x) override { inner_->Project(x); }
   void HoldParameters(VecId x, VecId g, VecId free, bool bounds) override { inner_->HoldParameters(x, g, free, bounds); }
   void Multiply(VecId y, VecId m) override { inner_->Multiply(y, m); }

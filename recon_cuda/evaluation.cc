@@ -29,10 +29,11 @@ Image OpacityImage(const RenderOutput& render) {
 }
 
 std::vector<ViewScore> ScoreViews(Backend* backend, VecId x, const std::vector<PosedImage>& views,
-                                  float min_box_opacity) {
+                                  float min_box_opacity, const PhotoExposures& exposures) {
   std::vector<ViewScore> scores;
   for (const PosedImage& v : views) {
-    const RenderOutput r = backend->Render(x, v.camera, v.image.width, v.image.height, min_box_opacity);
+    RenderOutput r = backend->Render(x, v.camera, v.image.width, v.image.height, min_box_opacity);
+    if (!exposures.empty()) ApplyTransform(exposures.Nearest(v.camera), &r);
     scores.push_back({v.name, Psnr(r, v.image)});
   }
   return scores;

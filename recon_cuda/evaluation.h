@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "recon_cuda/backend.h"
+#include "recon_cuda/exposure.h"
 
 namespace perf::recon {
 
@@ -19,9 +20,10 @@ Image ToImage(const RenderOutput& render);          // RGB
 Image OpacityImage(const RenderOutput& render);     // one channel: 1 - T_box
 
 // Renders every view at its own size (no jitter; the render rule at `min_box_opacity`,
-// render_rule.h) and scores it.
+// render_rule.h) and scores it; with exposures, each render under the transform of its nearest
+// training photo (exposure.h).
 std::vector<ViewScore> ScoreViews(Backend* backend, VecId x, const std::vector<PosedImage>& views,
-                                  float min_box_opacity);
+                                  float min_box_opacity, const PhotoExposures& exposures = {});
 
 // The mean of the per-view PSNRs (the NeRF convention); 0 for no views.
 double MeanPsnr(const std::vector<ViewScore>& scores);

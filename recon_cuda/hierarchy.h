@@ -25,6 +25,8 @@ struct HierarchyOptions {
   SolverOptions solver;       // max_iterations and seed are set per level
   InitOptions init;           // the start of level 0
   ResidualSettings residuals;
+  // Training photos whose exposures every level solves (VolumeShape::exposures); 0: none.
+  int exposures = 0;
   bool fixed_background = false;              // the shells are constants in `background`
   std::array<float, 3> background{1, 1, 1};  // (scene.json's background)
   bool pyramid = true;  // coarse levels fit downscaled photos (PyramidFactor)

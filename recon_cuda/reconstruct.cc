@@ -185,6 +185,10 @@ bool FixedBackground(BackgroundChoice background, const Scene& scene) {
   return background == BackgroundChoice::kAuto ? EveryImageHasAlpha(scene) : background == BackgroundChoice::kFixed;
 }
 
+bool SolvesExposures(ExposureChoice exposure, const Scene& scene) {
+  return exposure == ExposureChoice::kOn || (exposure == ExposureChoice::kAuto && scene.source.type == "colmap");
+}
+
 void SetHierarchyBackground(BackgroundChoice background, const Scene& scene, HierarchyOptions* options) {
   options->fixed_background = FixedBackground(background, scene);
   options->background = {static_cast<float>(scene.background.x()), static_cast<float>(scene.background.y()),
@@ -258,6 +262,8 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   ho.solver.smooth_grid = o.smooth_grid >= 0 ? o.smooth_grid : ho.fixed_background ? 0.0 : kAutoSmoothGrid;
   ho.solver.smooth_shells = o.smooth_shells;
   if (o.solver.type == SolverType::kAdam) ho.solver.smooth_grid = ho.solver.smooth_shells = 0;  // Gauss-Newton only
+  ho.exposures = SolvesExposures(o.exposure, scene) ? static_cast<int>(train_views.size()) : 0;
+  result.exposures = ho.exposures;
   const auto shape_of = [&](int level) { return LevelShape(ho, geometry.num_shells(), level); };
 
   if (root) {
@@ -335,6 +341,10 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
              "; ", levels, " levels from ", o.start_resolution, "^3"));
   const TrainingViews views = ViewsForHierarchy(train, &comm, train_views);
   say(result.levels_choice.Describe());
+  if (ho.exposures > 0) {
+    say(StrCat("exposures: a gain and an offset per channel for each of the ", ho.exposures,
+               " training photos; held-out views take their nearest training photo's"));
+  }
   // As every level's RaySet will (every rank's photos: either all have alpha or the scene's do not).
   const bool fits_alpha = o.residuals.use_alpha && !comm.Any(!ImagesHaveAlpha(train));
   const float opacity_weight = OpacityResidualWeight(o.residuals, fits_alpha);
@@ -357,11 +367,18 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   double level_start_elapsed = 0, iter_time = 0;  // for the log's elapsed solver time
   int held_out_iteration = -1;  // the iteration whose held-out PSNR was logged last
   double held_out_psnr = 0;
+  // The photos' exposures at the level's current parameters (none when it solves none).
+  const auto exposures_of = [&](const HierarchyLevel& h) {
+    if (h.shape.exposures == 0) return PhotoExposures();
+    std::vector<float> x(static_cast<size_t>(h.shape.ParamCount()));
+    backend->Download(h.params, x);
+    return PhotoExposures(h.shape, x, train_views);
+  };
   // The mean PSNR over every rank's held-out views (collective).
-  const auto held_out = [&](VecId params) {
+  const auto held_out = [&](const HierarchyLevel& h) {
     const auto t0 = WallClock::now();
     double sum[2] = {0, 0};  // PSNR, views
-    for (const ViewScore& s : ScoreViews(backend.get(), params, test, o.min_box_opacity)) {
+    for (const ViewScore& s : ScoreViews(backend.get(), h.params, test, o.min_box_opacity, exposures_of(h))) {
       sum[0] += s.psnr;
       sum[1] += 1;
     }
@@ -406,14 +423,15 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     }
     const bool last_it = s.iteration + 1 == h.solver.max_iterations;
     if (test_views > 0 && o.eval_every > 0 && ((s.iteration + 1) % o.eval_every == 0 || last_it)) {
-      held_out_psnr = held_out(h.params);
+      held_out_psnr = held_out(h);
       held_out_iteration = s.iteration;
       line["test_psnr"] = held_out_psnr;
     }
     if (root && o.preview_every > 0 && ((s.iteration + 1) % o.preview_every == 0 || last_it)) {
       const auto t0 = WallClock::now();
       const PosedImage& v = preview_views.front();
-      const RenderOutput r = backend->Render(h.params, v.camera, v.image.width, v.image.height, o.min_box_opacity);
+      RenderOutput r = backend->Render(h.params, v.camera, v.image.width, v.image.height, o.min_box_opacity);
+      if (h.shape.exposures > 0) ApplyTransform(exposures_of(h).Nearest(v.camera), &r);
       const fs::path p = o.workspace / "preview" / StrCat("recon_l", h.level, "_i", s.iteration + 1, ".png");
       EnsureWritableDirectory(p.parent_path());
       WriteImage(p, ToImage(r), PixelFormat::kUInt8);
@@ -446,7 +464,17 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     lr.status = StatusName(summary.status);
     if (test_views > 0) {
       // The last iteration's, when the log has it; else now (the backend still holds x).
-      lr.test_psnr = held_out_iteration == summary.iterations - 1 ? held_out_psnr : held_out(h.params);
+      lr.test_psnr = held_out_iteration == summary.iterations - 1 ? held_out_psnr : held_out(h);
+    }
+    if (h.shape.exposures > 0) {
+      result.gain_range[0] = 2, result.gain_range[1] = 0;
+      const PhotoExposures fitted(h.shape, x, train_views);
+      for (const ColourTransform<float>& xf : fitted.transforms()) {
+        for (float g : xf.gain) {
+          result.gain_range[0] = std::min(result.gain_range[0], g);
+          result.gain_range[1] = std::max(result.gain_range[1], g);
+        }
+      }
     }
     if (root) {
       WriteCheckpoint(CheckpointPath(o.workspace, h.level),
@@ -533,6 +561,11 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                      {"smooth_grid", ho.solver.smooth_grid},
                      {"smooth_shells", ho.solver.smooth_shells},
                      {"background", result.fixed_background ? "fixed" : "learned"},
+                     {"exposures",
+                      {{"photos", result.exposures},
+                       {"prior", ho.solver.exposure_prior},
+                       {"gain_range", {result.gain_range[0], result.gain_range[1]}},
+                       {"held_out", result.exposures > 0 ? "the nearest training photo's (camera centre)" : "none"}}},
                      {"opacity_residual", opacity_residual},
                      {"opacity_residual_weight", opacity_weight},
                      {"init_opacity", o.init.box_opacity},

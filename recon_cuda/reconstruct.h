@@ -59,6 +59,8 @@ struct ReconstructOptions {
   bool init_shells_from_photos = false;  // shells start at the training photos' mean colour
   // The shells (device_choice.h); a known background is information (+0.7 dB on lego, docs/tuning.md).
   BackgroundChoice background = BackgroundChoice::kAuto;
+  // Per-photo exposure (device_choice.h ExposureChoice; solver.exposure_prior weighs its prior).
+  ExposureChoice exposure = ExposureChoice::kAuto;
   ResidualSettings residuals;
   // Coarse levels fit downscaled photos: the largest power-of-two downscale that keeps a voxel
   // at least one pixel wide in the median view (fewer rays, same information at that level).
@@ -96,6 +98,9 @@ struct LevelReport {
 // Whether `background` fixes the shells for this scene.
 bool FixedBackground(BackgroundChoice background, const Scene& scene);
 
+// Whether `exposure` solves the photos' exposures for this scene (kAuto: COLMAP photos).
+bool SolvesExposures(ExposureChoice exposure, const Scene& scene);
+
 // The hierarchy's background as perf reconstruct sets it: fixed or not (FixedBackground), and
 // the colour fixed shells hold (scene.json's background).
 void SetHierarchyBackground(BackgroundChoice background, const Scene& scene, HierarchyOptions* options);
@@ -110,6 +115,8 @@ struct ReconstructResult {
   bool already_complete = false;    // --resume found every level done
   LevelChoice levels_choice;        // how many levels and why
   int ranks = 1;                    // processes that fitted the photos (ReconstructOptions::comm)
+  int exposures = 0;                // photos whose exposure was solved (0: none)
+  float gain_range[2] = {1, 1};     // the least and greatest gain of any photo and channel
   std::string memory_stop;          // automatic levels: why the hierarchy ended early (empty: it did not)
 };
 

@@ -27,9 +27,22 @@ LoadedCheckpoint LoadForRendering(const fs::path& workspace, const fs::path& che
   return l;
 }
 
+PhotoExposures ExposuresOf(const LoadedCheckpoint& l, const Scene& scene) {
+  const Checkpoint& c = l.checkpoint;
+  if (c.shape.exposures == 0) return {};
+  const std::vector<ViewFrustum> train = SplitViews(scene, Split::kTrain);
+  if (static_cast<int>(train.size()) != c.shape.exposures) {
+    throw InputError(l.path.string(), "exposures", StrCat(c.shape.exposures, " photos"),
+                     StrCat("scene.json has ", train.size(), " training photos: the workspace was imported again"),
+                     "run perf reconstruct again");
+  }
+  return PhotoExposures(c.shape, c.params, train);
+}
+
 RenderViewsResult RenderViews(const RenderViewsOptions& o) {
   const Scene scene = ReadScene(o.workspace / "scene.json");
   LoadedCheckpoint loaded = LoadForRendering(o.workspace, o.checkpoint, o.device, o.threads);
+  const PhotoExposures exposures = ExposuresOf(loaded, scene);
   RenderViewsResult result;
   result.checkpoint = loaded.path;
 
@@ -57,7 +70,9 @@ RenderViewsResult RenderViews(const RenderViewsOptions& o) {
   EnsureWritableDirectory(out_dir);
   int done = 0;
   for (const PosedImage& v : views) {
-    const RenderOutput render = backend->Render(LoadedCheckpoint::kParams, v.camera, v.image.width, v.image.height, o.min_box_opacity);
+    RenderOutput render =
+        backend->Render(LoadedCheckpoint::kParams, v.camera, v.image.width, v.image.height, o.min_box_opacity);
+    if (!exposures.empty()) ApplyTransform(exposures.Nearest(v.camera), &render);
     result.scores.push_back({v.name, Psnr(render, v.image)});
     const std::string stem = fs::path(v.name).filename().replace_extension().string();
     const fs::path file = out_dir / (stem + ".png");

@@ -29,6 +29,10 @@ struct LoadedCheckpoint {
 LoadedCheckpoint LoadForRendering(const std::filesystem::path& workspace, const std::filesystem::path& checkpoint,
                                   DeviceChoice device, int threads);
 
+// The photos' exposures the checkpoint holds, placed at the scene's training cameras (exposure.h;
+// none when it solved none). InputError when the scene's training photos are not the ones fitted.
+PhotoExposures ExposuresOf(const LoadedCheckpoint& loaded, const Scene& scene);
+
 struct RenderViewsOptions {
   std::filesystem::path workspace;
   std::filesystem::path checkpoint;  // empty: the highest level in recon/

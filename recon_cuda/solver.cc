@@ -67,6 +67,9 @@ void SolverOptions::Check() const {
   if (!(step_factor > 0 && step_factor < 1)) Fail("step_factor", StrCat(step_factor), "must be in (0, 1)");
   if (max_line_search_steps < 1) Fail("max_line_search_steps", std::to_string(max_line_search_steps), "must be >= 1");
   if (line_search_ray_stride < 1) Fail("line_search_ray_stride", std::to_string(line_search_ray_stride), "must be >= 1");
+  if (!(exposure_prior >= 0 && std::isfinite(exposure_prior))) {
+    Fail("exposure_prior", StrCat(exposure_prior), "must be finite and >= 0");
+  }
   if (!(smooth_grid >= 0 && std::isfinite(smooth_grid))) Fail("smooth_grid (--smooth-grid)", StrCat(smooth_grid), "must be finite and >= 0");
   if (!(smooth_shells >= 0 && std::isfinite(smooth_shells))) {
     Fail("smooth_shells (--smooth-shells)", StrCat(smooth_shells), "must be finite and >= 0");
@@ -93,11 +96,12 @@ namespace {
 // data's diagonal D of the level's first linearisation: relative weight times D's mean per kind.
 SmoothnessWeights CalibrateSmoothness(const SolverOptions& o, Backend* b) {
   SmoothnessWeights w;
-  if (o.smooth_grid <= 0 && o.smooth_shells <= 0) return w;
   const VolumeShape& shape = b->level().shape;
+  const bool exposures = shape.exposures > 0 && o.exposure_prior > 0;
+  if (o.smooth_grid <= 0 && o.smooth_shells <= 0 && !exposures) return w;
   const std::array<double, kParamKinds> sums = b->SumByKind(kDiag);
   const double cells = static_cast<double>(shape.StoredCells());
-  const double texels = static_cast<double>(shape.ParamCount() - shape.GridParamCount()) / 4;
+  const double texels = static_cast<double>(shape.ShellTexels());
   const auto mean = [&](ParamKind k, double count) { return count > 0 ? sums[static_cast<int>(k)] / count : 0.0; };
   w.grid_colour = static_cast<float>(o.smooth_grid * mean(ParamKind::kGridColour, 3 * cells));
   w.grid_density = static_cast<float>(o.smooth_grid * mean(ParamKind::kGridDensity, cells));
@@ -105,6 +109,7 @@ SmoothnessWeights CalibrateSmoothness(const SolverOptions& o, Backend* b) {
     w.shell_colour = static_cast<float>(o.smooth_shells * mean(ParamKind::kShellColour, 3 * texels));
     w.shell_opacity = static_cast<float>(o.smooth_shells * mean(ParamKind::kShellOpacity, texels));
   }
+  if (exposures) w.exposure = static_cast<float>(o.exposure_prior * mean(ParamKind::kExposureGain, 3.0 * shape.exposures));
   return w;
 }
 
@@ -114,7 +119,7 @@ int SolvePcg(const SolverOptions& o, Backend* b, const SmoothnessWeights& w, Sol
   b->Fill(kStep, 0.f);
   b->Fill(kResidual, 0.f);
   b->Axpy(kResidual, -1.0, kG);  // r0 = b - A 0 = -g
-  const double floor = std::max(o.diagonal_floor * b->MaxAbs(kDiag), 1e-30);
+  const double floor = std::max(o.diagonal_floor * b->MaxAbsVolume(kDiag), 1e-30);
   b->DivideClamped(kZ, kResidual, kDiag, static_cast<float>(floor));
   b->Copy(kDir, kZ);
   double rz = b->Dot(kResidual, kZ);

@@ -68,6 +68,10 @@ struct SolverOptions {
   // diag(J^T J) over that kind's parameters at the level's first linearisation, so 1 makes a
   // pair as stiff as the average parameter's photos. 0: off. Gauss-Newton only.
   double smooth_grid = 0, smooth_shells = 0;
+  // The photos' exposures' prior (smoothness.h), relative to the data as the smoothness weights
+  // are: this times the mean of diag(J^T J) over the gains, i.e. 1 holds a gain as firmly as a
+  // whole photo's pixels do. Fixes the gauge; 1 measured best of 0.01 to 10 (docs/tuning.md).
+  double exposure_prior = 1.0;
 
   AdamSettings adam;
 
