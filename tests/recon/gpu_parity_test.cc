@@ -152,6 +152,53 @@ TEST_F(GpuParityTest, JtJpAtTheLinearisationPoint) {
   ExpectClose(Get(gpu.get(), kOut), Get(cpu.get(), kOut), "J^T J p");
 }
 
+// Per-photo exposures (issue 16): every pass with six photos' transforms. A photo's 432 rays fill
+// 13.5 warps, so the device's warp sums of the exposure entries (cuda_passes.cu WarpAddExposure)
+// meet both warps of one photo and warps shared by two.
+TEST_F(GpuParityTest, ExposuresInEveryPass) {
+  TinyProblem p = Problem(47);
+  p.AddExposures(48);
+  SetLevel(p.Level(), p.x);
+  const int64_t e = p.shape.ExposureStart(), n = p.shape.ParamCount();
+  const auto tail = [&](Backend* b, VecId v) {
+    const std::vector<float> all = Get(b, v);
+    return std::vector<float>(all.begin() + e, all.end());
+  };
+  const auto expect_tail = [&](VecId v, const char* what) {
+    const std::vector<float> c = tail(cpu.get(), v), g = tail(gpu.get(), v);
+    for (int64_t i = 0; i < n - e; ++i) EXPECT_NEAR(g[i], c[i], 1e-4 * (1 + std::abs(c[i]))) << what << " entry " << i;
+  };
+  for (bool with_diag : {true, false}) {
+    const PassStats c = cpu->Linearize(kX, 13, kG, with_diag ? kD : kNoVector);
+    const PassStats g = gpu->Linearize(kX, 13, kG, with_diag ? kD : kNoVector);
+    ExpectStatsClose(g, c, "linearize with exposures");
+    ExpectClose(Get(gpu.get(), kG), Get(cpu.get(), kG), "J^T r with exposures");
+    expect_tail(kG, "J^T r's exposures");
+    if (with_diag) {
+      ExpectClose(Get(gpu.get(), kD), Get(cpu.get(), kD), "diag with exposures");
+      expect_tail(kD, "diag's exposures");
+      EXPECT_NEAR(gpu->MaxAbsVolume(kD), cpu->MaxAbsVolume(kD), 1e-5 * cpu->MaxAbsVolume(kD));
+      EXPECT_LT(cpu->MaxAbsVolume(kD), cpu->MaxAbs(kD));  // a photo's entries outweigh any cell's
+    }
+  }
+  std::mt19937 rng(49);
+  std::normal_distribution<float> normal;
+  std::vector<float> pv(n);
+  for (int64_t i = 0; i < n; ++i) pv[i] = i >= e && (i - e) % 4 == 3 ? 0.f : normal(rng);
+  for (Backend* b : {cpu.get(), gpu.get()}) b->Upload(kP, pv);
+  cpu->MultiplyJtJ(kP, kOut);
+  gpu->MultiplyJtJ(kP, kOut);
+  ExpectClose(Get(gpu.get(), kOut), Get(cpu.get(), kOut), "J^T J p with exposures");
+  expect_tail(kOut, "J^T J p's exposures");
+  ExpectStatsClose(gpu->Cost(kX, 13), cpu->Cost(kX, 13), "cost with exposures");
+  for (Backend* b : {cpu.get(), gpu.get()}) {
+    b->Copy(kOut, kX);
+    b->Axpy(kOut, 3.0, kP);  // far outside the exposures' range
+    b->Project(kOut);
+  }
+  EXPECT_EQ(tail(gpu.get(), kOut), tail(cpu.get(), kOut));
+}
+
 // RestrictJacobian: the CPU drops recorded samples, the GPU skips them on the fly; on the free
 // entries both equal the unrestricted product (half the box empty, its densities held).
 TEST_F(GpuParityTest, RestrictedJtJpOnTheFreeEntries) {

@@ -35,7 +35,9 @@ TEST(Smoothness, EveryTexelHasFourNeighboursSymmetricallyAcrossSeams) {
         EXPECT_EQ(q / per_shell, t / per_shell) << "a neighbour in another shell, m " << m;
         pairs.insert({t, q});
       }
-      if (m > 1) EXPECT_EQ(std::set<int64_t>(nbr, nbr + 4).size(), 4u) << "texel " << t << ", m " << m;
+      if (m > 1) {
+        EXPECT_EQ(std::set<int64_t>(nbr, nbr + 4).size(), 4u) << "texel " << t << ", m " << m;
+      }
     }
     for (const auto& [a, b] : pairs) EXPECT_EQ(pairs.count({a, b}), pairs.count({b, a})) << a << " " << b << ", m " << m;
     // Each face edge pairs texel for texel with its neighbouring face's: 12 edges x m pairs.
