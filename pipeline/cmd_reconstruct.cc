@@ -20,7 +20,7 @@ void AddReconstructCommand(CLI::App& app) {
     recon::ReconstructOptions o;
     std::string workspace;
     std::string solver = "gn";
-    bool no_aux = false, no_alpha = false, no_pyramid = false, no_hold = false, quiet = false;
+    bool no_aux = false, no_alpha = false, no_pyramid = false, no_hold = false, no_grow = false, quiet = false;
   };
   auto args = std::make_shared<Args>();
   recon::ReconstructOptions& o = args->o;
@@ -67,6 +67,9 @@ void AddReconstructCommand(CLI::App& app) {
                   "End a ray's march once its transmittance is below this (0: march the whole box)")
       ->capture_default_str();
   cmd->add_flag("--no-pyramid", args->no_pyramid, "Fit full-resolution photos at every level");
+  cmd->add_flag("--no-grow-box", args->no_grow,
+                "Only warn where the first level's density reaches a side or top face of the box (default: grow "
+                "the box there by a quarter, write it to scene.json and fit the first level again, at most twice)");
   cmd->add_flag("--dense", o.dense,
                 "Keep every level's grid dense (default: levels after the first store only the 8^3 bricks near "
                 "what the level before fitted)");
@@ -138,6 +141,7 @@ void AddReconstructCommand(CLI::App& app) {
     o.solver.adam.lr_opacity = o.solver.adam.lr_colour;
     if (args->no_aux) o.residuals.lambda = o.residuals.alpha_weight = 0;
     if (args->no_pyramid) o.pyramid = false;
+    if (args->no_grow) o.grow_box = false;
     if (args->no_hold) o.solver.hold_at_bounds = false;
     if (args->no_alpha) o.residuals.use_alpha = false;
     // Under mpirun every rank fits its share of the photos; rank 0 holds the lock, writes and reports.

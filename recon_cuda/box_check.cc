@@ -32,6 +32,29 @@ std::vector<BoxFace> BoxFaces(const VolumeShape& shape, const VolumeGeometry& ge
   return faces;
 }
 
+std::vector<int> FacesToGrow(const std::vector<BoxFace>& faces) {
+  std::vector<int> grow;
+  for (int f = 0; f < static_cast<int>(faces.size()); ++f) {
+    if (f != 4 && faces[f].opaque_fraction >= kCutOffFraction) grow.push_back(f);  // 4: -z, the bottom
+  }
+  return grow;
+}
+
+VolumePlacement GrownPlacement(const VolumePlacement& p, const std::vector<int>& faces) {
+  VolumePlacement g = p;
+  for (int f : faces) {
+    PERF_CHECK(f >= 0 && f < 6);
+    const int axis = f / 2;
+    const double sign = f % 2 == 0 ? -1.0 : 1.0;
+    const double step = kGrowFraction * p.box_size[axis];
+    g.box_size[axis] += step;
+    // The centre moves half the step toward the face, along the box's axis in the world
+    // (column `axis` of world_from_box, row-major).
+    for (int r = 0; r < 3; ++r) g.box_center[r] += 0.5 * step * sign * p.box_rotation[3 * r + axis];
+  }
+  return g;
+}
+
 std::string CutOffWarning(const std::vector<BoxFace>& faces) {
   std::string list;
   int count = 0;

@@ -30,4 +30,18 @@ std::vector<BoxFace> BoxFaces(const VolumeShape& shape, const VolumeGeometry& ge
 // none is.
 std::string CutOffWarning(const std::vector<BoxFace>& faces);
 
+// Growing the box where the object goes on (perf reconstruct, ReconstructOptions::grow_box): each
+// side or top face at or above kCutOffFraction moves out by kGrowFraction of the box's size along
+// its axis (the opposite face stays), and level 0 is fitted again in the grown box, at most
+// kMaxBoxGrowths times.
+inline constexpr double kGrowFraction = 0.25;
+inline constexpr int kMaxBoxGrowths = 2;
+
+// The faces (indices into BoxFaces' order: -x, +x, -y, +y, -z, +z) to move out; the bottom never.
+std::vector<int> FacesToGrow(const std::vector<BoxFace>& faces);
+
+// `placement` with `faces` moved out by kGrowFraction of the box along their axes, in the box's
+// own frame (the shells stay where they are).
+VolumePlacement GrownPlacement(const VolumePlacement& placement, const std::vector<int>& faces);
+
 }  // namespace perf::recon

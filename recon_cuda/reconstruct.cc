@@ -236,9 +236,9 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   };
 
   const fs::path scene_path = o.workspace / "scene.json";
-  const Scene scene = ReadScene(scene_path);
+  Scene scene = ReadScene(scene_path);  // its box grows where the object goes on (grow_box)
   CheckSameScene(comm, scene_path);
-  const VolumeGeometry geometry = VolumeGeometry::FromScene(scene);
+  VolumeGeometry geometry = VolumeGeometry::FromScene(scene);
   std::unique_ptr<Backend> backend = MakeBackend(o.device, o.threads, LocalRank());
   DistributedBackend* ranks = nullptr;  // with several ranks: sums the passes across them
   std::unique_ptr<Communicator> device_comm;  // NCCL, for a CUDA backend
@@ -450,13 +450,25 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   };
   json box_faces = json::array();  // after the first level (box_check.h)
   std::string box_warning;
+  std::vector<int> grow_faces;  // set after level 0: fit it again in a box grown there
+  json box_growths = json::array();
   cb.level_done = [&](const HierarchyLevel& h, const SolverSummary& summary, const std::vector<float>& x) {
     if (ranks != nullptr) ranks->CheckInStep(h.params);
     if (h.level == 0) {
       const std::vector<BoxFace> faces = BoxFaces(h.shape, geometry, x);
+      box_faces = json::array();  // the last fit's (level 0 is fitted again after a growth)
       for (const BoxFace& f : faces) box_faces.push_back({{"face", f.name}, {"opaque_fraction", f.opaque_fraction}});
       box_warning = CutOffWarning(faces);
-      if (!box_warning.empty()) say("warning: " + box_warning);
+      if (o.grow_box && box_growths.size() < static_cast<size_t>(kMaxBoxGrowths)) grow_faces = FacesToGrow(faces);
+      if (!box_warning.empty() && grow_faces.empty()) say("warning: " + box_warning);
+    }
+    if (!grow_faces.empty()) {  // this fit is discarded (before_level ends the hierarchy here)
+      const double seconds = SecondsSince(t_level) - eval_seconds;
+      elapsed += seconds;
+      result.solve_seconds += seconds;
+      t_level = WallClock::now();
+      eval_seconds = 0;
+      return;
     }
     lr.iterations = summary.iterations;
     lr.cost = summary.final_cost;
@@ -523,6 +535,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     t_level = WallClock::now();
     eval_seconds = 0;
   };
+  cb.before_level = [&](int) { return grow_faces.empty(); };
   cb.out_of_memory = [&](const HierarchyLevel& h) {
     result.memory_stop = StrCat("level ", h.level + 1, " (", DescribeShape(h.shape), ") would need ",
                                 FormatByteCount(h.memory.Needed()), " but ",
@@ -534,7 +547,37 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
       result.already_complete = true;
     }
   };
-  SolveHierarchy(backend.get(), geometry, views, ho, std::move(start), cb);
+  for (;;) {
+    SolveHierarchy(backend.get(), geometry, views, ho, std::move(start), cb);
+    if (grow_faces.empty()) break;
+    // The object goes on beyond these faces: grow the box there (every rank alike, from the same
+    // fit), write it to scene.json, and fit level 0 again.
+    std::string names, described;
+    for (int f : grow_faces) {
+      const std::string name = box_faces[f]["face"].get<std::string>();
+      names += StrCat(names.empty() ? "" : ", ", name);
+      described += StrCat(described.empty() ? "" : ", ", name, " (",
+                          std::lround(100 * box_faces[f]["opaque_fraction"].get<double>()), " % opaque)");
+    }
+    const VolumePlacement grown = GrownPlacement(VolumePlacement::FromScene(scene), grow_faces);
+    for (int a = 0; a < 3; ++a) {
+      scene.box.center[a] = grown.box_center[a];
+      scene.box.size[a] = grown.box_size[a];
+    }
+    scene.box.method += StrCat("; grown by perf reconstruct at ", names);
+    geometry = VolumeGeometry::From(grown, scene_path.string());
+    if (root) WriteScene(scene_path, scene);
+    const json growth{{"faces", names}, {"size", {grown.box_size[0], grown.box_size[1], grown.box_size[2]}},
+                      {"center", {grown.box_center[0], grown.box_center[1], grown.box_center[2]}}};
+    box_growths.push_back(growth);
+    write_log({{"event", "box_grown"}, {"growth", growth}});
+    say(StrCat("the fitted density reaches the box's ", described, grow_faces.size() > 1 ? " faces" : " face",
+               ": the object goes on there; the box grows ", std::lround(100 * kGrowFraction), " % there, to ",
+               grown.box_size[0], " x ", grown.box_size[1], " x ", grown.box_size[2],
+               " (scene.json), and level 1 is fitted again"));
+    grow_faces.clear();
+    start = HierarchyStart{};
+  }
   if (result.already_complete || !root) return result;
 
   json levels_json = json::array();
@@ -582,6 +625,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                      {"excluded_views", excluded_views},
                      {"box_faces", box_faces},
                      {"box_warning", box_warning},
+                     {"box_growths", box_growths},
                      {"final_checkpoint", fs::relative(result.final_checkpoint, o.workspace).string()},
                      {"test_psnr", result.test_psnr},
                      {"solve_seconds", result.solve_seconds},

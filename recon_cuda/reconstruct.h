@@ -66,6 +66,9 @@ struct ReconstructOptions {
   // at least one pixel wide in the median view (fewer rays, same information at that level).
   bool pyramid = true;
   bool dense = false;  // every level's grid dense (else levels after the first keep the occupied bricks)
+  // Where the first level's density reaches a side or top face of the box, grow the box there and
+  // fit that level again (box_check.h; at most kMaxBoxGrowths times); false: only warn.
+  bool grow_box = true;
   OccupancyOptions occupancy;  // which bricks a sparse level keeps
   bool resume = false;          // continue after the last checkpoint instead of starting over
   int preview_every = 0;        // write a held-out preview every K iterations (0: never)

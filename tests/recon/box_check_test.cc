@@ -54,6 +54,39 @@ TEST(BoxCheck, DensityAgainstASideFaceIsNamedTheBottomAndTheInsideAreNot) {
   EXPECT_EQ(CutOffWarning(BoxFaces(shape, UnitBox(), clear)), "");
 }
 
+TEST(BoxCheck, TheFacesTheDensityReachesGrowOutwardInTheBoxFrame) {
+  std::vector<BoxFace> faces(6);
+  faces[0].opaque_fraction = 0.3;   // -x
+  faces[3].opaque_fraction = 0.04;  // +y, under kCutOffFraction
+  faces[4].opaque_fraction = 0.9;   // -z, the bottom: never grown
+  faces[5].opaque_fraction = 0.05;  // +z, at the threshold
+  EXPECT_EQ(FacesToGrow(faces), (std::vector<int>{0, 5}));
+
+  VolumePlacement p;
+  p.box_center[0] = 1, p.box_center[1] = 2, p.box_center[2] = 3;
+  p.box_size[0] = 4, p.box_size[1] = 2, p.box_size[2] = 8;
+  // world_from_box: box x along world y, box y along world -x, box z along world z.
+  const double r[9] = {0, -1, 0, 1, 0, 0, 0, 0, 1};
+  std::copy(r, r + 9, p.box_rotation);
+  p.shell_radii = {10};
+  const VolumePlacement g = GrownPlacement(p, {0, 5});
+  EXPECT_DOUBLE_EQ(g.box_size[0], 4 + kGrowFraction * 4);
+  EXPECT_DOUBLE_EQ(g.box_size[1], 2);
+  EXPECT_DOUBLE_EQ(g.box_size[2], 8 + kGrowFraction * 8);
+  // -x of the box is world -y: the centre moves half the step that way; +z moves it up.
+  EXPECT_DOUBLE_EQ(g.box_center[0], 1);
+  EXPECT_DOUBLE_EQ(g.box_center[1], 2 - 0.5 * kGrowFraction * 4);
+  EXPECT_DOUBLE_EQ(g.box_center[2], 3 + 0.5 * kGrowFraction * 8);
+  // The faces that did not grow stay where they were: box +x at centre + R e_x size / 2.
+  EXPECT_DOUBLE_EQ(g.box_center[1] + 0.5 * g.box_size[0], p.box_center[1] + 0.5 * p.box_size[0]);
+  EXPECT_DOUBLE_EQ(g.box_center[2] - 0.5 * g.box_size[2], p.box_center[2] - 0.5 * p.box_size[2]);
+  // Both faces of an axis: the centre stays.
+  const VolumePlacement both = GrownPlacement(p, {2, 3});
+  EXPECT_DOUBLE_EQ(both.box_size[1], 2 + 2 * kGrowFraction * 2);
+  for (int a = 0; a < 3; ++a) EXPECT_DOUBLE_EQ(both.box_center[a], p.box_center[a]);
+  EXPECT_EQ(g.shell_radii, p.shell_radii);
+}
+
 TEST(BoxCheck, InactiveBricksOfASparseGridAreEmpty) {
   std::vector<uint8_t> active(8, 0);
   active[1] = 1;  // the brick at +x, -y, -z of a 16^3 grid

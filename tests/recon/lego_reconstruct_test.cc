@@ -5,11 +5,17 @@
 // skips without ../shared/data.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdio>
+#include <fstream>
 #include <memory>
+#include <nlohmann/json.hpp>
+#include <tuple>
 
 #include "export/evaluate.h"
 #include "export/export.h"
+#include "recon_cuda/checkpoint.h"
+#include "recon_cuda/box_check.h"
 #include "recon_cuda/reconstruct.h"
 #include "sfm_import/importer.h"
 #include "tests/test_util.h"
@@ -101,6 +107,62 @@ TEST_F(LegoTest, ExportAndMasksAgainstAlpha) {
   EXPECT_GT(e.pooled.iou, 0.93);
   EXPECT_GT(e.mean.ssim, 0.95);  // measured 0.965
   EXPECT_NEAR(e.mean.psnr, result_->test_psnr, 0.05) << "eval and reconstruct score the same renders";
+}
+
+// The box check of issue 16 acting: lego imported with a box too small for it (1.5 units a side
+// where the object spans about 1.3 x 2.4 x 1.5) makes the first level's density reach the side
+// faces; perf reconstruct grows the box there, writes it to scene.json and fits the level again,
+// which scores better than the fit in the box as imported (--no-grow-box).
+TEST(LegoBox, ABoxTooSmallGrowsWhereTheObjectGoesOn) {
+  PERF_REQUIRE_DATA(lego, "lego");
+  test::TempDir dir;
+  const auto fit = [&](const std::string& name, bool grow) {
+    ImportOptions io;
+    io.nerf_json = test::SharedData("lego") / "transforms_train.json";
+    io.workspace = dir.path() / name;
+    io.downscale = 16;
+    io.box_size = Eigen::Vector3d(1.5, 1.5, 1.5);
+    RunImport(io);
+    ReconstructOptions o;
+    o.workspace = io.workspace;
+    o.device = DeviceChoice::kCpu;
+    o.levels = 1;
+    o.iterations = 8;
+    o.grow_box = grow;
+    std::vector<std::string> said;
+    o.on_event = [&](const ReconstructOptions::Event& e) {
+      if (!e.message.empty()) said.push_back(e.message);
+    };
+    const ReconstructResult r = Reconstruct(o);
+    const Scene scene = ReadScene(io.workspace / "scene.json");
+    std::ifstream in(io.workspace / "recon" / "recon.json");
+    const nlohmann::json recon = nlohmann::json::parse(in);
+    return std::make_tuple(r, scene, recon, said);
+  };
+  const auto [kept, kept_scene, kept_json, kept_said] = fit("kept", false);
+  const auto [grown, grown_scene, grown_json, grown_said] = fit("grown", true);
+
+  EXPECT_TRUE(kept_json["box_growths"].empty());
+  EXPECT_FALSE(kept_json["box_warning"].get<std::string>().empty());
+  EXPECT_EQ(kept_scene.box.size, Eigen::Vector3d(1.5, 1.5, 1.5));
+
+  ASSERT_FALSE(grown_json["box_growths"].empty()) << grown_json.dump(1);
+  EXPECT_LE(grown_json["box_growths"].size(), static_cast<size_t>(kMaxBoxGrowths));
+  // scene.json holds the grown box, larger than imported and never smaller along any axis.
+  EXPECT_GT(grown_scene.box.size.prod(), 1.5 * 1.5 * 1.5 * 1.2);
+  for (int a = 0; a < 3; ++a) EXPECT_GE(grown_scene.box.size[a], 1.5);
+  EXPECT_NE(grown_scene.box.method.find("grown by perf reconstruct"), std::string::npos);
+  // The checkpoint was fitted in it, and the run said so.
+  const Checkpoint c = ReadCheckpoint(CheckpointPath(dir.path() / "grown", 0));
+  for (int a = 0; a < 3; ++a) EXPECT_DOUBLE_EQ(c.placement.box_size[a], grown_scene.box.size[a]);
+  EXPECT_TRUE(std::any_of(grown_said.begin(), grown_said.end(), [](const std::string& m) {
+    return m.find("the box grows 25 % there") != std::string::npos;
+  }));
+  ASSERT_EQ(grown.levels.size(), 1u);  // the discarded fits are not reported as levels
+  std::printf("lego 50x50 in a 1.5^3 box, 32^3 x 8: held-out %.2f dB kept, %.2f dB grown %zu times to %.2f x %.2f x %.2f\n",
+              kept.test_psnr, grown.test_psnr, grown_json["box_growths"].size(), grown_scene.box.size[0],
+              grown_scene.box.size[1], grown_scene.box.size[2]);
+  EXPECT_GT(grown.test_psnr, kept.test_psnr + 0.5);
 }
 
 }  // namespace
