@@ -116,6 +116,10 @@ void AddReconstructCommand(CLI::App& app) {
                   {{"auto", ExposureChoice::kAuto}, {"on", ExposureChoice::kOn}, {"off", ExposureChoice::kOff}},
                   "Solve a gain and an offset per colour channel for every training photo (auto: for COLMAP "
                   "photos, not for NeRF json scenes); held-out views take their nearest training photo's");
+  cmd->add_option("--sh-degree", o.sh_degree,
+                  "View-dependent colour: spherical harmonics of degree 1 (3 more values per channel and cell) or 2 "
+                  "(8 more) beyond each cell's colour; 0: none")
+      ->capture_default_str();
   cmd->add_option("--exposure-prior", o.solver.exposure_prior,
                   "Weight of the prior that keeps the photos' exposures near the identity, relative to the photos")
       ->capture_default_str();

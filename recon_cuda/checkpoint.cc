@@ -20,7 +20,7 @@ constexpr char kMagic[8] = {'P', 'E', 'R', 'F', 'V', 'O', 'L', '\0'};
 constexpr uint32_t kHeaderBytesV1 = 8 + 4 + 4 + 6 * 4 + (3 + 9 + 3 + 3 + kMaxShells) * 8 + 8 + 8;
 static_assert(kHeaderBytesV1 == 264);
 constexpr uint32_t kHeaderBytesV2 = kHeaderBytesV1 + 8;  // + the brick count
-constexpr uint32_t kHeaderBytes = kHeaderBytesV2 + 8;    // + the exposure count (version 3)
+constexpr uint32_t kHeaderBytes = kHeaderBytesV2 + 8;    // + the exposure count and SH degree (version 3)
 constexpr int64_t kMaxExposures = 1 << 20;
 
 constexpr uint64_t kFnvBasis = 0xcbf29ce484222325ull;
@@ -148,7 +148,8 @@ void WriteCheckpoint(std::ostream& out, const Checkpoint& c) {
   Put(&h, static_cast<uint64_t>(c.params.size()));
   Put(&h, Fnv1a(c.params.data(), c.params.size() * sizeof(float), Fnv1a(bricks.data(), bricks.size() * sizeof(uint32_t))));
   Put(&h, static_cast<int64_t>(c.shape.bricks ? static_cast<int64_t>(bricks.size()) : -1));
-  Put(&h, static_cast<int64_t>(c.shape.exposures));
+  Put(&h, static_cast<int32_t>(c.shape.exposures));
+  Put(&h, static_cast<int32_t>(c.shape.sh_degree));
   PERF_CHECK(h.size() == kHeaderBytes);
   out.write(h.data(), static_cast<std::streamsize>(h.size()));
   out.write(reinterpret_cast<const char*>(bricks.data()), static_cast<std::streamsize>(bricks.size() * sizeof(uint32_t)));
@@ -217,14 +218,20 @@ Checkpoint ReadCheckpoint(std::istream& in, const std::string& name) {
   } else if (num_bricks != -1) {
     r.Bad("bricks", StrCat(num_bricks), "must be -1 (dense) or a brick count");
   }
-  const int64_t exposures = version < 3 ? 0 : r.Get<int64_t>("exposures");
+  const int32_t exposures = version < 3 ? 0 : r.Get<int32_t>("exposures");
   if (exposures < 0 || exposures > kMaxExposures) {
     r.Bad("exposures", StrCat(exposures), StrCat("must be 0 to ", kMaxExposures, " photos"));
   }
-  c.shape.exposures = static_cast<int>(exposures);
+  c.shape.exposures = exposures;
+  const int32_t sh_degree = version < 3 ? 0 : r.Get<int32_t>("sh_degree");
+  if (sh_degree < 0 || sh_degree > 2) r.Bad("sh_degree", StrCat(sh_degree), "must be 0, 1 or 2");
+  c.shape.sh_degree = sh_degree;
   // The parameter count the shape implies, before the brick list is read (it needs only B).
   const int64_t grid_params = num_bricks >= 0 ? SparseGridParams(num_bricks) : GridParamCount(c.shape.n);
-  const int64_t expected = grid_params + (c.shape.ParamCount() - c.shape.GridParamCount());
+  const int64_t cells = grid_params / 4;
+  const int64_t expected = grid_params + (c.shape.ShStart() - c.shape.GridParamCount()) +
+                           (sh_degree > 0 ? ShStride(sh_degree) * cells : 0) +
+                           int64_t{kExposureValues} * exposures;
   if (count != static_cast<uint64_t>(expected)) {
     r.Bad("parameter count", std::to_string(count), StrCat("expected ", expected, " for the shape"));
   }

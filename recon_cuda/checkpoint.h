@@ -13,7 +13,8 @@
 //   u64      parameter count (= VolumeShape::ParamCount)
 //   u64      FNV-1a 64 of the brick list's bytes then the parameter bytes
 //   i64      B: -1 for a dense grid, else the number of active bricks (not in version 1)
-//   i64      photos whose exposures follow the shells (VolumeShape::exposures; from version 3)
+//   i32      photos whose exposures end the parameters (VolumeShape::exposures; from version 3)
+//   i32      degree of the grid's spherical harmonics after the shells (0 to 2; from version 3)
 //   u32[B]   the active bricks' indices (ray_types.h BrickOf), ascending: their slot order
 //   f32[count] parameters, layout of ray_types.h
 // The reader checks every field and names the file and field on any mismatch, and checks the

@@ -190,6 +190,7 @@ class CpuBackend final : public Backend {
           h = s.row.h.data();
         }
         const RayExposure<float> e = ExposureAt(vol, i, h);
+        const RaySh<float> sh = ShOfRay(vol, ray);
         float u[4] = {0, 0, 0, 0};
         TexelSample<float> ts[kMaxShells];
         for (int k = 0; k < k_shells; ++k) {
@@ -200,7 +201,7 @@ class CpuBackend final : public Backend {
         GridSample<float>* w = s.weights.data();
         for (int j = 0; j < count; ++j) {
           w[j] = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(samples[j].t));
-          AddJpSample(pp, w[j], samples[j].sp, u);
+          AddJpSample(pp, w[j], samples[j].sp, u, sh);
         }
         FinishJp(e, pp, u);
         float uv[4];
@@ -210,7 +211,7 @@ class CpuBackend final : public Backend {
           ScatterJtuShell(ts[k], shells[k].sp, uv, sink);
         }
         // Direct scatter: measured faster here than merging cells (CellMerger) first.
-        for (int j = 0; j < count; ++j) ScatterJtuSample(w[j], samples[j].sp, uv, sink);
+        for (int j = 0; j < count; ++j) ScatterJtuSample(w[j], samples[j].sp, uv, sink, sh);
         ScatterJtuExposure(e, u, sink);
         bs.rays += 1;
         bs.samples += count;
@@ -303,6 +304,7 @@ class CpuBackend final : public Backend {
                                 out ? &out->shells[(i - begin) * level_.shape.num_shells] : nullptr};
       VolumeU(e, fwd.residual, v.r);
       GainSquared(e, v.g2);
+      v.sh = ShOfRay(vol, ray);
       Backward(vol, ray, jit, fwd, v, s.record.data());
       v.Finish();
       ScatterJtuExposure(e, fwd.residual, v.g);

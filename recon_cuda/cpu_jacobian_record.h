@@ -64,6 +64,7 @@ struct LinearizeVisitor {
   AddSink g, d;
   BlockJ* out;         // nullptr: nothing recorded
   ShellJ* out_shells;  // [num_shells] of this ray
+  RaySh<float> sh{};   // the ray's spherical harmonics (degree 0: none)
   CellMerger<float, K> merger{};
 
   void Shell(int k, const CubeCoord<float>& c, const TexelSample<float>& ts, const ShellPartials<float>& sp) {
@@ -78,7 +79,7 @@ struct LinearizeVisitor {
       RowValues(sp, v + 4);
       merger.Sample(gs, v, *this);
     } else {
-      ScatterJtuSample(gs, sp, r, g);
+      ScatterJtuSample(gs, sp, r, g, sh);
     }
     if (out) out->samples.push_back({st.t, sp});
   }
@@ -86,6 +87,10 @@ struct LinearizeVisitor {
   void operator()(int64_t cell, const float* acc) {
     g.Add4(GridParam(cell, 0), acc[0], acc[1], acc[2], acc[3]);
     AddDiagFromRow(cell, acc + 4, g2, d);
+    if (sh.degree > 0) {
+      ScatterSh(sh, cell, acc, g);
+      AddDiagSh(sh, cell, acc[4], g2, d);
+    }
   }
   void Finish() {
     if constexpr (kDiag) merger.Finish(*this);

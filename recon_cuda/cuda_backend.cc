@@ -197,21 +197,20 @@ class CudaBackend final : public Backend {
     return cuda::SmoothnessCost(ptr(v), DeviceSmoothnessLayout(), w, n(), scratch_->Reduce());
   }
   std::array<double, kParamKinds> SumByKind(VecId v) const override {
-    return cuda::SumByKind(ptr(v), n(), level_.shape.GridParamCount(), level_.shape.ExposureStart(), scratch_->Reduce());
+    return cuda::SumByKind(ptr(v), n(), level_.shape.Layout(), scratch_->Reduce());
   }
   void Project(VecId x) override {
-    cuda::Project(ptr(x), n(), level_.shape.GridParamCount(), level_.shape.ExposureStart());
+    cuda::Project(ptr(x), n(), level_.shape.Layout());
   }
   void HoldParameters(VecId x, VecId g, VecId free, bool bounds) override {
-    cuda::HoldParameters(ptr(x), ptr(g), ptr(free), n(), level_.shape.GridParamCount(), level_.shape.ExposureStart(),
+    cuda::HoldParameters(ptr(x), ptr(g), ptr(free), n(), level_.shape.Layout(),
                          level_.fixed_shells, bounds);
   }
   void Multiply(VecId y, VecId m) override { cuda::Multiply(ptr(y), ptr(m), n()); }
   // Nothing is recorded: JtJpKernel skips the samples on the fly (jacobian.h SkippableSample).
   void RestrictJacobian(VecId free) override { restrict_to_ = ptr(free); }
   void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) override {
-    cuda::AdamStep(ptr(x), ptr(g), ptr(m), ptr(v), AdamCoefficientsAt(s, t), n(), level_.shape.GridParamCount(),
-                   level_.shape.ExposureStart());
+    cuda::AdamStep(ptr(x), ptr(g), ptr(m), ptr(v), AdamCoefficientsAt(s, t), n(), level_.shape.Layout());
   }
 
   PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset) override {

@@ -83,14 +83,14 @@ void Axpy(float* y, float a, const float* x, int64_t n);               // y += a
 void Xpby(float* y, const float* x, float b, int64_t n);               // y = x + b y
 void DivideClamped(float* z, const float* r, const float* d, float floor, int64_t n);
 void AxpyDiag(float* y, float a, const float* d, const float* x, int64_t n);  // y += a d x
-// grid_params, exposure_start: where the shells and the exposures start (param_ops.h KindOfParam).
-void Project(float* x, int64_t n, int64_t grid_params, int64_t exposure_start);
+// layout: where each part of the parameters starts (param_ops.h KindOfParam).
+void Project(float* x, int64_t n, const ParamLayout& layout);
 // backend.h HoldParameters and Multiply.
-void HoldParameters(const float* x, float* g, float* free, int64_t n, int64_t grid_params, int64_t exposure_start,
+void HoldParameters(const float* x, float* g, float* free, int64_t n, const ParamLayout& layout,
                     bool fixed_shells, bool bounds);
 void Multiply(float* y, const float* m, int64_t n);
 void AdamStep(float* x, const float* g, float* m, float* v, const AdamCoefficients& c, int64_t n,
-              int64_t grid_params, int64_t exposure_start);
+              const ParamLayout& layout);
 
 // Reductions in double with CUB (deterministic: a fixed tree for a given n and device).
 struct ReduceScratch {
@@ -106,7 +106,7 @@ void AddSmoothness(const float* v, const SmoothnessLayout& layout, const Smoothn
                    int64_t n);
 double SmoothnessCost(const float* v, const SmoothnessLayout& layout, const SmoothnessWeights& w, int64_t n,
                       const ReduceScratch& s);
-std::array<double, kParamKinds> SumByKind(const float* v, int64_t n, int64_t grid_params, int64_t exposure_start,
+std::array<double, kParamKinds> SumByKind(const float* v, int64_t n, const ParamLayout& layout,
                                           const ReduceScratch& s);
 
 // Whether the kernels of this build can run on the current device (a binary built for sm_90 +

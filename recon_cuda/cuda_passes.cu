@@ -63,6 +63,7 @@ struct ScatterVisitor {
   CellMerger<float, K> merger;
   const float* free = nullptr;
   float g2[3] = {1, 1, 1};  // the squared gains of the ray's photo (jacobian.h GainSquared)
+  RaySh<float> sh{};        // the ray's spherical harmonics (degree 0: none)
 
   __device__ void Shell(int, const CubeCoord<float>&, const TexelSample<float>& ts, const ShellPartials<float>& sp) {
     ScatterJtuShell(ts, sp, u, g);
@@ -79,6 +80,10 @@ struct ScatterVisitor {
   __device__ void operator()(int64_t cell, const float* acc) {
     g.Add4(GridParam(cell, 0), acc[0], acc[1], acc[2], acc[3]);
     if constexpr (kDiag) AddDiagFromRow(cell, acc + 4, g2, d);
+    if (sh.degree > 0) {
+      ScatterSh(sh, cell, acc, g);
+      if constexpr (kDiag) AddDiagSh(sh, cell, acc[4], g2, d);
+    }
   }
   __device__ void Finish() { merger.Finish(*this); }
 };
@@ -88,13 +93,14 @@ struct JpVisitor {
   const float* p;
   const float* free;
   float u[4];
+  RaySh<float> sh{};
   int used = 0;
   __device__ void Shell(int, const CubeCoord<float>&, const TexelSample<float>& ts, const ShellPartials<float>& sp) {
     AddJpShell(p, ts, sp, u);
   }
   __device__ void Sample(int, const MarchStep<float>&, const GridSample<float>& gs, const SamplePartials<float>& sp) {
     if (free && SkippableSample(gs, sp, free)) return;
-    AddJpSample(p, gs, sp, u);
+    AddJpSample(p, gs, sp, u, sh);
     ++used;
   }
 };
@@ -176,6 +182,7 @@ __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, flo
     ScatterVisitor<kDiag> v{{0, 0, 0, 0}, {g}, {diag}, {}};
     VolumeU(e, fwd.residual, v.u);
     GainSquared(e, v.g2);
+    v.sh = ShOfRay(in.vol, r.ray);
     Backward(in.vol, r.ray, r.jit, fwd, v);
     v.Finish();
     eg.base = ed.base = e.param;
@@ -205,10 +212,12 @@ __global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const fl
     const RayExposure<float> e = ExposureOfRay(in.vol.ExposureStart(), slot,
                                                TransformOf(in.vol.params, in.vol.ExposureStart(), slot), fwd.h);
     JpVisitor jp{p, free, {0, 0, 0, 0}};
+    jp.sh = ShOfRay(in.vol, r.ray);
     Backward(in.vol, r.ray, r.jit, fwd, jp);
     FinishJp(e, p, jp.u);
     ScatterVisitor<false> v{{0, 0, 0, 0}, {out}, {nullptr}, {}, free};
     VolumeU(e, jp.u, v.u);
+    v.sh = jp.sh;
     Backward(in.vol, r.ray, r.jit, fwd, v);
     v.Finish();
     eo.base = e.param;

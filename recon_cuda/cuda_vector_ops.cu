@@ -51,10 +51,10 @@ struct SmoothnessTerm {
 };
 struct KindTerm {
   const float* v;
-  int64_t grid_params, exposure_start;
+  ParamLayout layout;
   int kind;
   __device__ double operator()(int64_t i) const {
-    return static_cast<int>(KindOfParam(grid_params, exposure_start, i)) == kind ? static_cast<double>(v[i]) : 0.0;
+    return static_cast<int>(KindOfParam(layout, i)) == kind ? static_cast<double>(v[i]) : 0.0;
   }
 };
 struct AddD {
@@ -99,15 +99,15 @@ void DivideClamped(float* z, const float* r, const float* d, float floor, int64_
 void AxpyDiag(float* y, float a, const float* d, const float* x, int64_t n) {
   ForEach(n, [=] __device__(int64_t i) { y[i] += a * d[i] * x[i]; }, "AxpyDiag");
 }
-void Project(float* x, int64_t n, int64_t grid_params, int64_t exposure_start) {
-  ForEach(n, [=] __device__(int64_t i) { x[i] = ProjectToValid(KindOfParam(grid_params, exposure_start, i), x[i]); }, "Project");
+void Project(float* x, int64_t n, const ParamLayout& layout) {
+  ForEach(n, [=] __device__(int64_t i) { x[i] = ProjectToValid(KindOfParam(layout, i), x[i]); }, "Project");
 }
-void HoldParameters(const float* x, float* g, float* free, int64_t n, int64_t grid_params, int64_t exposure_start,
+void HoldParameters(const float* x, float* g, float* free, int64_t n, const ParamLayout& layout,
                     bool fixed_shells, bool bounds) {
   ForEach(
       n,
       [=] __device__(int64_t i) {
-        const bool held = HeldParameter(KindOfParam(grid_params, exposure_start, i), x[i], g[i], fixed_shells, bounds);
+        const bool held = HeldParameter(KindOfParam(layout, i), x[i], g[i], fixed_shells, bounds);
         free[i] = held ? 0.f : 1.f;
         if (held) g[i] = 0.f;
       },
@@ -117,10 +117,10 @@ void Multiply(float* y, const float* m, int64_t n) {
   ForEach(n, [=] __device__(int64_t i) { y[i] *= m[i]; }, "Multiply");
 }
 void AdamStep(float* x, const float* g, float* m, float* v, const AdamCoefficients& c, int64_t n,
-              int64_t grid_params, int64_t exposure_start) {
-  ForEach(n, [=] __device__(int64_t i) { AdamUpdate(c, KindOfParam(grid_params, exposure_start, i), g[i], &x[i], &m[i], &v[i]); },
+              const ParamLayout& layout) {
+  ForEach(n, [=] __device__(int64_t i) { AdamUpdate(c, KindOfParam(layout, i), g[i], &x[i], &m[i], &v[i]); },
           "AdamStep");
-  Project(x, n, grid_params, exposure_start);
+  Project(x, n, layout);
 }
 
 size_t ReduceTempBytes(int64_t n) {
@@ -163,11 +163,11 @@ double SmoothnessCost(const float* v, const SmoothnessLayout& layout, const Smoo
   return Reduce(SmoothnessTerm{layout, w, v}, AddD{}, n, s);
 }
 
-std::array<double, kParamKinds> SumByKind(const float* v, int64_t n, int64_t grid_params, int64_t exposure_start,
+std::array<double, kParamKinds> SumByKind(const float* v, int64_t n, const ParamLayout& layout,
                                           const ReduceScratch& s) {
   std::array<double, kParamKinds> sums{};
   for (int kind = 0; kind < kParamKinds; ++kind) {
-    sums[kind] = Reduce(KindTerm{v, grid_params, exposure_start, kind}, AddD{}, n, s);
+    sums[kind] = Reduce(KindTerm{v, layout, kind}, AddD{}, n, s);
   }
   return sums;
 }

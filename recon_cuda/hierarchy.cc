@@ -5,12 +5,13 @@
 namespace perf::recon {
 
 VolumeShape LevelShape(const HierarchyOptions& o, int num_shells, int level) {
-  return VolumeShape{o.start_resolution << level, o.start_resolution << level, num_shells, nullptr, o.exposures};
+  return VolumeShape{o.start_resolution << level, o.start_resolution << level, num_shells, nullptr, o.exposures,
+                     o.sh_degree};
 }
 
 VolumeShape NextLevelShape(const HierarchyOptions& o, const VolumeGeometry& geometry, const VolumeShape& shape,
                            std::span<const float> x, std::span<const ViewFrustum> views) {
-  const VolumeShape next = shape.Doubled().WithExposures(o.exposures);
+  const VolumeShape next = shape.Doubled().WithExposures(o.exposures).WithShDegree(o.sh_degree);
   if (!o.sparse || next.n % kBrickSide != 0) return next;
   return next.WithBricks(OccupiedBricks(shape, geometry, x, next.n, o.occupancy, views));
 }

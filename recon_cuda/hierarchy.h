@@ -27,6 +27,8 @@ struct HierarchyOptions {
   ResidualSettings residuals;
   // Training photos whose exposures every level solves (VolumeShape::exposures); 0: none.
   int exposures = 0;
+  // Spherical harmonics of the grid's colour at every level (VolumeShape::sh_degree); 0: none.
+  int sh_degree = 0;
   bool fixed_background = false;              // the shells are constants in `background`
   std::array<float, 3> background{1, 1, 1};  // (scene.json's background)
   bool pyramid = true;  // coarse levels fit downscaled photos (PyramidFactor)

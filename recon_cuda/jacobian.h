@@ -12,13 +12,45 @@
 namespace perf::recon {
 
 // u[4] += J_sample p: p is a parameter-sized vector; the sample's cells are interpolated exactly
-// as the volume is (p enters J p linearly through the same weights).
+// as the volume is (p enters J p linearly through the same weights). sh: the ray's spherical
+// harmonics (ray_math.h RaySh; degree 0: none), whose coefficients enter as the colour does, times y_k.
 template <class T>
-PERF_HD_INLINE void AddJpSample(const T* p, const GridSample<T>& gs, const SamplePartials<T>& sp, T u[4]) {
+PERF_HD_INLINE void AddJpSample(const T* p, const GridSample<T>& gs, const SamplePartials<T>& sp, T u[4],
+                                const RaySh<T>& sh) {
   T pb[4];
   GatherGrid(p, gs, pb);
+  if (sh.degree > 0) AddShColour(p, sh, gs, pb);
   for (int c = 0; c < 3; ++c) u[c] += sp.dc * pb[c] + sp.ds[c] * pb[3];
   u[3] += sp.dl * pb[3];
+}
+
+// The spherical harmonics' share of a cell's J^T u: colour[c] is what the cell's colour channel
+// c receives (JtuValues times the weight, or their merged sum along the ray); band k of channel c
+// receives y_k colour[c]. Written in groups of 4 (the padded stride, ray_types.h ShStride).
+template <class T, class Sink>
+PERF_HD_INLINE void ScatterSh(const RaySh<T>& sh, int64_t cell, const T* colour, Sink& sink) {
+  const int stride = ShStride(sh.degree);
+  T v[kMaxShStride];
+  for (int i = 0; i < stride; ++i) v[i] = 0;
+  for (int k = 0; k < sh.bands; ++k)
+    for (int c = 0; c < 3; ++c) v[3 * k + c] = sh.y[k] * colour[c];
+  const int64_t base = sh.start + static_cast<int64_t>(stride) * cell;
+  for (int i = 0; i < stride; i += 4) sink.Add4(base + i, v[i], v[i + 1], v[i + 2], v[i + 3]);
+}
+
+// The spherical harmonics' share of a cell's diag(J^T J) from its merged colour row entry dc (the
+// ray's, RowValues): band k of channel c gets g_c^2 (y_k dc)^2.
+template <class T, class Sink>
+PERF_HD_INLINE void AddDiagSh(const RaySh<T>& sh, int64_t cell, T dc, const T* g2, Sink& sink) {
+  T sq[3];
+  for (int c = 0; c < 3; ++c) sq[c] = g2[c] * dc * dc;
+  const int stride = ShStride(sh.degree);
+  T v[kMaxShStride];
+  for (int i = 0; i < stride; ++i) v[i] = 0;
+  for (int k = 0; k < sh.bands; ++k)
+    for (int c = 0; c < 3; ++c) v[3 * k + c] = sh.y[k] * sh.y[k] * sq[c];
+  const int64_t base = sh.start + static_cast<int64_t>(stride) * cell;
+  for (int i = 0; i < stride; i += 4) sink.Add4(base + i, v[i], v[i + 1], v[i + 2], v[i + 3]);
 }
 
 template <class T>
@@ -55,13 +87,18 @@ PERF_HD_INLINE void JtuValues(const SamplePartials<T>& sp, const T u[4], T* v) {
 // J_sample^T u into the sink (JtuValues times each cell's weight). With u = the ray's residuals
 // this is the ray's share of the gradient J^T r.
 template <class T, class Sink>
-PERF_HD_INLINE void ScatterJtuSample(const GridSample<T>& gs, const SamplePartials<T>& sp, const T u[4], Sink& sink) {
+PERF_HD_INLINE void ScatterJtuSample(const GridSample<T>& gs, const SamplePartials<T>& sp, const T u[4], Sink& sink,
+                                     const RaySh<T>& sh) {
   T v[4];
   JtuValues(sp, u, v);
   for (int q = 0; q < 8; ++q) {
     if (gs.cell[q] < 0) continue;  // an inactive brick's cell: no parameter
     const T w = gs.w[q];
     sink.Add4(GridParam(gs.cell[q], 0), w * v[0], w * v[1], w * v[2], w * v[3]);
+    if (sh.degree > 0) {
+      const T colour[3] = {w * v[0], w * v[1], w * v[2]};
+      ScatterSh(sh, gs.cell[q], colour, sink);
+    }
   }
 }
 

@@ -10,25 +10,43 @@
 namespace perf::recon {
 
 // What parameter i is (for per-kind learning rates, bounds and the smoothness weights).
-enum class ParamKind { kGridColour, kGridDensity, kShellColour, kShellOpacity, kExposureGain, kExposureOffset };
-inline constexpr int kParamKinds = 6;
+enum class ParamKind {
+  kGridColour,
+  kGridDensity,
+  kShellColour,
+  kShellOpacity,
+  kExposureGain,
+  kExposureOffset,
+  kGridSh
+};
+inline constexpr int kParamKinds = 7;
 
-// grid_params: where the shells' texels start (GridParamCount(n), or the sparse grid's);
-// exposure_start: where the exposures start (layout in ray_types.h). An exposure group's
-// zeros count as gain / offset entries (they never move).
-PERF_HD_INLINE ParamKind KindOfParam(int64_t grid_params, int64_t exposure_start, int64_t i) {
-  if (i >= exposure_start) {
-    return (i - exposure_start) % kExposureValues < 4 ? ParamKind::kExposureGain : ParamKind::kExposureOffset;
+// Where each part of the parameter vector starts (layout in ray_types.h; VolumeShape::Layout).
+struct ParamLayout {
+  int64_t grid_params = 0;     // the shells' texels (GridParamCount(n), or the sparse grid's)
+  int64_t sh_start = 0;        // the grid's spherical harmonics (== exposure_start without them)
+  int64_t exposure_start = 0;  // the photos' exposures (== the parameter count without them)
+};
+
+// What parameter i is. Padding zeros count with their group (they never move).
+PERF_HD_INLINE ParamKind KindOfParam(const ParamLayout& l, int64_t i) {
+  if (i >= l.exposure_start) {
+    return (i - l.exposure_start) % kExposureValues < 4 ? ParamKind::kExposureGain : ParamKind::kExposureOffset;
   }
+  if (i >= l.sh_start) return ParamKind::kGridSh;
+  const int64_t grid_params = l.grid_params;
   const bool fourth = i % 4 == 3;
   return i < grid_params ? (fourth ? ParamKind::kGridDensity : ParamKind::kGridColour)
                          : (fourth ? ParamKind::kShellOpacity : ParamKind::kShellColour);
 }
 
 // The valid range of a kind: sigma >= 0, colours and opacities in [0, 1], a photo's gain 1 + gamma
-// in [0.5, 2] and its offset in [-0.5, 0.5] (wider would mean a badly exposed or wrong photo).
+// in [0.5, 2] and its offset in [-0.5, 0.5] (wider would mean a badly exposed or wrong photo), a
+// spherical-harmonic coefficient in [-1, 1] (a band then moves the colour by up to 0.49 or 1.09).
 PERF_HD_INLINE float LowerBound(ParamKind kind) {
-  return kind == ParamKind::kExposureGain ? -0.5f : kind == ParamKind::kExposureOffset ? -0.5f : 0.f;
+  return kind == ParamKind::kExposureGain || kind == ParamKind::kExposureOffset ? -0.5f
+         : kind == ParamKind::kGridSh                                            ? -1.f
+                                                                                 : 0.f;
 }
 PERF_HD_INLINE float UpperBound(ParamKind kind) {
   return kind == ParamKind::kGridDensity ? 3.0e38f

@@ -49,14 +49,17 @@ struct VolumeView {
   // the grid is dense.
   const int32_t* brick_slot = nullptr;
   int64_t active_bricks = 0;
+  int sh_degree = 0;  // spherical harmonics of the grid's colour (ray_types.h ShParam); 0: none
 
   // Where the shells start in params.
   PERF_HD_INLINE int64_t GridParams() const {
     return brick_slot ? SparseGridParams(active_bricks) : GridParamCount(n);
   }
+  // Where the grid's spherical harmonics start in params (ray_types.h ShParam).
+  PERF_HD_INLINE int64_t ShStart() const { return GridParams() + 4 * static_cast<int64_t>(num_shells) * 6 * m * m; }
   // Where the photos' exposures start in params (ray_types.h ExposureParam).
   PERF_HD_INLINE int64_t ExposureStart() const {
-    return GridParams() + 4 * static_cast<int64_t>(num_shells) * 6 * m * m;
+    return ShStart() + (sh_degree > 0 ? ShStride(sh_degree) * (GridParams() / 4) : 0);
   }
 };
 
@@ -230,6 +233,40 @@ PERF_HD_INLINE int TakeSample(const VolumeView<T>& vol, const BoxRay<T>& ray, co
   return k;
 }
 
+// The spherical harmonics of one ray (ray_types.h ShParam): the basis at its direction (box
+// frame) and where the coefficients are; degree 0: none.
+template <class T>
+struct RaySh {
+  int degree = 0, bands = 0;
+  int64_t start = 0;
+  T y[kMaxShBands];
+};
+
+template <class T>
+PERF_HD_INLINE RaySh<T> ShOfRay(const VolumeView<T>& vol, const BoxRay<T>& ray) {
+  RaySh<T> sh;
+  sh.degree = vol.sh_degree;
+  if (sh.degree > 0) {
+    sh.start = vol.ShStart();
+    sh.bands = ShBasis(sh.degree, ray.dir, sh.y);
+  }
+  return sh;
+}
+
+// v[0..2] += sum_k y_k times band k of `params` (a parameter-sized vector) interpolated at gs.
+template <class T>
+PERF_HD_INLINE void AddShColour(const T* params, const RaySh<T>& sh, const GridSample<T>& gs, T* v) {
+  const int stride = ShStride(sh.degree);
+  for (int q = 0; q < 8; ++q) {
+    if (gs.cell[q] < 0) continue;
+    const T* p = params + sh.start + stride * gs.cell[q];
+    for (int k = 0; k < sh.bands; ++k) {
+      const T wy = gs.w[q] * sh.y[k];
+      for (int c = 0; c < 3; ++c) v[c] += wy * p[3 * k + c];
+    }
+  }
+}
+
 // Shell lookups along one ray, innermost first; a missed shell is transparent (a = 0).
 template <class T>
 struct ShellStack {
@@ -355,6 +392,7 @@ PERF_HD RayOutput<T> Forward(const VolumeView<T>& vol, const BoxRay<T>& ray, con
                              T alpha = T(-1), const ColourTransform<T>& xf = ColourTransform<T>{}) {
   RayOutput<T> out;
   const March<T> march = MakeMarch(vol, ray);
+  const RaySh<T> sh = ShOfRay(vol, ray);
   T depth = 0, trans = 1;
   for (int c = 0; c < 3; ++c) out.h[c] = 0;
   int taken = 0;
@@ -365,6 +403,7 @@ PERF_HD RayOutput<T> Forward(const VolumeView<T>& vol, const BoxRay<T>& ray, con
     T v[4];
     const GridSample<T> gs = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(st.t));
     GatherGrid(vol.params, gs, v);
+    if (sh.degree > 0) AddShColour(vol.params, sh, gs, v);
     const T od = v[3] * st.delta;
     const T keep = Exp(-od);
     const T weight = trans * (1 - keep);
@@ -394,7 +433,8 @@ PERF_HD RayOutput<T> Forward(const VolumeView<T>& vol, const BoxRay<T>& ray, con
 
 // The partials of one march sample before they are spread over its 8 cells with the trilinear
 // weights w: d r_c / d c_c = w dc (the same for the three channels; a sample's colour enters only
-// its own channel's residual), d r_c / d sigma = w ds[c], d L / d sigma = w dl.
+// its own channel's residual), d r_c / d sigma = w ds[c], d L / d sigma = w dl; with spherical
+// harmonics, d r_c / d (band k of channel c) = w dc y_k (RaySh: y_k is the ray's).
 template <class T>
 struct SamplePartials {
   T dc;
@@ -441,6 +481,7 @@ template <class T, class Visitor>
 PERF_HD void Backward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitter& jit,
                       const RayOutput<T>& fwd, Visitor& visit, const SampleRecord<T>* record = nullptr) {
   const March<T> march = MakeMarch(vol, ray);
+  const RaySh<T> sh = ShOfRay(vol, ray);
   const T tb = fwd.t_box;
   ShellStack<T> shells;
   EvalShells(vol, ray, march, &shells);
@@ -476,6 +517,7 @@ PERF_HD void Backward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitt
     } else {
       gs = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(st.t));
       GatherGrid(vol.params, gs, v);
+      if (sh.degree > 0) AddShColour(vol.params, sh, gs, v);
       const T od = v[3] * st.delta;
       v_depth -= od;
       ti = Exp(-v_depth);

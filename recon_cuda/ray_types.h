@@ -107,7 +107,8 @@ PERF_HD_INLINE T Uniform01(uint32_t seed, uint32_t ray, uint32_t sample) {
 //   grid cell (i, j, k), x fastest, cell = (k N + j) N + i, holds (r, g, b, sigma) at 4 cell + ch;
 //   after the grid, shell s (0 innermost), face f (see shells.h), texel (u, v) holds (r, g, b, a)
 //   at 4 N^3 + 4 ((s 6 + f) M^2 + v M + u) + ch;
-//   after the shells, the photos' exposures when solved (ExposureParam).
+//   after the shells, the grid's spherical harmonics beyond the constant when solved (ShParam),
+//   then the photos' exposures when solved (ExposureParam).
 // 64-bit indices: 4 N^3 overflows 32 bits from N = 1024.
 PERF_HD_INLINE int64_t GridCell(int n, int i, int j, int k) {
   return (static_cast<int64_t>(k) * n + j) * n + i;
@@ -124,7 +125,39 @@ PERF_HD_INLINE int64_t ShellParam(int n, int m, int shell, int face, int u, int 
 PERF_HD_INLINE int64_t ParamCount(int n, int m, int num_shells) {
   return GridParamCount(n) + 4 * static_cast<int64_t>(num_shells) * 6 * m * m;
 }
-// Per-photo exposure (issue 16), after the shells: training photo `slot` (its index among the
+// View-dependent colour (issue 16, --sh-degree): real spherical harmonics of degree 1 or 2 beyond
+// each stored cell's colour (its constant term), after the shells: stored cell c holds ShStride
+// values at sh_start + ShStride c: band k (from 0, the first beyond the constant) channel ch at
+// 3 k + ch, then zeros up to a multiple of 4 (float4 atomics; they never move). A sample's colour
+// is the trilinear colour plus sum_k Y_k(d) times the trilinear band k, d the ray's direction in
+// the box frame.
+PERF_HD_INLINE int ShBands(int degree) { return (degree + 1) * (degree + 1) - 1; }
+PERF_HD_INLINE int ShStride(int degree) { return (3 * ShBands(degree) + 3) / 4 * 4; }
+inline constexpr int kMaxShBands = 8;    // degree 2
+inline constexpr int kMaxShStride = 24;  // ShStride(2)
+PERF_HD_INLINE int64_t ShParam(int64_t sh_start, int degree, int64_t cell, int band, int ch) {
+  return sh_start + ShStride(degree) * cell + 3 * band + ch;
+}
+// Y_k(d) of the bands beyond the constant, d a unit vector (the real basis of graphics, e.g.
+// Sloan's "Stupid spherical harmonics tricks", without the constant's 0.282, which the colour
+// absorbs). Returns ShBands(degree).
+template <class T>
+PERF_HD_INLINE int ShBasis(int degree, Vec3<T> d, T* y) {
+  if (degree < 1) return 0;
+  const T c1 = T(0.4886025119029199);
+  y[0] = -c1 * d.y;
+  y[1] = c1 * d.z;
+  y[2] = -c1 * d.x;
+  if (degree < 2) return 3;
+  y[3] = T(1.0925484305920792) * d.x * d.y;
+  y[4] = T(-1.0925484305920792) * d.y * d.z;
+  y[5] = T(0.31539156525252005) * (2 * d.z * d.z - d.x * d.x - d.y * d.y);
+  y[6] = T(-1.0925484305920792) * d.x * d.z;
+  y[7] = T(0.5462742152960396) * (d.x * d.x - d.y * d.y);
+  return 8;
+}
+
+// Per-photo exposure (issue 16), after the grid's spherical harmonics (or the shells): training photo `slot` (its index among the
 // scene's training photos, scene.json order) holds kExposureValues values at
 // exposure_start + 8 slot: the gain offsets gamma (r, g, b), 0, the colour offsets b (r, g, b), 0.
 // Its pixels are modelled as (1 + gamma_c) H_c + b_c (ray_math.h ColourTransform). The two

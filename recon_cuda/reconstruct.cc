@@ -90,6 +90,7 @@ void ReconstructOptions::Check() const {
     Fail("--smooth-shells", StrCat(smooth_shells), "must be finite and >= 0 (0: off)");
   }
   if (!std::isfinite(smooth_grid)) Fail("--smooth-grid", StrCat(smooth_grid), "must be finite (0: off)");
+  if (sh_degree < 0 || sh_degree > 2) Fail("--sh-degree", std::to_string(sh_degree), "must be 0, 1 or 2");
   if (max_resolution != 0 && max_resolution < start_resolution) {
     Fail("--max-resolution", std::to_string(max_resolution), StrCat("must be at least --start-resolution (", start_resolution, ")"),
          "or 0 for the backend's default");
@@ -263,6 +264,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   ho.solver.smooth_shells = o.smooth_shells;
   if (o.solver.type == SolverType::kAdam) ho.solver.smooth_grid = ho.solver.smooth_shells = 0;  // Gauss-Newton only
   ho.exposures = SolvesExposures(o.exposure, scene) ? static_cast<int>(train_views.size()) : 0;
+  ho.sh_degree = o.sh_degree;
   result.exposures = ho.exposures;
   const auto shape_of = [&](int level) { return LevelShape(ho, geometry.num_shells(), level); };
 
@@ -604,6 +606,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                      {"smooth_grid", ho.solver.smooth_grid},
                      {"smooth_shells", ho.solver.smooth_shells},
                      {"background", result.fixed_background ? "fixed" : "learned"},
+                     {"sh_degree", o.sh_degree},
                      {"exposures",
                       {{"photos", result.exposures},
                        {"prior", ho.solver.exposure_prior},

@@ -61,6 +61,9 @@ struct ReconstructOptions {
   BackgroundChoice background = BackgroundChoice::kAuto;
   // Per-photo exposure (device_choice.h ExposureChoice; solver.exposure_prior weighs its prior).
   ExposureChoice exposure = ExposureChoice::kAuto;
+  // View-dependent colour: spherical harmonics of this degree (0, 1 or 2) beyond each cell's
+  // colour (ray_types.h ShParam); 0: none (docs/tuning.md "View dependence").
+  int sh_degree = 0;
   ResidualSettings residuals;
   // Coarse levels fit downscaled photos: the largest power-of-two downscale that keeps a voxel
   // at least one pixel wide in the median view (fewer rays, same information at that level).

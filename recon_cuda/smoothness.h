@@ -27,7 +27,8 @@ struct SmoothnessWeights {
   }
   PERF_HD_INLINE float Of(ParamKind k) const {
     switch (k) {
-      case ParamKind::kGridColour: return grid_colour;
+      case ParamKind::kGridColour:
+      case ParamKind::kGridSh: return grid_colour;  // a view-dependent colour is smoothed as the colour
       case ParamKind::kGridDensity: return grid_density;
       case ParamKind::kShellColour: return shell_colour;
       case ParamKind::kShellOpacity: return shell_opacity;
@@ -41,6 +42,8 @@ struct SmoothnessWeights {
 struct SmoothnessLayout {
   int n = 0, m = 0, num_shells = 0;
   int64_t grid_params = 0;
+  int64_t sh_start = 0;             // where the grid's spherical harmonics start (VolumeShape::ShStart)
+  int sh_degree = 0;                // their degree (0: none)
   int64_t exposure_start = 0;       // where the exposures start (VolumeShape::ExposureStart)
   const int32_t* slot = nullptr;    // [(n/8)^3] brick table (BrickGrid::slot)
   const int64_t* bricks = nullptr;  // [active bricks] brick index of each slot (BrickGrid::bricks)
@@ -103,8 +106,19 @@ PERF_HD_INLINE void ShellNeighbours(const SmoothnessLayout& l, int64_t texel, in
   }
 }
 
-// The parameters next to parameter i (same kind and channel) into out; returns how many.
+// The parameters next to parameter i (same kind and channel) into out; returns how many. A
+// spherical-harmonic coefficient's are the same band and channel of the neighbouring cells (a
+// padding zero has none).
 PERF_HD_INLINE int ParamNeighbours(const SmoothnessLayout& l, int64_t i, int64_t out[6]) {
+  if (i >= l.sh_start && i < l.exposure_start) {
+    const int stride = ShStride(l.sh_degree);
+    const int64_t cell = (i - l.sh_start) / stride;
+    const int j = static_cast<int>((i - l.sh_start) % stride);
+    if (j >= 3 * ShBands(l.sh_degree)) return 0;
+    const int count = GridNeighbours(l, cell, out);
+    for (int k = 0; k < count; ++k) out[k] = l.sh_start + stride * out[k] + j;
+    return count;
+  }
   const int ch = static_cast<int>(i % 4);
   if (i < l.grid_params) {
     const int count = GridNeighbours(l, i / 4, out);
@@ -124,7 +138,7 @@ PERF_HD_INLINE double SmoothnessRow(const SmoothnessLayout& l, const SmoothnessW
                                     int64_t i, float* lap, float* degree) {
   *lap = 0;
   *degree = 0;
-  const float w = weights.Of(KindOfParam(l.grid_params, l.exposure_start, i));
+  const float w = weights.Of(KindOfParam(ParamLayout{l.grid_params, l.sh_start, l.exposure_start}, i));
   if (!(w > 0)) return 0;
   if (i >= l.exposure_start) {  // the prior: L = w I
     *lap = w * v[i];

@@ -45,6 +45,7 @@ VolumeView<float> MakeView(const VolumeShape& shape, const VolumeGeometry& geome
   v.num_shells = shape.num_shells;
   v.m = shape.m;
   v.shell_center = geometry.shell_center;
+  v.sh_degree = shape.sh_degree;
   for (int k = 0; k < kMaxShells; ++k) v.shell_radii[k] = k < shape.num_shells ? geometry.shell_radii[k] : 0.f;
   if (shape.bricks) {
     PERF_CHECK(shape.bricks->n == shape.n);
@@ -60,6 +61,8 @@ SmoothnessLayout MakeSmoothnessLayout(const VolumeShape& shape) {
   l.m = shape.m;
   l.num_shells = shape.num_shells;
   l.grid_params = shape.GridParamCount();
+  l.sh_start = shape.ShStart();
+  l.sh_degree = shape.sh_degree;
   l.exposure_start = shape.ExposureStart();
   if (shape.bricks) {
     l.slot = shape.bricks->slot.data();
@@ -85,6 +88,7 @@ std::vector<float> InitialParams(const VolumeShape& shape, const VolumeGeometry&
       }
       case ParamKind::kExposureGain:
       case ParamKind::kExposureOffset: x[i] = 0; break;  // the identity
+      case ParamKind::kGridSh: x[i] = 0; break;          // no view dependence
       default: x[i] = unit(rng); break;
     }
   }
@@ -93,7 +97,7 @@ std::vector<float> InitialParams(const VolumeShape& shape, const VolumeGeometry&
 }
 
 void SetBackgroundShells(const VolumeShape& shape, const float colour[3], std::span<float> params) {
-  for (int64_t i = shape.GridParamCount(); i < shape.ExposureStart(); ++i) {
+  for (int64_t i = shape.GridParamCount(); i < shape.ShStart(); ++i) {
     params[i] = KindOf(shape, i) == ParamKind::kShellOpacity ? 1.f : colour[i % 4];
   }
 }
@@ -131,8 +135,10 @@ std::vector<float> Resample(const VolumeShape& from, std::span<const float> para
     std::copy(params.begin() + from.ExposureStart(), params.end(), out.begin() + to.ExposureStart());
   }
   const std::vector<Axis> g = AxisWeights(from.n, to.n);
+  // The grid's spherical harmonics are interpolated as its values are (when both levels have them).
+  const int sh = from.sh_degree == to.sh_degree && to.sh_degree > 0 ? ShStride(to.sh_degree) : 0;
   ForEachStoredCell(to, [&](int i, int j, int k, int64_t to_cell) {
-    double v[4] = {0, 0, 0, 0};
+    double v[4 + kMaxShStride] = {};
     for (int c = 0; c < 8; ++c) {
       const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
       const double w = (dx ? g[i].f : 1 - g[i].f) * (dy ? g[j].f : 1 - g[j].f) * (dz ? g[k].f : 1 - g[k].f);
@@ -140,8 +146,10 @@ std::vector<float> Resample(const VolumeShape& from, std::span<const float> para
       const int64_t cell = StoredCell(from, dx ? g[i].hi : g[i].lo, dy ? g[j].hi : g[j].lo, dz ? g[k].hi : g[k].lo);
       if (cell < 0) continue;  // an inactive brick: zeros
       for (int ch = 0; ch < 4; ++ch) v[ch] += w * params[GridParam(cell, ch)];
+      for (int s = 0; s < sh; ++s) v[4 + s] += w * params[from.ShStart() + sh * cell + s];
     }
     for (int ch = 0; ch < 4; ++ch) out[GridParam(to_cell, ch)] = static_cast<float>(v[ch]);
+    for (int s = 0; s < sh; ++s) out[to.ShStart() + sh * to_cell + s] = static_cast<float>(v[4 + s]);
   });
   const std::vector<Axis> t = AxisWeights(from.m, to.m);
   for (int s = 0; s < to.num_shells; ++s) {
@@ -185,6 +193,7 @@ std::string DescribeShape(const VolumeShape& shape) {
   } else {
     s << shape.ParamCount() << " parameters)";
   }
+  if (shape.sh_degree > 0) s << ", spherical harmonics of degree " << shape.sh_degree;
   if (shape.exposures > 0) s << ", exposures of " << shape.exposures << " photos";
   return s.str();
 }

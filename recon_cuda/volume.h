@@ -29,29 +29,37 @@ struct VolumeShape {
   int num_shells = 0;  // <= kMaxShells
   std::shared_ptr<const BrickGrid> bricks;  // a brick-sparse grid (brick_grid.h); nullptr: dense
   int exposures = 0;   // training photos whose exposure is solved (ray_types.h ExposureParam); 0: none
+  int sh_degree = 0;   // spherical harmonics of the grid's colour beyond the constant (ShParam); 0: none
 
   VolumeShape() = default;
-  VolumeShape(int n_, int m_, int num_shells_, std::shared_ptr<const BrickGrid> bricks_ = nullptr, int exposures_ = 0)
-      : n(n_), m(m_), num_shells(num_shells_), bricks(std::move(bricks_)), exposures(exposures_) {}
+  VolumeShape(int n_, int m_, int num_shells_, std::shared_ptr<const BrickGrid> bricks_ = nullptr, int exposures_ = 0,
+              int sh_degree_ = 0)
+      : n(n_), m(m_), num_shells(num_shells_), bricks(std::move(bricks_)), exposures(exposures_), sh_degree(sh_degree_) {}
 
   bool sparse() const { return bricks != nullptr; }
   // Where the shells start: 4 n^3, or 4 values per cell of the active bricks.
   int64_t GridParamCount() const { return bricks ? bricks->GridParams() : recon::GridParamCount(n); }
-  // Where the exposures start: after the shells.
-  int64_t ExposureStart() const { return GridParamCount() + 4 * static_cast<int64_t>(num_shells) * 6 * m * m; }
+  // Where the grid's spherical harmonics start: after the shells.
+  int64_t ShStart() const { return GridParamCount() + 4 * static_cast<int64_t>(num_shells) * 6 * m * m; }
+  // Where the exposures start: after the spherical harmonics.
+  int64_t ExposureStart() const { return ShStart() + (sh_degree > 0 ? ShStride(sh_degree) * StoredCells() : 0); }
   int64_t ParamCount() const { return ExposureStart() + static_cast<int64_t>(kExposureValues) * exposures; }
+  ParamLayout Layout() const { return {GridParamCount(), ShStart(), ExposureStart()}; }
   int64_t StoredCells() const { return GridParamCount() / 4; }
-  int64_t ShellTexels() const { return (ExposureStart() - GridParamCount()) / 4; }
+  int64_t ShellTexels() const { return (ShStart() - GridParamCount()) / 4; }
   // The bricks holding parameters: the active ones, or every brick of a dense grid.
   int64_t StoredBricks() const { return bricks ? bricks->ActiveBricks() : BrickCount(n); }
   // The next level of the hierarchy: every resolution doubled, the grid dense, the same photos.
-  VolumeShape Doubled() const { return {2 * n, 2 * m, num_shells, nullptr, exposures}; }
+  VolumeShape Doubled() const { return {2 * n, 2 * m, num_shells, nullptr, exposures, sh_degree}; }
   // The same resolutions with these bricks active (nullptr: dense).
-  VolumeShape WithBricks(std::shared_ptr<const BrickGrid> b) const { return {n, m, num_shells, std::move(b), exposures}; }
-  VolumeShape WithExposures(int photos) const { return {n, m, num_shells, bricks, photos}; }
+  VolumeShape WithBricks(std::shared_ptr<const BrickGrid> b) const {
+    return {n, m, num_shells, std::move(b), exposures, sh_degree};
+  }
+  VolumeShape WithExposures(int photos) const { return {n, m, num_shells, bricks, photos, sh_degree}; }
+  VolumeShape WithShDegree(int degree) const { return {n, m, num_shells, bricks, exposures, degree}; }
   bool operator==(const VolumeShape& o) const {
     return n == o.n && m == o.m && num_shells == o.num_shells && exposures == o.exposures &&
-           (bricks == o.bricks || (bricks && o.bricks && *bricks == *o.bricks));
+           sh_degree == o.sh_degree && (bricks == o.bricks || (bricks && o.bricks && *bricks == *o.bricks));
   }
 };
 
@@ -142,9 +150,7 @@ void ForEachStoredCell(const VolumeShape& shape, F&& f) {
 }
 
 // What parameter i is (param_ops.h).
-inline ParamKind KindOf(const VolumeShape& shape, int64_t i) {
-  return KindOfParam(shape.GridParamCount(), shape.ExposureStart(), i);
-}
+inline ParamKind KindOf(const VolumeShape& shape, int64_t i) { return KindOfParam(shape.Layout(), i); }
 
 // "128^3 grid, 4 shells of 6 x 128^2 texels (33.8 M parameters)"; a sparse grid says
 // "128^3 grid (310 of 4096 bricks), ...".

@@ -127,6 +127,30 @@ TEST(CeresCheckTest, GradientCheckerAcceptsTheExposures) {
   EXPECT_GT(volume, 100);
 }
 
+// Spherical harmonics of degree 2 (issue 16, --sh-degree): the colour's view-dependent bands and
+// their basis, against Ceres' central differences.
+TEST(CeresCheckTest, GradientCheckerAcceptsTheSphericalHarmonics) {
+  test::TinyProblem p(24, 2, 2, 3, 4, 3);
+  p.AddSh(2, 25);
+  const RaysCost cost(p, 7, 0.1, true);
+  ceres::NumericDiffOptions nd;
+  const std::vector<const ceres::Manifold*>* no_manifolds = nullptr;
+  ceres::GradientChecker checker(&cost, no_manifolds, nd);
+  std::vector<double> x(p.x.begin(), p.x.end());
+  const double* params[] = {x.data()};
+  ceres::GradientChecker::ProbeResults results;
+  EXPECT_TRUE(checker.Probe(params, 1e-6, &results)) << results.error_log;
+  EXPECT_LT(results.maximum_relative_error, 1e-6);
+  const auto& jac = results.jacobians[0];
+  std::vector<int> per_band(ShBands(2), 0);
+  for (int r = 0; r < jac.rows(); ++r) {
+    for (int c = static_cast<int>(p.shape.ShStart()); c < jac.cols(); ++c) {
+      if (std::abs(jac(r, c)) > 1e-4) per_band[(c - p.shape.ShStart()) % ShStride(2) / 3]++;
+    }
+  }
+  for (int k = 0; k < ShBands(2); ++k) EXPECT_GT(per_band[k], 10) << "band " << k;
+}
+
 TEST(CeresCheckTest, GaussNewtonKeepsUpWithCeresOnATinyProblem) {
   // Targets rendered from a random "true" volume; both solvers start from the same other volume,
   // without jitter (a fixed objective), with the same bounds (sigma >= 0, colours and opacities

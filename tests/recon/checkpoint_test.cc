@@ -133,13 +133,23 @@ TEST(CheckpointTest, ExposuresTravelAndVersionTwoFilesReadWithout) {
   ExpectEqual(back, c);
 
   std::string negative = bytes;
-  const int64_t minus = -2;
-  std::memcpy(&negative[272], &minus, 8);
+  const int32_t minus = -2, four = 4, three = 3;
+  std::memcpy(&negative[272], &minus, 4);
   EXPECT_EQ(FieldOfError(negative), "exposures");
   std::string more = bytes;  // the count no longer matches the parameters
-  const int64_t four = 4;
-  std::memcpy(&more[272], &four, 8);
+  std::memcpy(&more[272], &four, 4);
   EXPECT_EQ(FieldOfError(more), "parameter count");
+  std::string degree = bytes;
+  std::memcpy(&degree[276], &three, 4);
+  EXPECT_EQ(FieldOfError(degree), "sh_degree");
+
+  // Spherical harmonics of degree 2 on the sparse and dense grids travel too.
+  Checkpoint sh = c;
+  sh.shape.sh_degree = 2;
+  sh.params.resize(sh.shape.ParamCount());
+  for (size_t i = 0; i < sh.params.size(); ++i) sh.params[i] = 0.5f - 0.001f * static_cast<float>(i % 1000);
+  std::istringstream in_sh(Bytes(sh));
+  ExpectEqual(ReadCheckpoint(in_sh, "sh"), sh);
 
   // A version 2 file: the same header without the exposure count; it has no exposures.
   const Checkpoint plain = Sample();

@@ -188,6 +188,60 @@ TEST(CpuBackendTest, ExposuresMatchTheDenseJacobian) {
   EXPECT_GT(std::abs(without.Cost() - j.Cost()), 1e-3 * j.Cost());
 }
 
+// View-dependent colour (issue 16, --sh-degree): spherical harmonics of degree 1 and 2 (the
+// second with exposures too) against the dense Jacobian in every pass, recorded and recomputed.
+TEST(CpuBackendTest, SphericalHarmonicsMatchTheDenseJacobian) {
+  for (const int degree : {1, 2}) {
+    SCOPED_TRACE(degree);
+    TinyProblem p(7);
+    const TinyProblem plain = p;
+    p.AddSh(degree, 8);
+    if (degree == 2) p.AddExposures(9);
+    const uint32_t seed = 23;
+    const DenseJacobian j(p, p.x, seed, 0.1);
+    std::mt19937 rng(10);
+    std::normal_distribution<float> normal;
+    std::vector<float> pv(p.shape.ParamCount());
+    for (float& v : pv) v = normal(rng);
+    for (int64_t c = 0; c < p.shape.StoredCells(); ++c)  // the padding zeros stay zero
+      for (int k = 3 * ShBands(degree); k < ShStride(degree); ++k) pv[p.shape.ShStart() + ShStride(degree) * c + k] = 0;
+    for (int64_t i = p.shape.ExposureStart(); i < p.shape.ParamCount(); ++i) {
+      if ((i - p.shape.ExposureStart()) % 4 == 3) pv[i] = 0;
+    }
+    const std::vector<double> want = j.Jtu(j.Jp(std::vector<double>(pv.begin(), pv.end())));
+    const std::vector<double> jtr = j.Jtr(), diag = j.Diag();
+    for (bool cache : {true, false}) {
+      SCOPED_TRACE(cache ? "recorded" : "recomputed");
+      auto b = Cpu(2, cache);
+      b->SetLevel(p.Level(), kVectors);
+      b->Upload(kX, p.x);
+      b->Upload(kP, pv);
+      const PassStats s = b->Linearize(kX, seed, kG, kD);
+      EXPECT_NEAR(s.cost, j.Cost(), 1e-5 * j.Cost());
+      EXPECT_NEAR(b->Cost(kX, seed).cost, j.Cost(), 1e-5 * j.Cost());
+      b->MultiplyJtJ(kP, kOut);
+      std::vector<float> g(p.shape.ParamCount()), d(p.shape.ParamCount()), out(p.shape.ParamCount());
+      b->Download(kG, g);
+      b->Download(kD, d);
+      b->Download(kOut, out);
+      ExpectClose(g, jtr, "J^T r");
+      ExpectClose(d, diag, "diag(J^T J)");
+      ExpectClose(out, want, "J^T J p");
+      // The coefficients' own entries, on their own scale, and some of them exercised.
+      int nonzero = 0;
+      for (int64_t i = p.shape.ShStart(); i < p.shape.ExposureStart(); ++i) {
+        EXPECT_NEAR(g[i], jtr[i], 1e-4 * std::abs(jtr[i]) + 1e-5) << i;
+        EXPECT_NEAR(d[i], diag[i], 1e-4 * std::abs(diag[i]) + 1e-6) << i;
+        EXPECT_NEAR(out[i], want[i], 1e-4 * std::abs(want[i]) + 1e-4) << i;
+        nonzero += std::abs(jtr[i]) > 1e-3;
+      }
+      EXPECT_GT(nonzero, 50);
+    }
+    const DenseJacobian without(plain, plain.x, seed, 0.1);
+    EXPECT_GT(std::abs(without.Cost() - j.Cost()), 1e-3 * j.Cost());
+  }
+}
+
 // A sparse level (3 of 8 bricks stored) against the dense level whose other bricks are empty:
 // the same cost, and on the stored cells the same J^T r, diag(J^T J), J^T J p and renders, with
 // fewer samples marched.

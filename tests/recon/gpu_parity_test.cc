@@ -156,7 +156,10 @@ TEST_F(GpuParityTest, JtJpAtTheLinearisationPoint) {
 // 13.5 warps, so the device's warp sums of the exposure entries (cuda_passes.cu WarpAddExposure)
 // meet both warps of one photo and warps shared by two.
 TEST_F(GpuParityTest, ExposuresInEveryPass) {
+  for (const int degree : {0, 2}) {  // and spherical harmonics (issue 16, --sh-degree)
+  SCOPED_TRACE(degree);
   TinyProblem p = Problem(47);
+  if (degree > 0) p.AddSh(degree, 50);
   p.AddExposures(48);
   SetLevel(p.Level(), p.x);
   const int64_t e = p.shape.ExposureStart(), n = p.shape.ParamCount();
@@ -197,6 +200,7 @@ TEST_F(GpuParityTest, ExposuresInEveryPass) {
     b->Project(kOut);
   }
   EXPECT_EQ(tail(gpu.get(), kOut), tail(cpu.get(), kOut));
+  }
 }
 
 // RestrictJacobian: the CPU drops recorded samples, the GPU skips them on the fly; on the free

@@ -11,6 +11,7 @@ namespace perf::recon {
 template <class T, class F>
 struct PerParamVisitor {
   F& f;
+  RaySh<T> sh{};  // the ray's spherical harmonics (degree 0: none)
   PERF_HD_INLINE void Shell(int, const CubeCoord<T>&, const TexelSample<T>& ts, const ShellPartials<T>& p) {
     for (int q = 0; q < 4; ++q) {
       const T w = ts.w[q];
@@ -29,6 +30,12 @@ struct PerParamVisitor {
       f(base + 1, T(0), p.dc * w, T(0), T(0));
       f(base + 2, T(0), T(0), p.dc * w, T(0));
       f(base + 3, p.ds[0] * w, p.ds[1] * w, p.ds[2] * w, p.dl * w);
+      for (int k = 0; k < sh.bands; ++k) {  // band k's channel c enters r_c as the colour does, times y_k
+        const T e = p.dc * w * sh.y[k];
+        f(ShParam(sh.start, sh.degree, gs.cell[q], k, 0), e, T(0), T(0), T(0));
+        f(ShParam(sh.start, sh.degree, gs.cell[q], k, 1), T(0), e, T(0), T(0));
+        f(ShParam(sh.start, sh.degree, gs.cell[q], k, 2), T(0), T(0), e, T(0));
+      }
     }
   }
 };
@@ -36,7 +43,7 @@ struct PerParamVisitor {
 template <class T, class F>
 PERF_HD_INLINE void BackwardPerParam(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitter& jit,
                                      const RayOutput<T>& fwd, F& f) {
-  PerParamVisitor<T, F> v{f};
+  PerParamVisitor<T, F> v{f, ShOfRay(vol, ray)};
   Backward(vol, ray, jit, fwd, v);
 }
 

@@ -70,6 +70,20 @@ struct TinyProblem {
     }
   }
 
+  // Spherical harmonics of `degree` on every stored cell (VolumeShape::sh_degree), random in
+  // [-0.3, 0.3] (padding zeros). Before AddExposures (the exposures follow them).
+  void AddSh(int degree, uint32_t seed) {
+    ASSERT_EQ(shape.exposures, 0);
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> coef(-0.3f, 0.3f);
+    shape = shape.WithShDegree(degree);
+    const int stride = ShStride(degree);
+    for (int64_t c = 0; c < shape.StoredCells(); ++c) {
+      for (int j = 0; j < stride; ++j) x.push_back(j < 3 * ShBands(degree) ? coef(rng) : 0.f);
+    }
+    EXPECT_EQ(static_cast<int64_t>(x.size()), shape.ParamCount());
+  }
+
   // Solves every camera's exposure (VolumeShape::exposures): random gains 1 + gamma and offsets,
   // and camera k in slot (k + 1) % cameras (so that slots and cameras differ).
   void AddExposures(uint32_t seed) {
@@ -109,6 +123,7 @@ struct DenseJacobian {
     vol.n = p.shape.n;
     vol.m = p.shape.m;
     vol.num_shells = p.shape.num_shells;
+    vol.sh_degree = p.shape.sh_degree;
     vol.size = {p.geometry.box.size.x, p.geometry.box.size.y, p.geometry.box.size.z};
     vol.shell_center = {p.geometry.shell_center.x, p.geometry.shell_center.y, p.geometry.shell_center.z};
     for (int k = 0; k < p.shape.num_shells; ++k) vol.shell_radii[k] = p.geometry.shell_radii[k];

@@ -73,13 +73,15 @@ TEST(Smoothness, SparseGridNeighboursAreTheDenseGridsStoredOnes) {
   EXPECT_EQ(across_bricks, 2 * 64);  // bricks 0 and 1 share one 8 x 8 face
 }
 
-// A level of the CPU backend without rays, x random in the valid range, with one photo's
-// exposure (whose weight is a prior's: smoothness.h).
+// A level of the CPU backend without rays, x random in the valid range, with spherical harmonics
+// of degree 1 (smoothed as the colour) and one photo's exposure (whose weight is a prior's:
+// smoothness.h).
 struct SmoothLevel {
   test::TinyProblem p{5, 8, 3, 1, 2, 2};
   std::unique_ptr<Backend> b = MakeCpuBackend({});
   SmoothnessWeights w{0.7f, 0.3f, 1.3f, 0.9f, 0.5f};
   SmoothLevel() {
+    p.AddSh(1, 2);
     p.AddExposures(3);
     b->SetLevel(LevelProblem{p.shape, p.geometry, nullptr, {}}, 4);
     b->Upload(0, p.x);
@@ -169,7 +171,7 @@ TEST(Smoothness, GradientIsTheCentralDifferenceAndTheHessianIsSymmetric) {
   std::mt19937 rng(9);
   std::uniform_int_distribution<int64_t> pick(0, n - 1);
   for (int t = 0; t < 48; ++t) {
-    // The exposure's values, the last shell's texels, and any.
+    // The exposure's values, the last cell's spherical harmonics, and any.
     const int64_t i = t < kExposureValues ? n - 1 - t : t < 12 ? s.p.shape.ExposureStart() - 1 - t : pick(rng);
     std::vector<float> x = s.p.x;
     const float h = 1e-2f;  // the cost is quadratic: central differences are exact up to rounding
