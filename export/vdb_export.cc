@@ -88,9 +88,15 @@ VdbStats WriteVdb(const recon::Checkpoint& c, const fs::path& path, const VdbOpt
   const openvdb::math::Transform::Ptr transform = MakeTransform(c);
   openvdb::FloatGrid::Ptr density = openvdb::FloatGrid::create(0.f);
   openvdb::Vec3SGrid::Ptr colour = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.f));
+  // The spherical harmonics beyond the constant, a grid per band (recon ray_types.h ShParam).
+  const int bands = c.shape.sh_degree > 0 ? recon::ShBands(c.shape.sh_degree) : 0;
+  std::vector<openvdb::Vec3SGrid::Ptr> sh;
+  for (int k = 0; k < bands; ++k) sh.push_back(openvdb::Vec3SGrid::create(openvdb::Vec3s(0.f)));
   {
     openvdb::FloatGrid::Accessor d = density->getAccessor();
     openvdb::Vec3SGrid::Accessor col = colour->getAccessor();
+    std::vector<openvdb::Vec3SGrid::Accessor> sh_acc;
+    for (const auto& g : sh) sh_acc.push_back(g->getAccessor());
     // The stored cells only: a sparse grid's 8^3 bricks land on OpenVDB's 8^3 leaves.
     recon::ForEachStoredCell(c.shape, [&](int i, int j, int k, int64_t cell) {
       const float sigma = c.params[recon::GridParam(cell, 3)];
@@ -103,6 +109,10 @@ VdbStats WriteVdb(const recon::Checkpoint& c, const fs::path& path, const VdbOpt
         rgb[ch] = static_cast<float>(SrgbToLinear(v));
       }
       col.setValue(xyz, rgb);
+      for (int k = 0; k < bands; ++k) {
+        const int64_t at = recon::ShParam(c.shape.ShStart(), c.shape.sh_degree, cell, k, 0);
+        sh_acc[k].setValue(xyz, openvdb::Vec3s(c.params[at], c.params[at + 1], c.params[at + 2]));
+      }
       ++stats.active_voxels;
     });
   }
@@ -115,7 +125,19 @@ VdbStats WriteVdb(const recon::Checkpoint& c, const fs::path& path, const VdbOpt
   colour->setTransform(transform->copy());
   colour->insertMeta("colorspace", openvdb::StringMetadata("linear"));
   colour->insertMeta("units", openvdb::StringMetadata("linear Rec.709 RGB (sRGB primaries), converted from sRGB"));
-  for (openvdb::GridBase* g : {static_cast<openvdb::GridBase*>(density.get()), static_cast<openvdb::GridBase*>(colour.get())}) {
+  openvdb::GridPtrVec grids{density, colour};
+  for (int k = 0; k < bands; ++k) {
+    stats.sh_grids.push_back(StrCat("color_sh", k + 1));
+    sh[k]->setName(stats.sh_grids.back());
+    sh[k]->setVectorType(openvdb::VEC_INVARIANT);
+    sh[k]->setTransform(transform->copy());
+    sh[k]->insertMeta("units", openvdb::StringMetadata(
+                                   "spherical-harmonic band of the colour before sRGB decoding: the sRGB colour seen "
+                                   "along unit direction d (box frame) is the color grid's plus sum_k Y_k(d) color_shk"));
+    sh[k]->insertMeta("perf_sh_band", openvdb::Int32Metadata(k + 1));
+    grids.push_back(sh[k]);
+  }
+  for (const openvdb::GridBase::Ptr& g : grids) {
     g->setCreator("PERF");
     g->setSaveFloatAsHalf(options.half_float);
   }
@@ -129,7 +151,7 @@ VdbStats WriteVdb(const recon::Checkpoint& c, const fs::path& path, const VdbOpt
   file_meta.insertMeta("perf_min_cell_opacity", openvdb::DoubleMetadata(min_opacity));
   file_meta.insertMeta("perf_opacity_length", openvdb::DoubleMetadata(length));
 
-  openvdb::GridPtrVec grids{density, colour};
+  if (bands > 0) file_meta.insertMeta("perf_sh_degree", openvdb::Int32Metadata(c.shape.sh_degree));
   // Serialised in memory (the same format io::File writes, without its grid offsets) and written
   // with checked calls: io::File does not report a full disk.
   WriteStreamAtomically(path, [&](std::ostream& out) {

@@ -33,6 +33,9 @@ struct VdbStats {
   int64_t total_voxels = 0;   // n^3
   double voxel_size[3] = {0, 0, 0};  // world units along the box axes
   std::string density_grid, colour_grid;  // the grid names written
+  // With view-dependent colour (--sh-degree): one grid per spherical-harmonic band beyond the
+  // constant, "color_sh1" .. (the colour grid holds the constant term).
+  std::vector<std::string> sh_grids;
   int64_t file_bytes = 0;
 };
 

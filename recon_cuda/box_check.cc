@@ -1,5 +1,6 @@
 #include "recon_cuda/box_check.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "common/errors.h"
@@ -30,6 +31,13 @@ std::vector<BoxFace> BoxFaces(const VolumeShape& shape, const VolumeGeometry& ge
     faces[f] = {kNames[f], static_cast<double>(opaque) / (static_cast<double>(n) * n)};
   }
   return faces;
+}
+
+bool FogCanLookOpaque(double box_opacity, const VolumeGeometry& geometry, int n) {
+  const float* s = &geometry.box.size.x;
+  const double shortest = std::min({s[0], s[1], s[2]}), longest = std::max({s[0], s[1], s[2]});
+  const double sigma_max = 2 * -std::log(1 - std::clamp(box_opacity, 0.0, 1 - 1e-12)) / shortest;
+  return 1 - std::exp(-sigma_max * longest / n) >= kOpaqueCell;
 }
 
 std::vector<int> FacesToGrow(const std::vector<BoxFace>& faces) {

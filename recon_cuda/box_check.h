@@ -37,6 +37,12 @@ std::string CutOffWarning(const std::vector<BoxFace>& faces);
 inline constexpr double kGrowFraction = 0.25;
 inline constexpr int kMaxBoxGrowths = 2;
 
+// Whether the first level's starting fog (InitOptions: box opacity `box_opacity` across the
+// shortest side, each cell's sigma uniform in [0, 2 s]) can already make a cell of an n^3 grid
+// kOpaqueCell opaque: then an opaque face says nothing about the object (at 8^3 from the default
+// 0.99 a cell can reach 0.68), and the box is not grown from it.
+bool FogCanLookOpaque(double box_opacity, const VolumeGeometry& geometry, int n);
+
 // The faces (indices into BoxFaces' order: -x, +x, -y, +y, -z, +z) to move out; the bottom never.
 std::vector<int> FacesToGrow(const std::vector<BoxFace>& faces);
 

@@ -461,7 +461,10 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
       box_faces = json::array();  // the last fit's (level 0 is fitted again after a growth)
       for (const BoxFace& f : faces) box_faces.push_back({{"face", f.name}, {"opaque_fraction", f.opaque_fraction}});
       box_warning = CutOffWarning(faces);
-      if (o.grow_box && box_growths.size() < static_cast<size_t>(kMaxBoxGrowths)) grow_faces = FacesToGrow(faces);
+      if (o.grow_box && box_growths.size() < static_cast<size_t>(kMaxBoxGrowths) &&
+          !FogCanLookOpaque(o.init.box_opacity, geometry, h.shape.n)) {
+        grow_faces = FacesToGrow(faces);
+      }
       if (!box_warning.empty() && grow_faces.empty()) say("warning: " + box_warning);
     }
     if (!grow_faces.empty()) {  // this fit is discarded (before_level ends the hierarchy here)

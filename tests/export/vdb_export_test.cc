@@ -209,6 +209,35 @@ TEST_F(VdbExportTest, HoudiniNamesTheColourGridCd) {
   EXPECT_EQ(static_cast<int64_t>(f.colour->activeVoxelCount()), stats.active_voxels);
 }
 
+// View-dependent colour (--sh-degree 1): a grid per band beyond the constant, on the same voxels
+// as the colour, holding the checkpoint's coefficients.
+TEST_F(VdbExportTest, SphericalHarmonicsGetAGridPerBand) {
+  recon::Checkpoint c = checkpoint_;
+  c.shape.sh_degree = 1;
+  c.params.resize(c.shape.ParamCount(), 0.f);
+  const int64_t cell = recon::GridCell(kN, kN / 2, kN / 2, kN / 2);
+  ASSERT_GT(c.params[recon::GridParam(cell, 3)], 0.f);  // inside the painted sphere
+  for (int k = 0; k < 3; ++k)
+    for (int ch = 0; ch < 3; ++ch) c.params[recon::ShParam(c.shape.ShStart(), 1, cell, k, ch)] = 0.1f * (k + 1) - 0.05f * ch;
+  const fs::path path = dir_ / "sh.vdb";
+  const VdbStats stats = WriteVdb(c, path, {});
+  EXPECT_EQ(stats.sh_grids, (std::vector<std::string>{"color_sh1", "color_sh2", "color_sh3"}));
+  openvdb::io::File file(path.string());
+  file.open();
+  EXPECT_EQ(file.getMetadata()->metaValue<int32_t>("perf_sh_degree"), 1);
+  for (int k = 0; k < 3; ++k) {
+    const auto g = openvdb::gridPtrCast<openvdb::Vec3SGrid>(file.readGrid(stats.sh_grids[k]));
+    ASSERT_TRUE(g);
+    EXPECT_EQ(static_cast<int64_t>(g->activeVoxelCount()), stats.active_voxels);
+    EXPECT_EQ(g->metaValue<int32_t>("perf_sh_band"), k + 1);
+    const openvdb::Vec3s v = g->getConstAccessor().getValue(openvdb::Coord(kN / 2, kN / 2, kN / 2));
+    for (int ch = 0; ch < 3; ++ch) EXPECT_FLOAT_EQ(v[ch], 0.1f * (k + 1) - 0.05f * ch) << k << " " << ch;
+  }
+  file.close();
+  // Without spherical harmonics: no such grid.
+  EXPECT_TRUE(WriteVdb(checkpoint_, dir_ / "plain.vdb", {}).sh_grids.empty());
+}
+
 TEST_F(VdbExportTest, HalfFloatReadsBackWithinHalfPrecision) {
   const fs::path full = dir_ / "full.vdb", half = dir_ / "half.vdb";
   const VdbStats full_stats = WriteVdb(checkpoint_, full, {});

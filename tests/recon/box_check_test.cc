@@ -85,6 +85,17 @@ TEST(BoxCheck, TheFacesTheDensityReachesGrowOutwardInTheBoxFrame) {
   EXPECT_DOUBLE_EQ(both.box_size[1], 2 + 2 * kGrowFraction * 2);
   for (int a = 0; a < 3; ++a) EXPECT_DOUBLE_EQ(both.box_center[a], p.box_center[a]);
   EXPECT_EQ(g.shell_radii, p.shell_radii);
+
+  // The default start (0.99 across the box): at 8^3 a fog cell can look opaque (0.68 at most in a
+  // cube), at 16^3 (0.44) and 32^3 (0.25) it cannot.
+  VolumeGeometry cube;
+  cube.box.size = {2.f, 2.f, 2.f};
+  cube.shell_radii = {3.f};
+  EXPECT_TRUE(FogCanLookOpaque(0.99, cube, 8));
+  EXPECT_FALSE(FogCanLookOpaque(0.99, cube, 16));
+  EXPECT_FALSE(FogCanLookOpaque(0.99, cube, 32));
+  cube.box.size = {1.f, 1.f, 4.f};  // a long box: its longest cells are 4 times the shortest
+  EXPECT_TRUE(FogCanLookOpaque(0.99, cube, 16));
 }
 
 TEST(BoxCheck, InactiveBricksOfASparseGridAreEmpty) {
