@@ -210,8 +210,21 @@ class CpuBackend final : public Backend {
           if (shells[k].coord.face < 0) continue;
           ScatterJtuShell(ts[k], shells[k].sp, uv, sink);
         }
-        // Direct scatter: measured faster here than merging cells (CellMerger) first.
-        for (int j = 0; j < count; ++j) ScatterJtuSample(w[j], samples[j].sp, uv, sink, sh);
+        if (sh.degree == 0) {
+          // Direct scatter: measured faster here than merging cells (CellMerger) first.
+          for (int j = 0; j < count; ++j) ScatterJtuSample(w[j], samples[j].sp, uv, sink, sh);
+        } else {
+          // With spherical harmonics each cell's bands are written once per ray from its merged
+          // colour values, not once per sample (3 to 5 samples reach a cell).
+          MergedScatter flush{sink, sh};
+          CellMerger<float, 4> merger;
+          for (int j = 0; j < count; ++j) {
+            float v[4];
+            JtuValues(samples[j].sp, uv, v);
+            merger.Sample(w[j], v, flush);
+          }
+          merger.Finish(flush);
+        }
         ScatterJtuExposure(e, u, sink);
         bs.rays += 1;
         bs.samples += count;
@@ -360,6 +373,16 @@ class CpuBackend final : public Backend {
     Backward(vol, ray, jit, fwd, visitor, s.record.data());
     for (int c = 0; c < 3; ++c) s.row.h[c] = fwd.h[c];
   }
+  // A cell's merged J^T u values (JtuValues summed along the ray) into the grid and its bands.
+  struct MergedScatter {
+    AddSink& sink;
+    const RaySh<float>& sh;
+    void operator()(int64_t cell, const float* acc) {
+      sink.Add4(GridParam(cell, 0), acc[0], acc[1], acc[2], acc[3]);
+      ScatterSh(sh, cell, acc, sink);
+    }
+  };
+
   // Records a ray's partials without scattering anything.
   struct RecordOnly {
     BlockJ* row;
