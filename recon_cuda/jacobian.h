@@ -24,33 +24,35 @@ PERF_HD_INLINE void AddJpSample(const T* p, const GridSample<T>& gs, const Sampl
   u[3] += sp.dl * pb[3];
 }
 
-// The spherical harmonics' share of a cell's J^T u: colour[c] is what the cell's colour channel
-// c receives (JtuValues times the weight, or their merged sum along the ray); band k of channel c
-// receives y_k colour[c]. Written in groups of 4 (the padded stride, ray_types.h ShStride).
+// Adds y_k^power a[c] to band k, channel c of a cell's spherical harmonics, in groups of 4 (the
+// padded stride, ray_types.h ShStride; the padding gets zeros).
 template <class T, class Sink>
-PERF_HD_INLINE void ScatterSh(const RaySh<T>& sh, int64_t cell, const T* colour, Sink& sink) {
+PERF_HD_INLINE void AddShBands(const RaySh<T>& sh, int64_t cell, const T* a, int power, Sink& sink) {
   const int stride = ShStride(sh.degree);
   T v[kMaxShStride];
   for (int i = 0; i < stride; ++i) v[i] = 0;
-  for (int k = 0; k < sh.bands; ++k)
-    for (int c = 0; c < 3; ++c) v[3 * k + c] = sh.y[k] * colour[c];
+  for (int k = 0; k < sh.bands; ++k) {
+    const T y = power == 2 ? sh.y[k] * sh.y[k] : sh.y[k];
+    for (int c = 0; c < 3; ++c) v[3 * k + c] = y * a[c];
+  }
   const int64_t base = sh.start + static_cast<int64_t>(stride) * cell;
   for (int i = 0; i < stride; i += 4) sink.Add4(base + i, v[i], v[i + 1], v[i + 2], v[i + 3]);
+}
+
+// The spherical harmonics' share of a cell's J^T u: colour[c] is what the cell's colour channel
+// c receives (JtuValues times the weight, or their merged sum along the ray); band k of channel c
+// receives y_k colour[c].
+template <class T, class Sink>
+PERF_HD_INLINE void ScatterSh(const RaySh<T>& sh, int64_t cell, const T* colour, Sink& sink) {
+  AddShBands(sh, cell, colour, 1, sink);
 }
 
 // The spherical harmonics' share of a cell's diag(J^T J) from its merged colour row entry dc (the
 // ray's, RowValues): band k of channel c gets g_c^2 (y_k dc)^2.
 template <class T, class Sink>
 PERF_HD_INLINE void AddDiagSh(const RaySh<T>& sh, int64_t cell, T dc, const T* g2, Sink& sink) {
-  T sq[3];
-  for (int c = 0; c < 3; ++c) sq[c] = g2[c] * dc * dc;
-  const int stride = ShStride(sh.degree);
-  T v[kMaxShStride];
-  for (int i = 0; i < stride; ++i) v[i] = 0;
-  for (int k = 0; k < sh.bands; ++k)
-    for (int c = 0; c < 3; ++c) v[3 * k + c] = sh.y[k] * sh.y[k] * sq[c];
-  const int64_t base = sh.start + static_cast<int64_t>(stride) * cell;
-  for (int i = 0; i < stride; i += 4) sink.Add4(base + i, v[i], v[i + 1], v[i + 2], v[i + 3]);
+  const T sq[3] = {g2[0] * dc * dc, g2[1] * dc * dc, g2[2] * dc * dc};
+  AddShBands(sh, cell, sq, 2, sink);
 }
 
 template <class T>
