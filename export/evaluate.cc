@@ -166,7 +166,7 @@ EvalResult RunEval(const EvalOptions& o) {
   r.checkpoint = l.path;
 
   const std::vector<recon::PosedImage> test = recon::LoadImages(scene, o.workspace, Split::kTest);
-  // Each held-out render as its nearest training photo was exposed (recon/exposure.h).
+  // Each held-out render under the blend of its two nearest training photos' exposures (recon/exposure.h).
   const recon::PhotoExposures exposures = recon::ExposuresOf(l, scene);
   std::vector<ReportStripView> strip;
   int masked_views = 0;

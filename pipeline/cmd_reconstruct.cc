@@ -115,7 +115,8 @@ void AddReconstructCommand(CLI::App& app) {
   AddChoiceOption(cmd, "--exposure", &o.exposure,
                   {{"auto", ExposureChoice::kAuto}, {"on", ExposureChoice::kOn}, {"off", ExposureChoice::kOff}},
                   "Solve a gain and an offset per colour channel for every training photo (auto: for COLMAP "
-                  "photos, not for NeRF json scenes); held-out views take their nearest training photo's");
+                  "photos, not for NeRF json scenes); held-out views take the blend of their two nearest training "
+                  "photos' (by camera centre)");
   cmd->add_option("--sh-degree", o.sh_degree,
                   "View-dependent colour: spherical harmonics of degree 1 (3 more values per channel and cell) or 2 "
                   "(8 more) beyond each cell's colour; 0: none")

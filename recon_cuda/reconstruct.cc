@@ -345,7 +345,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   say(result.levels_choice.Describe());
   if (ho.exposures > 0) {
     say(StrCat("exposures: a gain and an offset per channel for each of the ", ho.exposures,
-               " training photos; held-out views take their nearest training photo's"));
+               " training photos; held-out views take the blend of their two nearest training photos'"));
   }
   // As every level's RaySet will (every rank's photos: either all have alpha or the scene's do not).
   const bool fits_alpha = o.residuals.use_alpha && !comm.Any(!ImagesHaveAlpha(train));
@@ -614,7 +614,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                       {{"photos", result.exposures},
                        {"prior", ho.solver.exposure_prior},
                        {"gain_range", {result.gain_range[0], result.gain_range[1]}},
-                       {"held_out", result.exposures > 0 ? "the nearest training photo's (camera centre)" : "none"}}},
+                       {"held_out", result.exposures > 0 ? "the inverse-distance blend of the two nearest training photos' (camera centres)" : "none"}}},
                      {"opacity_residual", opacity_residual},
                      {"opacity_residual_weight", opacity_weight},
                      {"init_opacity", o.init.box_opacity},

@@ -1,5 +1,6 @@
 // The host-side volume: level-to-level resampling (exact for constant and linear fields),
 // the random start, the valid-range projection, and placement from scene.json.
+#include "recon_cuda/exposure.h"
 #include "recon_cuda/volume.h"
 
 #include <gtest/gtest.h>
@@ -157,6 +158,37 @@ TEST(VolumeTest, ExposuresStartAtTheIdentityCarryOverAndStayInRange) {
   const std::vector<float> y = Resample(s, x, next);
   EXPECT_TRUE(std::equal(x.begin() + s.ExposureStart(), x.end(), y.begin() + next.ExposureStart(), y.end()));
   EXPECT_NE(DescribeShape(s).find("exposures of 3 photos"), std::string::npos) << DescribeShape(s);
+}
+
+// A view's exposure outside the solve (exposure.h): the inverse-distance blend of the two
+// training photos nearest its camera centre; at a training photo's own centre, that photo's.
+TEST(VolumeTest, AViewTakesTheBlendOfItsTwoNearestPhotosExposures) {
+  const VolumeShape s(2, 1, 1, nullptr, 3);
+  std::vector<float> x(s.ParamCount(), 0.f);
+  const float gains[3] = {0.f, 0.2f, -0.3f}, offsets[3] = {0.f, 0.1f, 0.f};
+  std::vector<ViewFrustum> views(3);
+  for (int k = 0; k < 3; ++k) {
+    views[k].camera.world_from_cam[3] = 2.f * k;  // centres at x = 0, 2, 4
+    for (int c = 0; c < 3; ++c) {
+      x[ExposureParam(s.ExposureStart(), k) + c] = gains[k];
+      x[ExposureParam(s.ExposureStart(), k) + 4 + c] = offsets[k];
+    }
+  }
+  const PhotoExposures e(s, x, views);
+  PinholeCamera<float> at{};
+  at.world_from_cam[3] = 0.5f;  // 0.5 from photo 0, 1.5 from photo 1: weights 2 and 2/3
+  ColourTransform<float> xf = e.Nearest(at);
+  EXPECT_NEAR(xf.gain[1], (2 * 1.0 + 2.0 / 3 * 1.2) / (2 + 2.0 / 3), 1e-6);
+  EXPECT_NEAR(xf.offset[2], (2.0 / 3 * 0.1) / (2 + 2.0 / 3), 1e-6);
+  at.world_from_cam[3] = 4.f;  // photo 2's own centre
+  xf = e.Nearest(at);
+  EXPECT_FLOAT_EQ(xf.gain[0], 0.7f);
+  RenderOutput r;
+  r.colour = {0.5f, 0.5f, 0.5f};
+  ApplyTransform(e.Nearest(views[1].camera), &r);
+  EXPECT_FLOAT_EQ(r.colour[0], 1.2f * 0.5f + 0.1f);
+  EXPECT_TRUE(PhotoExposures().empty());
+  EXPECT_FLOAT_EQ(PhotoExposures().Nearest(at).gain[0], 1.f);
 }
 
 TEST(VolumeTest, GeometryFromSceneAndItsErrors) {
