@@ -171,9 +171,8 @@ EvalResult RunEval(const EvalOptions& o) {
   std::vector<ReportStripView> strip;
   int masked_views = 0;
   for (const recon::PosedImage& v : test) {
-    recon::RenderOutput render =
-        l.backend->Render(LoadedCheckpoint::kParams, v.camera, v.image.width, v.image.height, o.min_box_opacity);
-    if (!exposures.empty()) recon::ApplyTransform(exposures.Nearest(v.camera), &render);
+    const recon::RenderOutput render =
+        recon::RenderAsShot(l.backend.get(), LoadedCheckpoint::kParams, v, o.min_box_opacity, exposures);
     const Image image = recon::ToImage(render);
     const ImageScores s = ScoreImage(image, v.image, Binarize(recon::OpacityImage(render), o.mask_threshold));
     r.views.push_back({v.name, s});

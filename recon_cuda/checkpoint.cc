@@ -228,10 +228,7 @@ Checkpoint ReadCheckpoint(std::istream& in, const std::string& name) {
   c.shape.sh_degree = sh_degree;
   // The parameter count the shape implies, before the brick list is read (it needs only B).
   const int64_t grid_params = num_bricks >= 0 ? SparseGridParams(num_bricks) : GridParamCount(c.shape.n);
-  const int64_t cells = grid_params / 4;
-  const int64_t expected = grid_params + (c.shape.ShStart() - c.shape.GridParamCount()) +
-                           (sh_degree > 0 ? ShStride(sh_degree) * cells : 0) +
-                           int64_t{kExposureValues} * exposures;
+  const int64_t expected = c.shape.ParamCountFor(grid_params);
   if (count != static_cast<uint64_t>(expected)) {
     r.Bad("parameter count", std::to_string(count), StrCat("expected ", expected, " for the shape"));
   }

@@ -341,11 +341,10 @@ class CpuBackend final : public Backend {
   }
   // Ray i's photo's colour transform at vol's parameters, and its exposure's partials given H.
   ColourTransform<float> TransformAt(const VolumeView<float>& vol, int64_t i) const {
-    return TransformOf(vol.params, vol.ExposureStart(), ExposureSlotOf(rays_, i));
+    return TransformOfRay(rays_, vol, i);
   }
   RayExposure<float> ExposureAt(const VolumeView<float>& vol, int64_t i, const float* h) const {
-    const int slot = ExposureSlotOf(rays_, i);
-    return ExposureOfRay(vol.ExposureStart(), slot, TransformOf(vol.params, vol.ExposureStart(), slot), h);
+    return ExposureOfRay(vol.ExposureStart(), ExposureSlotOf(rays_, i), TransformAt(vol, i), h);
   }
 
   // Ray i in the iteration of `seed` (training_ray.h, as the CUDA passes read it).

@@ -175,7 +175,7 @@ __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, flo
     float target[3];
     TargetOf(in.rays, i, target);
     const int slot = ExposureSlotOf(in.rays, i);
-    const ColourTransform<float> xf = TransformOf(in.vol.params, in.vol.ExposureStart(), slot);
+    const ColourTransform<float> xf = TransformOfRay(in.rays, in.vol, i);
     const RayOutput<float> fwd =
         Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in.rays, i), xf);
     const RayExposure<float> e = ExposureOfRay(in.vol.ExposureStart(), slot, xf, fwd.h);
@@ -208,9 +208,8 @@ __global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const fl
     const float zero[3] = {0, 0, 0};
     const RayOutput<float> fwd =
         Forward(in.vol, r.ray, r.jit, zero, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in.rays, i));
-    const int slot = ExposureSlotOf(in.rays, i);
-    const RayExposure<float> e = ExposureOfRay(in.vol.ExposureStart(), slot,
-                                               TransformOf(in.vol.params, in.vol.ExposureStart(), slot), fwd.h);
+    const RayExposure<float> e =
+        ExposureOfRay(in.vol.ExposureStart(), ExposureSlotOf(in.rays, i), TransformOfRay(in.rays, in.vol, i), fwd.h);
     JpVisitor jp{p, free, {0, 0, 0, 0}};
     jp.sh = ShOfRay(in.vol, r.ray);
     Backward(in.vol, r.ray, r.jit, fwd, jp);
@@ -243,9 +242,8 @@ __global__ void __launch_bounds__(kRayThreads) CostKernel(PassInput in, int64_t 
     const TrainingRay r = MakeRay(in, i);
     float target[3];
     TargetOf(in.rays, i, target);
-    const ColourTransform<float> xf = TransformOf(in.vol.params, in.vol.ExposureStart(), ExposureSlotOf(in.rays, i));
-    mine = StatsOf(
-        Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in.rays, i), xf));
+    mine = StatsOf(Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance, nullptr,
+                           AlphaOf(in.rays, i), TransformOfRay(in.rays, in.vol, i)));
   }
   WriteBlockStats(mine, partials);
 }

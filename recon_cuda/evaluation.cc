@@ -28,13 +28,18 @@ Image OpacityImage(const RenderOutput& render) {
   return im;
 }
 
+RenderOutput RenderAsShot(Backend* backend, VecId x, const PosedImage& view, float min_box_opacity,
+                          const PhotoExposures& exposures) {
+  RenderOutput r = backend->Render(x, view.camera, view.image.width, view.image.height, min_box_opacity);
+  if (!exposures.empty()) ApplyTransform(exposures.Nearest(view.camera), &r);
+  return r;
+}
+
 std::vector<ViewScore> ScoreViews(Backend* backend, VecId x, const std::vector<PosedImage>& views,
                                   float min_box_opacity, const PhotoExposures& exposures) {
   std::vector<ViewScore> scores;
   for (const PosedImage& v : views) {
-    RenderOutput r = backend->Render(x, v.camera, v.image.width, v.image.height, min_box_opacity);
-    if (!exposures.empty()) ApplyTransform(exposures.Nearest(v.camera), &r);
-    scores.push_back({v.name, Psnr(r, v.image)});
+    scores.push_back({v.name, Psnr(RenderAsShot(backend, x, v, min_box_opacity, exposures), v.image)});
   }
   return scores;
 }

@@ -19,9 +19,13 @@ double Psnr(const RenderOutput& render, const Image& truth);
 Image ToImage(const RenderOutput& render);          // RGB
 Image OpacityImage(const RenderOutput& render);     // one channel: 1 - T_box
 
-// Renders every view at its own size (no jitter; the render rule at `min_box_opacity`,
-// render_rule.h) and scores it; with exposures, each render under the transform of its nearest
-// training photo (exposure.h).
+// A view rendered at its own size as its photo was shot: no jitter, the render rule at
+// `min_box_opacity` (render_rule.h), then with exposures the transform of its nearest training
+// photos (exposure.h PhotoExposures::Nearest).
+RenderOutput RenderAsShot(Backend* backend, VecId x, const PosedImage& view, float min_box_opacity,
+                          const PhotoExposures& exposures = {});
+
+// Every view rendered as shot (RenderAsShot) and scored.
 std::vector<ViewScore> ScoreViews(Backend* backend, VecId x, const std::vector<PosedImage>& views,
                                   float min_box_opacity, const PhotoExposures& exposures = {});
 

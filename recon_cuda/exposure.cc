@@ -4,7 +4,7 @@
 #include <limits>
 
 #include "common/errors.h"
-#include "recon_cuda/jacobian.h"
+#include "recon_cuda/training_ray.h"
 
 namespace perf::recon {
 

@@ -229,19 +229,6 @@ struct RayExposure {
   T h[3] = {0, 0, 0};  // H at the linearisation point
 };
 
-// The transform that parameters `params` give the photo of exposure slot `slot` (< 0: identity).
-template <class T>
-PERF_HD_INLINE ColourTransform<T> TransformOf(const T* params, int64_t exposure_start, int slot) {
-  ColourTransform<T> xf;
-  if (slot < 0) return xf;
-  const T* e = params + ExposureParam(exposure_start, slot);
-  for (int c = 0; c < 3; ++c) {
-    xf.gain[c] = 1 + e[c];
-    xf.offset[c] = e[4 + c];
-  }
-  return xf;
-}
-
 template <class T>
 PERF_HD_INLINE RayExposure<T> ExposureOfRay(int64_t exposure_start, int slot, const ColourTransform<T>& xf,
                                             const T* h) {

@@ -369,18 +369,21 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
   double level_start_elapsed = 0, iter_time = 0;  // for the log's elapsed solver time
   int held_out_iteration = -1;  // the iteration whose held-out PSNR was logged last
   double held_out_psnr = 0;
-  // The photos' exposures at the level's current parameters (none when it solves none).
+  // The photos' exposures at the level's current parameters (none when it solves none), read from
+  // the backend once for a callback's scoring and preview.
   const auto exposures_of = [&](const HierarchyLevel& h) {
     if (h.shape.exposures == 0) return PhotoExposures();
+    const auto t0 = WallClock::now();
     std::vector<float> x(static_cast<size_t>(h.shape.ParamCount()));
     backend->Download(h.params, x);
+    eval_seconds += SecondsSince(t0);
     return PhotoExposures(h.shape, x, train_views);
   };
   // The mean PSNR over every rank's held-out views (collective).
-  const auto held_out = [&](const HierarchyLevel& h) {
+  const auto held_out = [&](VecId params, const PhotoExposures& exposures) {
     const auto t0 = WallClock::now();
     double sum[2] = {0, 0};  // PSNR, views
-    for (const ViewScore& s : ScoreViews(backend.get(), h.params, test, o.min_box_opacity, exposures_of(h))) {
+    for (const ViewScore& s : ScoreViews(backend.get(), params, test, o.min_box_opacity, exposures)) {
       sum[0] += s.psnr;
       sum[1] += 1;
     }
@@ -424,16 +427,17 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
       summed_at_iteration = summed_bytes();
     }
     const bool last_it = s.iteration + 1 == h.solver.max_iterations;
-    if (test_views > 0 && o.eval_every > 0 && ((s.iteration + 1) % o.eval_every == 0 || last_it)) {
-      held_out_psnr = held_out(h);
+    const bool score = test_views > 0 && o.eval_every > 0 && ((s.iteration + 1) % o.eval_every == 0 || last_it);
+    const bool preview = root && o.preview_every > 0 && ((s.iteration + 1) % o.preview_every == 0 || last_it);
+    const PhotoExposures exposures = score || preview ? exposures_of(h) : PhotoExposures();
+    if (score) {
+      held_out_psnr = held_out(h.params, exposures);
       held_out_iteration = s.iteration;
       line["test_psnr"] = held_out_psnr;
     }
-    if (root && o.preview_every > 0 && ((s.iteration + 1) % o.preview_every == 0 || last_it)) {
+    if (preview) {
       const auto t0 = WallClock::now();
-      const PosedImage& v = preview_views.front();
-      RenderOutput r = backend->Render(h.params, v.camera, v.image.width, v.image.height, o.min_box_opacity);
-      if (h.shape.exposures > 0) ApplyTransform(exposures_of(h).Nearest(v.camera), &r);
+      const RenderOutput r = RenderAsShot(backend.get(), h.params, preview_views.front(), o.min_box_opacity, exposures);
       const fs::path p = o.workspace / "preview" / StrCat("recon_l", h.level, "_i", s.iteration + 1, ".png");
       EnsureWritableDirectory(p.parent_path());
       WriteImage(p, ToImage(r), PixelFormat::kUInt8);
@@ -479,13 +483,13 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     lr.cost = summary.final_cost;
     lr.train_psnr = summary.per_iteration.empty() ? 0 : summary.per_iteration.back().train_psnr;
     lr.status = StatusName(summary.status);
+    const PhotoExposures fitted(h.shape, x, train_views);  // none when the level solves none
     if (test_views > 0) {
       // The last iteration's, when the log has it; else now (the backend still holds x).
-      lr.test_psnr = held_out_iteration == summary.iterations - 1 ? held_out_psnr : held_out(h);
+      lr.test_psnr = held_out_iteration == summary.iterations - 1 ? held_out_psnr : held_out(h.params, fitted);
     }
-    if (h.shape.exposures > 0) {
+    if (!fitted.empty()) {
       result.gain_range[0] = 2, result.gain_range[1] = 0;
-      const PhotoExposures fitted(h.shape, x, train_views);
       for (const ColourTransform<float>& xf : fitted.transforms()) {
         for (float g : xf.gain) {
           result.gain_range[0] = std::min(result.gain_range[0], g);

@@ -70,9 +70,7 @@ RenderViewsResult RenderViews(const RenderViewsOptions& o) {
   EnsureWritableDirectory(out_dir);
   int done = 0;
   for (const PosedImage& v : views) {
-    RenderOutput render =
-        backend->Render(LoadedCheckpoint::kParams, v.camera, v.image.width, v.image.height, o.min_box_opacity);
-    if (!exposures.empty()) ApplyTransform(exposures.Nearest(v.camera), &render);
+    const RenderOutput render = RenderAsShot(backend, LoadedCheckpoint::kParams, v, o.min_box_opacity, exposures);
     result.scores.push_back({v.name, Psnr(render, v.image)});
     const std::string stem = fs::path(v.name).filename().replace_extension().string();
     const fs::path file = out_dir / (stem + ".png");

@@ -41,10 +41,8 @@ struct SmoothnessWeights {
 // brick-sparse one (its brick table and, slot by slot, the brick each slot holds).
 struct SmoothnessLayout {
   int n = 0, m = 0, num_shells = 0;
-  int64_t grid_params = 0;
-  int64_t sh_start = 0;             // where the grid's spherical harmonics start (VolumeShape::ShStart)
-  int sh_degree = 0;                // their degree (0: none)
-  int64_t exposure_start = 0;       // where the exposures start (VolumeShape::ExposureStart)
+  ParamLayout params;               // where the shells, spherical harmonics and exposures start
+  int sh_degree = 0;                // the spherical harmonics' degree (0: none)
   const int32_t* slot = nullptr;    // [(n/8)^3] brick table (BrickGrid::slot)
   const int64_t* bricks = nullptr;  // [active bricks] brick index of each slot (BrickGrid::bricks)
 };
@@ -110,23 +108,23 @@ PERF_HD_INLINE void ShellNeighbours(const SmoothnessLayout& l, int64_t texel, in
 // spherical-harmonic coefficient's are the same band and channel of the neighbouring cells (a
 // padding zero has none).
 PERF_HD_INLINE int ParamNeighbours(const SmoothnessLayout& l, int64_t i, int64_t out[6]) {
-  if (i >= l.sh_start && i < l.exposure_start) {
+  if (i >= l.params.sh_start && i < l.params.exposure_start) {
     const int stride = ShStride(l.sh_degree);
-    const int64_t cell = (i - l.sh_start) / stride;
-    const int j = static_cast<int>((i - l.sh_start) % stride);
+    const int64_t cell = (i - l.params.sh_start) / stride;
+    const int j = static_cast<int>((i - l.params.sh_start) % stride);
     if (j >= 3 * ShBands(l.sh_degree)) return 0;
     const int count = GridNeighbours(l, cell, out);
-    for (int k = 0; k < count; ++k) out[k] = l.sh_start + stride * out[k] + j;
+    for (int k = 0; k < count; ++k) out[k] = l.params.sh_start + stride * out[k] + j;
     return count;
   }
   const int ch = static_cast<int>(i % 4);
-  if (i < l.grid_params) {
+  if (i < l.params.grid_params) {
     const int count = GridNeighbours(l, i / 4, out);
     for (int k = 0; k < count; ++k) out[k] = GridParam(out[k], ch);
     return count;
   }
-  ShellNeighbours(l, (i - l.grid_params) / 4, out);
-  for (int k = 0; k < 4; ++k) out[k] = l.grid_params + 4 * out[k] + ch;
+  ShellNeighbours(l, (i - l.params.grid_params) / 4, out);
+  for (int k = 0; k < 4; ++k) out[k] = l.params.grid_params + 4 * out[k] + ch;
   return 4;
 }
 
@@ -138,9 +136,9 @@ PERF_HD_INLINE double SmoothnessRow(const SmoothnessLayout& l, const SmoothnessW
                                     int64_t i, float* lap, float* degree) {
   *lap = 0;
   *degree = 0;
-  const float w = weights.Of(KindOfParam(ParamLayout{l.grid_params, l.sh_start, l.exposure_start}, i));
+  const float w = weights.Of(KindOfParam(l.params, i));
   if (!(w > 0)) return 0;
-  if (i >= l.exposure_start) {  // the prior: L = w I
+  if (i >= l.params.exposure_start) {  // the prior: L = w I
     *lap = w * v[i];
     *degree = w;
     return 0.5 * w * static_cast<double>(v[i]) * v[i];

@@ -60,6 +60,26 @@ PERF_HD_INLINE int ExposureSlotOf(const TrainingRays<Colour>& rays, int64_t i) {
   return rays.exposure_slot ? rays.exposure_slot[rays.pixels[i].camera] : -1;
 }
 
+// The transform that parameters `params` give the photo of exposure slot `slot` (< 0: identity).
+template <class T>
+PERF_HD_INLINE ColourTransform<T> TransformOf(const T* params, int64_t exposure_start, int slot) {
+  ColourTransform<T> xf;
+  if (slot < 0) return xf;
+  const T* e = params + ExposureParam(exposure_start, slot);
+  for (int c = 0; c < 3; ++c) {
+    xf.gain[c] = 1 + e[c];
+    xf.offset[c] = e[4 + c];
+  }
+  return xf;
+}
+
+// Ray i's photo's transform at vol's parameters.
+template <class Colour>
+PERF_HD_INLINE ColourTransform<float> TransformOfRay(const TrainingRays<Colour>& rays, const VolumeView<float>& vol,
+                                                    int64_t i) {
+  return TransformOf(vol.params, vol.ExposureStart(), ExposureSlotOf(rays, i));
+}
+
 // A ray's share of the cost, in double from the float residuals: 0.5 |r|^2 over the colour and
 // opacity residuals, and the colour part's squared error (for PSNR).
 struct RayCost {

@@ -60,10 +60,8 @@ SmoothnessLayout MakeSmoothnessLayout(const VolumeShape& shape) {
   l.n = shape.n;
   l.m = shape.m;
   l.num_shells = shape.num_shells;
-  l.grid_params = shape.GridParamCount();
-  l.sh_start = shape.ShStart();
+  l.params = shape.Layout();
   l.sh_degree = shape.sh_degree;
-  l.exposure_start = shape.ExposureStart();
   if (shape.bricks) {
     l.slot = shape.bricks->slot.data();
     l.bricks = shape.bricks->bricks.data();
@@ -137,6 +135,7 @@ std::vector<float> Resample(const VolumeShape& from, std::span<const float> para
   const std::vector<Axis> g = AxisWeights(from.n, to.n);
   // The grid's spherical harmonics are interpolated as its values are (when both levels have them).
   const int sh = from.sh_degree == to.sh_degree && to.sh_degree > 0 ? ShStride(to.sh_degree) : 0;
+  const int64_t from_sh = from.ShStart(), to_sh = to.ShStart();
   ForEachStoredCell(to, [&](int i, int j, int k, int64_t to_cell) {
     double v[4 + kMaxShStride] = {};
     for (int c = 0; c < 8; ++c) {
@@ -146,10 +145,10 @@ std::vector<float> Resample(const VolumeShape& from, std::span<const float> para
       const int64_t cell = StoredCell(from, dx ? g[i].hi : g[i].lo, dy ? g[j].hi : g[j].lo, dz ? g[k].hi : g[k].lo);
       if (cell < 0) continue;  // an inactive brick: zeros
       for (int ch = 0; ch < 4; ++ch) v[ch] += w * params[GridParam(cell, ch)];
-      for (int s = 0; s < sh; ++s) v[4 + s] += w * params[from.ShStart() + sh * cell + s];
+      for (int s = 0; s < sh; ++s) v[4 + s] += w * params[from_sh + sh * cell + s];
     }
     for (int ch = 0; ch < 4; ++ch) out[GridParam(to_cell, ch)] = static_cast<float>(v[ch]);
-    for (int s = 0; s < sh; ++s) out[to.ShStart() + sh * to_cell + s] = static_cast<float>(v[4 + s]);
+    for (int s = 0; s < sh; ++s) out[to_sh + sh * to_cell + s] = static_cast<float>(v[4 + s]);
   });
   const std::vector<Axis> t = AxisWeights(from.m, to.m);
   for (int s = 0; s < to.num_shells; ++s) {

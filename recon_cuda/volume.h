@@ -39,14 +39,22 @@ struct VolumeShape {
   bool sparse() const { return bricks != nullptr; }
   // Where the shells start: 4 n^3, or 4 values per cell of the active bricks.
   int64_t GridParamCount() const { return bricks ? bricks->GridParams() : recon::GridParamCount(n); }
+  // The shells' values, and the grid's spherical harmonics' for a grid of grid_params values.
+  int64_t ShellParams() const { return 4 * static_cast<int64_t>(num_shells) * 6 * m * m; }
+  int64_t ShParams(int64_t grid_params) const { return sh_degree > 0 ? ShStride(sh_degree) * (grid_params / 4) : 0; }
   // Where the grid's spherical harmonics start: after the shells.
-  int64_t ShStart() const { return GridParamCount() + 4 * static_cast<int64_t>(num_shells) * 6 * m * m; }
+  int64_t ShStart() const { return GridParamCount() + ShellParams(); }
   // Where the exposures start: after the spherical harmonics.
-  int64_t ExposureStart() const { return ShStart() + (sh_degree > 0 ? ShStride(sh_degree) * StoredCells() : 0); }
-  int64_t ParamCount() const { return ExposureStart() + static_cast<int64_t>(kExposureValues) * exposures; }
+  int64_t ExposureStart() const { return ShStart() + ShParams(GridParamCount()); }
+  // The parameter count with a grid of grid_params values (a checkpoint checks its count before
+  // it has read its bricks).
+  int64_t ParamCountFor(int64_t grid_params) const {
+    return grid_params + ShellParams() + ShParams(grid_params) + static_cast<int64_t>(kExposureValues) * exposures;
+  }
+  int64_t ParamCount() const { return ParamCountFor(GridParamCount()); }
   ParamLayout Layout() const { return {GridParamCount(), ShStart(), ExposureStart()}; }
   int64_t StoredCells() const { return GridParamCount() / 4; }
-  int64_t ShellTexels() const { return (ShStart() - GridParamCount()) / 4; }
+  int64_t ShellTexels() const { return ShellParams() / 4; }
   // The bricks holding parameters: the active ones, or every brick of a dense grid.
   int64_t StoredBricks() const { return bricks ? bricks->ActiveBricks() : BrickCount(n); }
   // The next level of the hierarchy: every resolution doubled, the grid dense, the same photos.
