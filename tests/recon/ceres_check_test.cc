@@ -46,17 +46,23 @@ class RaysCost : public ceres::CostFunction {
   bool jitter_;
 };
 
+// Ceres' GradientChecker (its own central differences, relative precision 1e-6) on `cost` at x;
+// true when it accepts the analytic Jacobian.
+bool Probe(const ceres::CostFunction& cost, const std::vector<float>& x0, ceres::GradientChecker::ProbeResults* results) {
+  ceres::NumericDiffOptions nd;
+  const std::vector<const ceres::Manifold*>* no_manifolds = nullptr;
+  ceres::GradientChecker checker(&cost, no_manifolds, nd);
+  std::vector<double> x(x0.begin(), x0.end());
+  const double* params[] = {x.data()};
+  return checker.Probe(params, 1e-6, results);
+}
+
 TEST(CeresCheckTest, GradientCheckerAcceptsTheRayJacobian) {
   // 2^3 grid, one opaque shell of 2 x 2 texels and one translucent: every kind of parameter.
   const test::TinyProblem p(21, 2, 2, 3, 4, 3);
   const RaysCost cost(p, 1234, 0.1, true);
-  ceres::NumericDiffOptions nd;
-  const std::vector<const ceres::Manifold*>* no_manifolds = nullptr;
-  ceres::GradientChecker checker(&cost, no_manifolds, nd);
-  std::vector<double> x(p.x.begin(), p.x.end());
-  const double* params[] = {x.data()};
   ceres::GradientChecker::ProbeResults results;
-  EXPECT_TRUE(checker.Probe(params, 1e-6, &results)) << results.error_log;
+  EXPECT_TRUE(Probe(cost, p.x, &results)) << results.error_log;
   EXPECT_LT(results.maximum_relative_error, 1e-6);
   // The check covered real partials of every kind.
   const auto& jac = results.jacobians[0];
@@ -91,8 +97,7 @@ TEST(CeresCheckTest, GradientCheckerAcceptsTheRayJacobian) {
    private:
     const RaysCost& c_;
   } broken(cost);
-  ceres::GradientChecker bad(&broken, no_manifolds, nd);
-  EXPECT_FALSE(bad.Probe(params, 1e-6, &results));
+  EXPECT_FALSE(Probe(broken, p.x, &results));
 }
 
 // Per-photo exposures (issue 16): the transformed residuals' Jacobian, the volume's partials
@@ -101,13 +106,8 @@ TEST(CeresCheckTest, GradientCheckerAcceptsTheExposures) {
   test::TinyProblem p(22, 2, 2, 3, 4, 3);
   p.AddExposures(23);
   const RaysCost cost(p, 99, 0.1, true);
-  ceres::NumericDiffOptions nd;
-  const std::vector<const ceres::Manifold*>* no_manifolds = nullptr;
-  ceres::GradientChecker checker(&cost, no_manifolds, nd);
-  std::vector<double> x(p.x.begin(), p.x.end());
-  const double* params[] = {x.data()};
   ceres::GradientChecker::ProbeResults results;
-  EXPECT_TRUE(checker.Probe(params, 1e-6, &results)) << results.error_log;
+  EXPECT_TRUE(Probe(cost, p.x, &results)) << results.error_log;
   EXPECT_LT(results.maximum_relative_error, 1e-6);
   const auto& jac = results.jacobians[0];
   int gains = 0, offsets = 0, volume = 0;
@@ -133,13 +133,8 @@ TEST(CeresCheckTest, GradientCheckerAcceptsTheSphericalHarmonics) {
   test::TinyProblem p(24, 2, 2, 3, 4, 3);
   p.AddSh(2, 25);
   const RaysCost cost(p, 7, 0.1, true);
-  ceres::NumericDiffOptions nd;
-  const std::vector<const ceres::Manifold*>* no_manifolds = nullptr;
-  ceres::GradientChecker checker(&cost, no_manifolds, nd);
-  std::vector<double> x(p.x.begin(), p.x.end());
-  const double* params[] = {x.data()};
   ceres::GradientChecker::ProbeResults results;
-  EXPECT_TRUE(checker.Probe(params, 1e-6, &results)) << results.error_log;
+  EXPECT_TRUE(Probe(cost, p.x, &results)) << results.error_log;
   EXPECT_LT(results.maximum_relative_error, 1e-6);
   const auto& jac = results.jacobians[0];
   std::vector<int> per_band(ShBands(2), 0);

@@ -142,6 +142,40 @@ TEST(CpuBackendTest, JtJpMatchesTheDenseJacobianCachedAndRecomputed) {
   }
 }
 
+// What the dense Jacobian says the passes must give: the cost, J^T r, diag(J^T J) and J^T J pv.
+struct DenseWant {
+  double cost;
+  std::vector<double> jtr, diag, jtjp;
+  DenseWant(const DenseJacobian& j, const std::vector<float>& pv)
+      : cost(j.Cost()), jtr(j.Jtr()), diag(j.Diag()), jtjp(j.Jtu(j.Jp(std::vector<double>(pv.begin(), pv.end())))) {}
+};
+struct PassOutputs {
+  std::vector<float> g, d, out;  // J^T r, diag(J^T J), J^T J pv
+};
+
+// Linearize, Cost and MultiplyJtJ of a 2-thread CPU backend (its Jacobian recorded or recomputed)
+// on p at p.x, each against `want`; returns the vectors for checks of their own entries.
+PassOutputs ExpectPassesMatch(const TinyProblem& p, const DenseWant& want, const std::vector<float>& pv, uint32_t seed,
+                              bool cache) {
+  auto b = Cpu(2, cache);
+  b->SetLevel(p.Level(), kVectors);
+  b->Upload(kX, p.x);
+  b->Upload(kP, pv);
+  const PassStats s = b->Linearize(kX, seed, kG, kD);
+  EXPECT_NEAR(s.cost, want.cost, 1e-5 * want.cost);
+  EXPECT_NEAR(b->Cost(kX, seed).cost, want.cost, 1e-5 * want.cost);
+  b->MultiplyJtJ(kP, kOut);
+  PassOutputs o{std::vector<float>(p.shape.ParamCount()), std::vector<float>(p.shape.ParamCount()),
+                std::vector<float>(p.shape.ParamCount())};
+  b->Download(kG, o.g);
+  b->Download(kD, o.d);
+  b->Download(kOut, o.out);
+  ExpectClose(o.g, want.jtr, "J^T r");
+  ExpectClose(o.d, want.diag, "diag(J^T J)");
+  ExpectClose(o.out, want.jtjp, "J^T J p");
+  return o;
+}
+
 // Per-photo exposures (issue 16): every pass against the dense Jacobian of the transformed
 // residuals (gain (1 + gamma) times the volume's partials, H and 1 for the photo's own entries),
 // with the Jacobian recorded and recomputed; the exposure entries are exercised (non-zero) and
@@ -156,32 +190,17 @@ TEST(CpuBackendTest, ExposuresMatchTheDenseJacobian) {
   std::normal_distribution<float> normal;
   std::vector<float> pv(p.shape.ParamCount());
   for (int64_t i = 0; i < p.shape.ParamCount(); ++i) pv[i] = i % 4 == 3 && i >= p.shape.ExposureStart() ? 0.f : normal(rng);
-  const std::vector<double> want = j.Jtu(j.Jp(std::vector<double>(pv.begin(), pv.end())));
-  const std::vector<double> jtr = j.Jtr(), diag = j.Diag();
+  const DenseWant want(j, pv);
   for (bool cache : {true, false}) {
     SCOPED_TRACE(cache ? "recorded" : "recomputed");
-    auto b = Cpu(2, cache);
-    b->SetLevel(p.Level(), kVectors);
-    b->Upload(kX, p.x);
-    b->Upload(kP, pv);
-    const PassStats s = b->Linearize(kX, seed, kG, kD);
-    EXPECT_NEAR(s.cost, j.Cost(), 1e-5 * j.Cost());
-    EXPECT_NEAR(b->Cost(kX, seed).cost, j.Cost(), 1e-5 * j.Cost());
-    b->MultiplyJtJ(kP, kOut);
-    std::vector<float> g(p.shape.ParamCount()), d(p.shape.ParamCount()), out(p.shape.ParamCount());
-    b->Download(kG, g);
-    b->Download(kD, d);
-    b->Download(kOut, out);
-    ExpectClose(g, jtr, "J^T r");
-    ExpectClose(d, diag, "diag(J^T J)");
-    ExpectClose(out, want, "J^T J p");
+    const PassOutputs o = ExpectPassesMatch(p, want, pv, seed, cache);
     for (int64_t i = p.shape.ExposureStart(); i < p.shape.ParamCount(); ++i) {
       SCOPED_TRACE(i);
       const bool pad = (i - p.shape.ExposureStart()) % 4 == 3;
-      EXPECT_EQ(pad, g[i] == 0.f && d[i] == 0.f && out[i] == 0.f);
-      EXPECT_NEAR(d[i], diag[i], 1e-5 * std::abs(diag[i]) + 1e-6);
-      EXPECT_NEAR(g[i], jtr[i], 1e-4 * std::abs(jtr[i]) + 1e-5);
-      EXPECT_NEAR(out[i], want[i], 1e-4 * std::abs(want[i]) + 1e-4);
+      EXPECT_EQ(pad, o.g[i] == 0.f && o.d[i] == 0.f && o.out[i] == 0.f);
+      EXPECT_NEAR(o.d[i], want.diag[i], 1e-5 * std::abs(want.diag[i]) + 1e-6);
+      EXPECT_NEAR(o.g[i], want.jtr[i], 1e-4 * std::abs(want.jtr[i]) + 1e-5);
+      EXPECT_NEAR(o.out[i], want.jtjp[i], 1e-4 * std::abs(want.jtjp[i]) + 1e-4);
     }
   }
   const DenseJacobian without(plain, plain.x, seed, 0.1);
@@ -208,32 +227,17 @@ TEST(CpuBackendTest, SphericalHarmonicsMatchTheDenseJacobian) {
     for (int64_t i = p.shape.ExposureStart(); i < p.shape.ParamCount(); ++i) {
       if ((i - p.shape.ExposureStart()) % 4 == 3) pv[i] = 0;
     }
-    const std::vector<double> want = j.Jtu(j.Jp(std::vector<double>(pv.begin(), pv.end())));
-    const std::vector<double> jtr = j.Jtr(), diag = j.Diag();
+    const DenseWant want(j, pv);
     for (bool cache : {true, false}) {
       SCOPED_TRACE(cache ? "recorded" : "recomputed");
-      auto b = Cpu(2, cache);
-      b->SetLevel(p.Level(), kVectors);
-      b->Upload(kX, p.x);
-      b->Upload(kP, pv);
-      const PassStats s = b->Linearize(kX, seed, kG, kD);
-      EXPECT_NEAR(s.cost, j.Cost(), 1e-5 * j.Cost());
-      EXPECT_NEAR(b->Cost(kX, seed).cost, j.Cost(), 1e-5 * j.Cost());
-      b->MultiplyJtJ(kP, kOut);
-      std::vector<float> g(p.shape.ParamCount()), d(p.shape.ParamCount()), out(p.shape.ParamCount());
-      b->Download(kG, g);
-      b->Download(kD, d);
-      b->Download(kOut, out);
-      ExpectClose(g, jtr, "J^T r");
-      ExpectClose(d, diag, "diag(J^T J)");
-      ExpectClose(out, want, "J^T J p");
+      const PassOutputs o = ExpectPassesMatch(p, want, pv, seed, cache);
       // The coefficients' own entries, on their own scale, and some of them exercised.
       int nonzero = 0;
       for (int64_t i = p.shape.ShStart(); i < p.shape.ExposureStart(); ++i) {
-        EXPECT_NEAR(g[i], jtr[i], 1e-4 * std::abs(jtr[i]) + 1e-5) << i;
-        EXPECT_NEAR(d[i], diag[i], 1e-4 * std::abs(diag[i]) + 1e-6) << i;
-        EXPECT_NEAR(out[i], want[i], 1e-4 * std::abs(want[i]) + 1e-4) << i;
-        nonzero += std::abs(jtr[i]) > 1e-3;
+        EXPECT_NEAR(o.g[i], want.jtr[i], 1e-4 * std::abs(want.jtr[i]) + 1e-5) << i;
+        EXPECT_NEAR(o.d[i], want.diag[i], 1e-4 * std::abs(want.diag[i]) + 1e-6) << i;
+        EXPECT_NEAR(o.out[i], want.jtjp[i], 1e-4 * std::abs(want.jtjp[i]) + 1e-4) << i;
+        nonzero += std::abs(want.jtr[i]) > 1e-3;
       }
       EXPECT_GT(nonzero, 50);
     }

@@ -25,6 +25,23 @@ namespace {
 
 namespace fs = std::filesystem;
 
+// Lego imported at 50 x 50 (downscale 16) into `workspace`, and a CPU reconstruction of it.
+ImportOptions LegoImport(const fs::path& workspace) {
+  ImportOptions io;
+  io.nerf_json = test::SharedData("lego") / "transforms_train.json";
+  io.workspace = workspace;
+  io.downscale = 16;
+  return io;
+}
+ReconstructOptions CpuReconstruct(const fs::path& workspace, int levels, int iterations) {
+  ReconstructOptions o;
+  o.workspace = workspace;
+  o.device = DeviceChoice::kCpu;
+  o.levels = levels;
+  o.iterations = iterations;
+  return o;
+}
+
 class LegoTest : public ::testing::Test {
  protected:
   // One reconstruction for both tests.
@@ -32,17 +49,8 @@ class LegoTest : public ::testing::Test {
     const fs::path lego = test::SharedData("lego");
     if (lego.empty()) return;
     dir_ = new test::TempDir();
-    ImportOptions io;
-    io.nerf_json = lego / "transforms_train.json";
-    io.workspace = *dir_ / "ws";
-    io.downscale = 16;
-    RunImport(io);
-    ReconstructOptions o;
-    o.workspace = io.workspace;
-    o.device = DeviceChoice::kCpu;
-    o.levels = 2;
-    o.iterations = 8;
-    result_ = new ReconstructResult(Reconstruct(o));
+    RunImport(LegoImport(*dir_ / "ws"));
+    result_ = new ReconstructResult(Reconstruct(CpuReconstruct(*dir_ / "ws", 2, 8)));
   }
   static void TearDownTestSuite() {
     delete result_;
@@ -117,17 +125,10 @@ TEST(LegoBox, ABoxTooSmallGrowsWhereTheObjectGoesOn) {
   PERF_REQUIRE_DATA(lego, "lego");
   test::TempDir dir;
   const auto fit = [&](const std::string& name, bool grow) {
-    ImportOptions io;
-    io.nerf_json = test::SharedData("lego") / "transforms_train.json";
-    io.workspace = dir.path() / name;
-    io.downscale = 16;
+    ImportOptions io = LegoImport(dir.path() / name);
     io.box_size = Eigen::Vector3d(1.5, 1.5, 1.5);
     RunImport(io);
-    ReconstructOptions o;
-    o.workspace = io.workspace;
-    o.device = DeviceChoice::kCpu;
-    o.levels = 1;
-    o.iterations = 8;
+    ReconstructOptions o = CpuReconstruct(io.workspace, 1, 8);
     o.grow_box = grow;
     std::vector<std::string> said;
     o.on_event = [&](const ReconstructOptions::Event& e) {
