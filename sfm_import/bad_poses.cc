@@ -1,26 +1,75 @@
 #include "sfm_import/bad_poses.h"
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <optional>
 
 #include "common/errors.h"
 #include "sfm_import/bounds.h"
+#include "sfm_import/camera_models.h"
 #include "sfm_import/colmap_pose.h"
 
 namespace perf {
+namespace {
+
+// The pinhole part of an image's camera (distortion does not move the principal region much),
+// or nullopt for a model PERF does not know.
+std::optional<BoundsCamera> PinholeOf(const colmap::Reconstruction& rec, const colmap::Image& im) {
+  const auto cam = rec.cameras.find(im.camera_id);
+  if (cam == rec.cameras.end() || !colmap::FindCameraModel(cam->second.model_id)) return std::nullopt;
+  const colmap::FocalAndCentre f =
+      colmap::GetFocalAndCentre(static_cast<colmap::CameraModelId>(cam->second.model_id), cam->second.params.data());
+  return BoundsCamera{WorldFromCam(im), f.fx, f.fy, f.cx, f.cy, static_cast<int>(cam->second.width),
+                      static_cast<int>(cam->second.height)};
+}
+
+// The point the cameras look at: closest to the optical axes of the cameras that look towards
+// the first estimate (within 30 degrees), so that a few turned-away poses do not pull it; nullopt
+// unless most cameras (60 %) look at it.
+std::optional<Eigen::Vector3d> LookedAtPoint(const std::vector<BoundsCamera>& cameras) {
+  Eigen::Vector3d p;
+  if (!ClosestPointToAxes(cameras, &p)) return std::nullopt;
+  std::vector<BoundsCamera> inward;
+  for (const BoundsCamera& c : cameras) {
+    const Eigen::Vector3d to_p = (p - c.world_from_cam.col(3)).normalized();
+    if (to_p.dot(c.world_from_cam.col(2).normalized()) > std::cos(30.0 * M_PI / 180.0)) inward.push_back(c);
+  }
+  if (inward.size() < 0.6 * static_cast<double>(cameras.size())) return std::nullopt;
+  if (!ClosestPointToAxes(inward, &p)) return std::nullopt;
+  return p;
+}
+
+double DegreesOffAxis(const BoundsCamera& c, const Eigen::Vector3d& p) {
+  const Eigen::Vector3d to_p = (p - c.world_from_cam.col(3)).normalized();
+  return std::acos(std::clamp(to_p.dot(c.world_from_cam.col(2).normalized()), -1.0, 1.0)) * 180.0 / M_PI;
+}
+
+}  // namespace
 
 std::string BadPose::Describe() const {
   char buf[64];
   std::snprintf(buf, sizeof buf, "%.1f units", distance);
   std::string d = buf;
   std::snprintf(buf, sizeof buf, "%.1f", median_distance);
-  return StrCat(name, ": ", d, " from the cameras' centre (median ", buf, "), ", points, " points (median ",
-                median_points, ")");
+  std::string s = StrCat(name, ": ", d, " from the cameras' centre (median ", buf, "), ", points, " points (median ",
+                         median_points, ")");
+  if (away_degrees >= 0) {
+    char from[64];
+    std::snprintf(from, sizeof from, "%.1f units (median %.1f)", from_looked_at, median_from_looked_at);
+    std::snprintf(buf, sizeof buf, "%.0f", away_degrees);
+    s += StrCat(", ", from, " from the point the cameras look at, which is ", buf,
+                " degrees off its axis and out of its view");
+  }
+  return s;
 }
 
 std::vector<BadPose> FindBadPoses(const colmap::Reconstruction& rec, const BadPoseOptions& o) {
   if (rec.images.size() < 4) return {};
   std::vector<Eigen::Vector3d> centres;
   std::vector<int> points;
+  std::vector<std::optional<BoundsCamera>> pinholes;
+  std::vector<BoundsCamera> known;
   for (const auto& [id, im] : rec.images) {
     centres.push_back(WorldFromCam(im).col(3));
     int seen = 0;
@@ -28,6 +77,8 @@ std::vector<BadPose> FindBadPoses(const colmap::Reconstruction& rec, const BadPo
       seen += p.point3D_id != colmap::kInvalidPoint3DId && rec.points3D.count(p.point3D_id) > 0;
     }
     points.push_back(seen);
+    pinholes.push_back(PinholeOf(rec, im));
+    if (pinholes.back()) known.push_back(*pinholes.back());
   }
   Eigen::Vector3d centre;
   for (int a = 0; a < 3; ++a) {
@@ -39,11 +90,29 @@ std::vector<BadPose> FindBadPoses(const colmap::Reconstruction& rec, const BadPo
   for (const Eigen::Vector3d& c : centres) distances.push_back((c - centre).norm());
   const double median_distance = Median(distances);
   const int median_points = static_cast<int>(Median(std::vector<double>(points.begin(), points.end())));
+  const std::optional<Eigen::Vector3d> looked_at = LookedAtPoint(known);
+  double median_from_looked_at = 0;
+  if (looked_at) {
+    std::vector<double> from;
+    for (const Eigen::Vector3d& c : centres) from.push_back((c - *looked_at).norm());
+    median_from_looked_at = Median(from);
+  }
   std::vector<BadPose> bad;
   size_t i = 0;
   for (const auto& [id, im] : rec.images) {
-    if (distances[i] > o.max_distance_ratio * median_distance && points[i] < o.max_point_fraction * median_points) {
-      bad.push_back({im.name, distances[i], median_distance, points[i], median_points});
+    const bool far_and_weak =
+        distances[i] > o.max_distance_ratio * median_distance && points[i] < o.max_point_fraction * median_points;
+    const bool far_and_away = looked_at && pinholes[i] &&
+                              (centres[i] - *looked_at).norm() > o.away_distance_ratio * median_from_looked_at &&
+                              !InFrustum(*pinholes[i], *looked_at);
+    if (far_and_weak || far_and_away) {
+      BadPose b{im.name, distances[i], median_distance, points[i], median_points};
+      if (far_and_away) {
+        b.away_degrees = DegreesOffAxis(*pinholes[i], *looked_at);
+        b.from_looked_at = (centres[i] - *looked_at).norm();
+        b.median_from_looked_at = median_from_looked_at;
+      }
+      bad.push_back(b);
     }
     ++i;
   }
