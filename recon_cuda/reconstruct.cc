@@ -454,6 +454,11 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     emit(e);
     return true;
   };
+  json photo_fits = nullptr;  // after the first level (photo_fit.h)
+  std::vector<std::string> train_names;  // every rank's training photos, scene.json order
+  for (const SceneImage& im : scene.images) {
+    if (im.split == Split::kTrain) train_names.push_back(im.name);
+  }
   json box_faces = json::array();  // after the first level (box_check.h)
   std::string box_warning;
   std::vector<int> grow_faces;  // set after level 0: fit it again in a box grown there
@@ -484,6 +489,19 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     lr.train_psnr = summary.per_iteration.empty() ? 0 : summary.per_iteration.back().train_psnr;
     lr.status = StatusName(summary.status);
     const PhotoExposures fitted(h.shape, x, train_views);  // none when the level solves none
+    if (h.level == 0) {
+      const auto t0 = WallClock::now();
+      const PhotoFits fits = CheckPhotoFits(backend.get(), h.params, train, train_names, fitted, comm, o.photo_fit);
+      eval_seconds += SecondsSince(t0);
+      json poor = json::array();
+      for (const PhotoFit& f : fits.poor) poor.push_back({{"name", f.name}, {"psnr", f.psnr}});
+      photo_fits = {{"after_level", 1},
+                    {"median_psnr", fits.median_psnr},
+                    {"max_db_below_median", o.photo_fit.max_db_below_median},
+                    {"poor", poor}};
+      write_log({{"event", "photo_fits"}, {"photo_fits", photo_fits}});
+      if (!fits.poor.empty()) say("warning: " + fits.Warning(o.photo_fit));
+    }
     if (test_views > 0) {
       // The last iteration's, when the log has it; else now (the backend still holds x).
       lr.test_psnr = held_out_iteration == summary.iterations - 1 ? held_out_psnr : held_out(h.params, fitted);
@@ -633,6 +651,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                      {"iterations_per_level", o.iterations},
                      {"level_iterations", o.level_iterations},
                      {"excluded_views", excluded_views},
+                     {"photo_fits", photo_fits},
                      {"box_faces", box_faces},
                      {"box_warning", box_warning},
                      {"box_growths", box_growths},

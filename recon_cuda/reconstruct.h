@@ -20,6 +20,7 @@
 #include "recon_cuda/device_choice.h"
 #include "recon_cuda/hierarchy.h"
 #include "recon_cuda/level_choice.h"
+#include "recon_cuda/photo_fit.h"
 #include "recon_cuda/render_rule.h"
 #include "recon_cuda/solver.h"
 #include "recon_cuda/training_data.h"
@@ -72,6 +73,9 @@ struct ReconstructOptions {
   // Where the first level's density reaches a side or top face of the box, grow the box there and
   // fit that level again (box_check.h; at most kMaxBoxGrowths times); false: only warn.
   bool grow_box = true;
+  // After the first level, the training photos that fit far worse than the median are named
+  // (photo_fit.h; output, log and recon.json) and kept.
+  PhotoFitOptions photo_fit;
   OccupancyOptions occupancy;  // which bricks a sparse level keeps
   bool resume = false;          // continue after the last checkpoint instead of starting over
   int preview_every = 0;        // write a held-out preview every K iterations (0: never)

@@ -47,12 +47,14 @@ double DegreesOffAxis(const BoundsCamera& c, const Eigen::Vector3d& p) {
 
 }  // namespace
 
-std::string BadPose::Describe() const {
+std::string BadPose::Describe() const { return StrCat(name, ": ", Why()); }
+
+std::string BadPose::Why() const {
   char buf[64];
   std::snprintf(buf, sizeof buf, "%.1f units", distance);
   std::string d = buf;
   std::snprintf(buf, sizeof buf, "%.1f", median_distance);
-  std::string s = StrCat(name, ": ", d, " from the cameras' centre (median ", buf, "), ", points, " points (median ",
+  std::string s = StrCat(d, " from the cameras' centre (median ", buf, "), ", points, " points (median ",
                          median_points, ")");
   if (away_degrees >= 0) {
     char from[64];

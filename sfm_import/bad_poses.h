@@ -48,6 +48,7 @@ struct BadPose {
   // 1064)", and for the second rule ", 8.0 units (median 4.5) from the point the cameras look at,
   // which is 80 degrees off its axis and out of its view".
   std::string Describe() const;
+  std::string Why() const;  // Describe() without the name
 };
 
 // The images of `rec` that are far and weak, or far and looking away, in image-id order. Fewer than 4 images: none.

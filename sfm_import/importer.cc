@@ -122,7 +122,8 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
   std::map<std::string, std::string> bad_poses;  // image name -> why
   for (const BadPose& b : FindBadPoses(rec)) {
     bad_poses[b.name] = StrCat("pose looks wrong: ", b.Describe());
-    r->warnings.push_back(StrCat("the pose of ", b.Describe(), " looks wrong: COLMAP may have registered it in the wrong place; ",
+    r->warnings.push_back(StrCat("the pose of ", b.name, " looks wrong (", b.Why(),
+                                 "): COLMAP may have registered it in the wrong place; ",
                                  o.keep_bad_poses ? "kept (--keep-bad-poses)"
                                                   : "left out of training and scoring (--keep-bad-poses keeps it)"));
   }

@@ -146,6 +146,11 @@ TEST_F(ExportCli, APhotoLeftOutOnImportIsNamedAndGetsNoMask) {
   ASSERT_EQ(recon["excluded_views"].size(), 1u);
   EXPECT_EQ(recon["excluded_views"][0]["name"], name);
   EXPECT_EQ(recon["excluded_views"][0]["because"], "pose looks wrong: a test");
+  // The first level's fit of every training photo was checked (photo_fit.h), the left-out one not.
+  EXPECT_EQ(recon["photo_fits"]["after_level"], 1);
+  EXPECT_GT(recon["photo_fits"]["median_psnr"].get<double>(), 0.0);
+  ASSERT_TRUE(recon["photo_fits"]["poor"].is_array());
+  for (const auto& p : recon["photo_fits"]["poor"]) EXPECT_NE(p["name"], name);
 
   r = RunCommand(Perf("export " + ws_.string() + " --no-volume --no-mesh --orbit-frames 0"));
   ASSERT_EQ(r.exit_code, 0) << r.output;

@@ -1,0 +1,49 @@
+// Training photos the first level fits far worse than the others (issue 16). A photo whose pose
+// is a little off, or that shows what the others do not (a passer-by, motion blur), keeps a large
+// error however the volume is fitted. perf reconstruct names such photos after the first level, in
+// its output and in recon.json (`photo_fits`), and keeps training on them: on the bonsai example
+// the photos that fit worst are the start of the capture, whose poses disagree with the rest by
+// a shift of the object, and leaving them out lowered held-out PSNR from 19.28 to 18.79 dB (the
+// held-out view among them lost its neighbours; docs/tuning.md "What limits the example").
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "common/comm.h"
+#include "recon_cuda/backend.h"
+#include "recon_cuda/exposure.h"
+#include "recon_cuda/training_data.h"
+
+namespace perf::recon {
+
+struct PhotoFitOptions {
+  // A photo fits poorly when its PSNR is more than this many dB below the median training photo's
+  // (2.5 times the median's squared error). Bonsai example, first level: median 23.7 dB, the two
+  // worst 4.8 and 4.6 dB below it, the next 3.5 dB.
+  double max_db_below_median = 4.0;
+};
+
+struct PhotoFit {
+  std::string name;
+  double psnr = 0;
+};
+
+struct PhotoFits {
+  double median_psnr = 0;
+  std::vector<PhotoFit> poor;  // worst first
+  // One line naming the poor fits, what they may mean and what to do; empty when there are none.
+  std::string Warning(const PhotoFitOptions& options = {}) const;
+};
+
+// The poor fits among photos `fits` (any order); none for fewer than 3 photos.
+PhotoFits FindPoorFits(std::vector<PhotoFit> fits, const PhotoFitOptions& options = {});
+
+// Every training photo rendered as shot at parameters x (evaluation.h RenderAsShot, its own
+// exposure) and scored; the poor fits among them. share: this rank's training photos; names:
+// every rank's, in scene.json order (collective over comm).
+PhotoFits CheckPhotoFits(Backend* backend, VecId x, const std::vector<PosedImage>& share,
+                         const std::vector<std::string>& names, const PhotoExposures& exposures, Communicator& comm,
+                         const PhotoFitOptions& options = {});
+
+}  // namespace perf::recon
