@@ -63,6 +63,11 @@ void AddReconstructCommand(CLI::App& app) {
                   "where every photo had alpha)")
       ->capture_default_str();
   cmd->add_flag("--no-aux", args->no_aux, "Switch the opacity residual off (either kind)");
+  cmd->add_option("--robust", o.residuals.robust_scale,
+                  "Robust colour loss: Cauchy with this scale (a ray whose colour error is this large counts half "
+                  "as much as in least squares), solved by reweighting inside Gauss-Newton from the second level "
+                  "on; 0: least squares")
+      ->capture_default_str();
   cmd->add_option("--stop-transmittance", o.residuals.stop_transmittance,
                   "End a ray's march once its transmittance is below this (0: march the whole box)")
       ->capture_default_str();

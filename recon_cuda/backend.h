@@ -44,6 +44,10 @@ struct ResidualSettings {
   bool use_alpha = true;
   // The weight of that alpha residual (lambda's counterpart); 0.3 (docs/tuning.md).
   float alpha_weight = 0.3f;
+  // The colour residuals' robust loss: Cauchy with this scale c (a ray whose colour error |r| is c
+  // counts half as much as in least squares), solved by reweighting inside Gauss-Newton
+  // (jacobian.h RobustRowScale); 0: least squares.
+  float robust_scale = 0.f;
 };
 
 // Everything a backend needs for one level of the hierarchy.

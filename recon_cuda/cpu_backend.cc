@@ -57,6 +57,7 @@ class CpuBackend final : public Backend {
              UsesAlpha(p) ? p.rays->alphas.data() : nullptr, p.rays->size(), p.rays->first_index,
              ExposureSlots(p)};
     weight_ = OpacityResidualWeight(p);
+    robust_ = p.residuals.robust_scale;
     const MemoryEstimate e = EstimateMemory(p, num_vectors);
     if (!e.Fits()) {
       throw ResourceError(StrCat("level ", DescribeShape(p.shape), " needs ", e.Needed() >> 20, " MiB for the solver's ",
@@ -173,6 +174,7 @@ class CpuBackend final : public Backend {
         const SampleJ* samples;
         const ShellJ* shells;
         const float* h;
+        float scale;
         int count;
         if (recorded_) {
           const BlockJ& b = blocks_[block];
@@ -182,14 +184,16 @@ class CpuBackend final : public Backend {
           count = static_cast<int>(b.end[r] - first);
           shells = &b.shells[r * k_shells];
           h = &b.h[3 * r];
+          scale = b.scale[r];
         } else {
           RecomputeRow(vol, tr, i, s);
           samples = s.row.samples.data();
           count = static_cast<int>(s.row.samples.size());
           shells = s.row.shells.data();
           h = s.row.h.data();
+          scale = s.row.scale[0];
         }
-        const RayExposure<float> e = ExposureAt(vol, i, h);
+        const RayExposure<float> e = ExposureAt(vol, i, h, scale);
         const RaySh<float> sh = ShOfRay(vol, ray);
         float u[4] = {0, 0, 0, 0};
         TexelSample<float> ts[kMaxShells];
@@ -248,7 +252,7 @@ class CpuBackend final : public Backend {
         const RayOutput<float> fwd =
             Forward(vol, tr.ray, tr.jit, &level_.rays->colours[3 * i], weight_, level_.residuals.stop_transmittance,
                     nullptr, AlphaOf(rays_, i), TransformAt(vol, i));
-        bs.Add(fwd);
+        bs.Add(fwd, robust_);
       }
       return bs;
     });
@@ -283,8 +287,8 @@ class CpuBackend final : public Backend {
   struct BlockStats {
     double cost = 0, colour_sse = 0, subset_cost = 0;
     int64_t rays = 0, samples = 0;
-    void Add(const RayOutput<float>& o, bool in_subset = false) {
-      const RayCost c = CostOf(o);
+    void Add(const RayOutput<float>& o, float robust_scale, bool in_subset = false) {
+      const RayCost c = CostOf(o, robust_scale);
       colour_sse += c.colour_sse;
       cost += c.cost;
       if (in_subset) subset_cost += c.cost;
@@ -308,25 +312,29 @@ class CpuBackend final : public Backend {
       const RayOutput<float> fwd =
           Forward(vol, ray, jit, &level_.rays->colours[3 * i], weight_, level_.residuals.stop_transmittance,
                   s.record.data(), AlphaOf(rays_, i), xf);
-      const RayExposure<float> e = ExposureOfRay(vol.ExposureStart(), ExposureSlotOf(rays_, i), xf, fwd.h);
+      const float scale = RobustRowScale(fwd.residual, robust_);
+      const RayExposure<float> e = ExposureOfRay(vol.ExposureStart(), ExposureSlotOf(rays_, i), xf, fwd.h, scale);
+      float r[4];  // the weighted system's residuals
+      ScaledResidual(e, fwd.residual, r);
       LinearizeVisitor<kDiag> v{{},
                                 {},
                                 AddSink{s.acc.data(), kDiag ? 1 : 0, 0},
                                 AddSink{kDiag ? s.acc.data() : nullptr, 1, 4},
                                 out,
                                 out ? &out->shells[(i - begin) * level_.shape.num_shells] : nullptr};
-      VolumeU(e, fwd.residual, v.r);
+      VolumeU(e, r, v.r);
       GainSquared(e, v.g2);
       v.sh = ShOfRay(vol, ray);
       Backward(vol, ray, jit, fwd, v, s.record.data());
       v.Finish();
-      ScatterJtuExposure(e, fwd.residual, v.g);
+      ScatterJtuExposure(e, r, v.g);
       if constexpr (kDiag) AddDiagExposure(e, v.d);
       if (out) {
         out->end[i - begin] = static_cast<uint32_t>(out->samples.size());
         for (int c = 0; c < 3; ++c) out->h[3 * (i - begin) + c] = fwd.h[c];
+        out->scale[i - begin] = scale;
       }
-      bs.Add(fwd, subset.Contains(i));
+      bs.Add(fwd, robust_, subset.Contains(i));
     }
     return bs;
   }
@@ -343,8 +351,8 @@ class CpuBackend final : public Backend {
   ColourTransform<float> TransformAt(const VolumeView<float>& vol, int64_t i) const {
     return TransformOfRay(rays_, vol, i);
   }
-  RayExposure<float> ExposureAt(const VolumeView<float>& vol, int64_t i, const float* h) const {
-    return ExposureOfRay(vol.ExposureStart(), ExposureSlotOf(rays_, i), TransformAt(vol, i), h);
+  RayExposure<float> ExposureAt(const VolumeView<float>& vol, int64_t i, const float* h, float scale) const {
+    return ExposureOfRay(vol.ExposureStart(), ExposureSlotOf(rays_, i), TransformAt(vol, i), h, scale);
   }
 
   // Ray i in the iteration of `seed` (training_ray.h, as the CUDA passes read it).
@@ -359,6 +367,7 @@ class CpuBackend final : public Backend {
     b->end.assign(rays, 0);
     b->shells.assign(rays * level_.shape.num_shells, ShellJ{{-1, 0.f, 0.f}, {}});
     b->h.assign(3 * rays, 0.f);
+    b->scale.assign(rays, 1.f);
   }
 
   // The partials of ray i at the linearisation point, into s.row (no recorded Jacobian).
@@ -366,11 +375,13 @@ class CpuBackend final : public Backend {
     const BoxRay<float>& ray = tr.ray;
     const Jitter& jit = tr.jit;
     ClearBlock(&s.row, 1);
-    const RayOutput<float> fwd = Forward(vol, ray, jit, &level_.rays->colours[3 * i], weight_,
-                                         level_.residuals.stop_transmittance, s.record.data(), AlphaOf(rays_, i));
+    const RayOutput<float> fwd =
+        Forward(vol, ray, jit, &level_.rays->colours[3 * i], weight_, level_.residuals.stop_transmittance,
+                s.record.data(), AlphaOf(rays_, i), TransformAt(vol, i));
     RecordOnly visitor{&s.row};
     Backward(vol, ray, jit, fwd, visitor, s.record.data());
     for (int c = 0; c < 3; ++c) s.row.h[c] = fwd.h[c];
+    s.row.scale[0] = RobustRowScale(fwd.residual, robust_);
   }
   // A cell's merged J^T u values (JtuValues summed along the ray) into the grid and its bands.
   struct MergedScatter {
@@ -433,7 +444,7 @@ class CpuBackend final : public Backend {
     int64_t samples = 0;
     for (int64_t c : per_block) samples += c;
     return samples * static_cast<int64_t>(sizeof(SampleJ)) +
-           n * (static_cast<int64_t>(sizeof(uint32_t) + 3 * sizeof(float)) +
+           n * (static_cast<int64_t>(sizeof(uint32_t) + 4 * sizeof(float)) +
                 p.shape.num_shells * static_cast<int64_t>(sizeof(ShellJ)));
   }
 
@@ -529,6 +540,7 @@ class CpuBackend final : public Backend {
   int max_samples_ = 0;
   TrainingRays<float> rays_{};     // the level's rays (alphas: nullptr unless UsesAlpha)
   float weight_ = 0;               // OpacityResidualWeight
+  float robust_ = 0;               // ResidualSettings::robust_scale
   VecId lin_x_ = kNoVector;
   uint32_t lin_seed_ = 0;
   uint64_t pass_ = 0;

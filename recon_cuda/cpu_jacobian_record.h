@@ -42,6 +42,7 @@ struct BlockJ {
   std::vector<uint32_t> end;  // [rays]: one past the ray's last sample in `samples`
   std::vector<ShellJ> shells;  // [rays, num_shells]
   std::vector<float> h;        // [rays, 3] the composited colour H (the exposure's partials)
+  std::vector<float> scale;    // [rays] the robust loss's row scale (jacobian.h RobustRowScale)
 };
 
 struct Scratch {

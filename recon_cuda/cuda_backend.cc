@@ -331,7 +331,8 @@ class CudaBackend final : public Backend {
             level_.residuals.stop_transmittance,
             level_.residuals.jitter,
             level_.residuals.pixel_jitter,
-            seed};
+            seed,
+            level_.residuals.robust_scale};
   }
 
   static PassStats ToPassStats(const cuda::RayStats& r, WallClock::time_point t0) {

@@ -39,6 +39,7 @@ struct PassInput {
   float lambda, stop_transmittance;
   bool jitter, pixel_jitter;
   uint32_t seed;
+  float robust;  // ResidualSettings::robust_scale
 };
 
 // Statistics of one block of rays, summed in a fixed order (per block, then over blocks).

@@ -147,8 +147,8 @@ struct SumStats {
 };
 
 // The cost of one ray (training_ray.h CostOf, as the CPU backend sums it).
-__device__ __forceinline__ RayStats StatsOf(const RayOutput<float>& o) {
-  const RayCost c = CostOf(o);
+__device__ __forceinline__ RayStats StatsOf(const RayOutput<float>& o, float robust) {
+  const RayCost c = CostOf(o, robust);
   return {c.cost, c.colour_sse, 1, o.count, 0.0};
 }
 
@@ -178,17 +178,20 @@ __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, flo
     const ColourTransform<float> xf = TransformOfRay(in.rays, in.vol, i);
     const RayOutput<float> fwd =
         Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in.rays, i), xf);
-    const RayExposure<float> e = ExposureOfRay(in.vol.ExposureStart(), slot, xf, fwd.h);
+    const RayExposure<float> e =
+        ExposureOfRay(in.vol.ExposureStart(), slot, xf, fwd.h, RobustRowScale(fwd.residual, in.robust));
+    float rs[4];  // the weighted system's residuals
+    ScaledResidual(e, fwd.residual, rs);
     ScatterVisitor<kDiag> v{{0, 0, 0, 0}, {g}, {diag}, {}};
-    VolumeU(e, fwd.residual, v.u);
+    VolumeU(e, rs, v.u);
     GainSquared(e, v.g2);
     v.sh = ShOfRay(in.vol, r.ray);
     Backward(in.vol, r.ray, r.jit, fwd, v);
     v.Finish();
     eg.base = ed.base = e.param;
-    ScatterJtuExposure(e, fwd.residual, eg);
+    ScatterJtuExposure(e, rs, eg);
     if constexpr (kDiag) AddDiagExposure(e, ed);
-    mine = StatsOf(fwd);
+    mine = StatsOf(fwd, in.robust);
     if (i % stride == offset) mine.subset_cost = mine.cost;
   }
   WarpAddExposure(eg, g);
@@ -203,13 +206,15 @@ __global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const fl
   ExposureSums eo;
   if (i < in.rays.count) {
     const TrainingRay r = MakeRay(in, i);
-    // The partials depend on the forward's transmittances and colours, not on the target (and
-    // on whether the ray has an alpha, not on its value); the exposure's on H.
-    const float zero[3] = {0, 0, 0};
+    // The partials depend on the forward's transmittances and colours (and on whether the ray
+    // has an alpha, not on its value); the exposure's on H; the robust row scale on the residual.
+    float target[3];
+    TargetOf(in.rays, i, target);
+    const ColourTransform<float> xf = TransformOfRay(in.rays, in.vol, i);
     const RayOutput<float> fwd =
-        Forward(in.vol, r.ray, r.jit, zero, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in.rays, i));
-    const RayExposure<float> e =
-        ExposureOfRay(in.vol.ExposureStart(), ExposureSlotOf(in.rays, i), TransformOfRay(in.rays, in.vol, i), fwd.h);
+        Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in.rays, i), xf);
+    const RayExposure<float> e = ExposureOfRay(in.vol.ExposureStart(), ExposureSlotOf(in.rays, i), xf, fwd.h,
+                                               RobustRowScale(fwd.residual, in.robust));
     JpVisitor jp{p, free, {0, 0, 0, 0}};
     jp.sh = ShOfRay(in.vol, r.ray);
     Backward(in.vol, r.ray, r.jit, fwd, jp);
@@ -243,7 +248,8 @@ __global__ void __launch_bounds__(kRayThreads) CostKernel(PassInput in, int64_t 
     float target[3];
     TargetOf(in.rays, i, target);
     mine = StatsOf(Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance, nullptr,
-                           AlphaOf(in.rays, i), TransformOfRay(in.rays, in.vol, i)));
+                           AlphaOf(in.rays, i), TransformOfRay(in.rays, in.vol, i)),
+                   in.robust);
   }
   WriteBlockStats(mine, partials);
 }

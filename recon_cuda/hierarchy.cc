@@ -35,7 +35,9 @@ std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geomet
     h.image_downscale = o.pyramid ? PyramidFactor(train.views, geometry, h.shape.n, 1 << (o.levels - 1 - level)) : 1;
     const RaySet rays = train.rays(h.image_downscale);
     h.rays = rays.size();
-    const LevelProblem problem{h.shape, geometry, &rays, o.residuals, o.fixed_background};
+    ResidualSettings residuals = o.residuals;
+    if (level < o.robust_from_level) residuals.robust_scale = 0.f;
+    const LevelProblem problem{h.shape, geometry, &rays, residuals, o.fixed_background};
     if (o.stop_when_out_of_memory && level > 0) {
       h.memory = backend->EstimateMemory(problem, RequiredVectors(o.solver.type));
       if (!h.memory.Fits()) {

@@ -25,6 +25,10 @@ struct HierarchyOptions {
   SolverOptions solver;       // max_iterations and seed are set per level
   InitOptions init;           // the start of level 0
   ResidualSettings residuals;
+  // The robust loss (ResidualSettings::robust_scale) applies from this level on; the levels
+  // before fit by least squares. From the fog of the start every ray's error is large, and a
+  // robust loss there fits nothing (bonsai example, docs/tuning.md "Robust loss").
+  int robust_from_level = 1;
   // Training photos whose exposures every level solves (VolumeShape::exposures); 0: none.
   int exposures = 0;
   // Spherical harmonics of the grid's colour at every level (VolumeShape::sh_degree); 0: none.

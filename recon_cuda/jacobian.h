@@ -220,19 +220,26 @@ class CellMerger {
 // A ray's photo exposure (ray_types.h ExposureParam, ray_math.h ColourTransform): with
 // r_c = g_c H_c + b_c - C_c and g_c = 1 + gamma_c, the volume's partials of r_c are g_c times
 // those of H_c (Backward's), and d r_c / d gamma_c = H_c, d r_c / d b_c = 1. param < 0: the
-// photo's exposure is not solved (g = 1, no exposure entries), and every function below then
-// leaves the volume's values exactly as they were.
+// photo's exposure is not solved (g = 1, no exposure entries).
+//
+// scale: the robust loss's row scale (RobustRowScale; 1 without). Iteratively reweighted least
+// squares: at the linearisation point the ray's colour rows (residuals and Jacobian rows) are
+// multiplied by s = sqrt(rho'(|r|^2)), so J^T r becomes the robust cost's gradient and J^T J its
+// Gauss-Newton matrix with the weights held. The opacity residual L is not scaled.
+// With param < 0 and scale 1 every function below leaves the volume's values exactly as they were.
 template <class T>
 struct RayExposure {
   int64_t param = -1;  // the photo's gamma_r
   T gain[3] = {1, 1, 1};
   T h[3] = {0, 0, 0};  // H at the linearisation point
+  T scale = 1;
 };
 
 template <class T>
 PERF_HD_INLINE RayExposure<T> ExposureOfRay(int64_t exposure_start, int slot, const ColourTransform<T>& xf,
-                                            const T* h) {
+                                            const T* h, T scale = T(1)) {
   RayExposure<T> e;
+  e.scale = scale;
   if (slot < 0) return e;
   e.param = ExposureParam(exposure_start, slot);
   for (int c = 0; c < 3; ++c) {
@@ -242,41 +249,63 @@ PERF_HD_INLINE RayExposure<T> ExposureOfRay(int64_t exposure_start, int slot, co
   return e;
 }
 
-// The residual vector the volume's partials multiply: (g_c u_c, u_L).
+// The Cauchy loss rho(q) = c^2 log(1 + q / c^2) of a ray's squared colour residual q = |r|^2
+// (ResidualSettings::robust_scale c; c <= 0: least squares, rho(q) = q), its row scale
+// sqrt(rho'(q)) = 1 / sqrt(1 + q / c^2), and its cost 0.5 rho(q).
+template <class T>
+PERF_HD_INLINE T RobustRowScale(const T* residual, T c) {
+  if (c <= 0) return T(1);
+  const T q = residual[0] * residual[0] + residual[1] * residual[1] + residual[2] * residual[2];
+  return T(1) / Sqrt(T(1) + q / (c * c));
+}
+
+// The residuals of the weighted system: the colour ones times the row scale.
+template <class T>
+PERF_HD_INLINE void ScaledResidual(const RayExposure<T>& e, const T r[4], T out[4]) {
+  for (int c = 0; c < 3; ++c) out[c] = e.scale * r[c];
+  out[3] = r[3];
+}
+
+// The residual vector the volume's partials multiply: (s g_c u_c, u_L).
 template <class T>
 PERF_HD_INLINE void VolumeU(const RayExposure<T>& e, const T u[4], T out[4]) {
-  for (int c = 0; c < 3; ++c) out[c] = e.gain[c] * u[c];
+  for (int c = 0; c < 3; ++c) out[c] = e.scale * e.gain[c] * u[c];
   out[3] = u[3];
 }
 
 // u = J_ray p from the volume's gathers `u` (of H; AddJpSample, AddJpShell): the colour entries
-// become g_c u_c + H_c p[gamma_c] + p[b_c].
+// become s (g_c u_c + H_c p[gamma_c] + p[b_c]).
 template <class T>
 PERF_HD_INLINE void FinishJp(const RayExposure<T>& e, const T* p, T u[4]) {
-  if (e.param < 0) return;
-  for (int c = 0; c < 3; ++c) u[c] = e.gain[c] * u[c] + e.h[c] * p[e.param + c] + p[e.param + 4 + c];
+  for (int c = 0; c < 3; ++c) {
+    const T exposure = e.param < 0 ? T(0) : e.h[c] * p[e.param + c] + p[e.param + 4 + c];
+    u[c] = e.scale * (e.gain[c] * u[c] + exposure);
+  }
 }
 
-// The exposure's share of J^T u (u: the ray's residuals, or J p): H_c u_c to gamma_c, u_c to b_c.
+// The exposure's share of J^T u (u: the ray's scaled residuals, or J p): s H_c u_c to gamma_c,
+// s u_c to b_c.
 template <class T, class Sink>
 PERF_HD_INLINE void ScatterJtuExposure(const RayExposure<T>& e, const T u[4], Sink& sink) {
   if (e.param < 0) return;
-  sink.Add4(e.param, e.h[0] * u[0], e.h[1] * u[1], e.h[2] * u[2], T(0));
-  sink.Add4(e.param + 4, u[0], u[1], u[2], T(0));
+  const T s = e.scale;
+  sink.Add4(e.param, s * e.h[0] * u[0], s * e.h[1] * u[1], s * e.h[2] * u[2], T(0));
+  sink.Add4(e.param + 4, s * u[0], s * u[1], s * u[2], T(0));
 }
 
-// The exposure's share of diag(J^T J): H_c^2 and 1 (one row entry each per ray).
+// The exposure's share of diag(J^T J): (s H_c)^2 and s^2 (one row entry each per ray).
 template <class T, class Sink>
 PERF_HD_INLINE void AddDiagExposure(const RayExposure<T>& e, Sink& sink) {
   if (e.param < 0) return;
-  sink.Add4(e.param, e.h[0] * e.h[0], e.h[1] * e.h[1], e.h[2] * e.h[2], T(0));
-  sink.Add4(e.param + 4, T(1), T(1), T(1), T(0));
+  const T s2 = e.scale * e.scale;
+  sink.Add4(e.param, s2 * e.h[0] * e.h[0], s2 * e.h[1] * e.h[1], s2 * e.h[2] * e.h[2], T(0));
+  sink.Add4(e.param + 4, s2, s2, s2, T(0));
 }
 
-// The squared gains g_c^2 that scale the volume's diagonal entries of colour residual c.
+// The squared factors (s g_c)^2 that scale the volume's diagonal entries of colour residual c.
 template <class T>
 PERF_HD_INLINE void GainSquared(const RayExposure<T>& e, T g2[3]) {
-  for (int c = 0; c < 3; ++c) g2[c] = e.gain[c] * e.gain[c];
+  for (int c = 0; c < 3; ++c) g2[c] = e.scale * e.scale * e.gain[c] * e.gain[c];
 }
 
 // The row values whose merged sums give, squared, a cell's diag(J^T J) share: the colour entry

@@ -106,6 +106,9 @@ void ReconstructOptions::Check() const {
   if (eval_every < 0) Fail("--eval-every", std::to_string(eval_every), "must be >= 0");
   if (!(residuals.lambda >= 0)) Fail("--lambda", StrCat(residuals.lambda), "must be >= 0");
   if (!(residuals.alpha_weight >= 0)) Fail("--alpha-weight", StrCat(residuals.alpha_weight), "must be >= 0");
+  if (!(residuals.robust_scale >= 0 && std::isfinite(residuals.robust_scale))) {
+    Fail("--robust", StrCat(residuals.robust_scale), "must be >= 0 (0: least squares)");
+  }
   if (!(residuals.stop_transmittance >= 0 && residuals.stop_transmittance < 1)) {
     Fail("--stop-transmittance", StrCat(residuals.stop_transmittance), "must be in [0, 1)");
   }
@@ -637,6 +640,8 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
                        {"prior", ho.solver.exposure_prior},
                        {"gain_range", {result.gain_range[0], result.gain_range[1]}},
                        {"held_out", result.exposures > 0 ? "the inverse-distance blend of the two nearest training photos' (camera centres)" : "none"}}},
+                     {"robust_scale", o.residuals.robust_scale},
+                     {"robust_from_level", ho.robust_from_level + 1},
                      {"opacity_residual", opacity_residual},
                      {"opacity_residual_weight", opacity_weight},
                      {"init_opacity", o.init.box_opacity},

@@ -80,15 +80,18 @@ PERF_HD_INLINE ColourTransform<float> TransformOfRay(const TrainingRays<Colour>&
   return TransformOf(vol.params, vol.ExposureStart(), ExposureSlotOf(rays, i));
 }
 
-// A ray's share of the cost, in double from the float residuals: 0.5 |r|^2 over the colour and
-// opacity residuals, and the colour part's squared error (for PSNR).
+// A ray's share of the cost, in double from the float residuals: 0.5 (rho(|r_colour|^2) + L^2),
+// rho the robust loss of ResidualSettings::robust_scale c (Cauchy, c^2 log(1 + q / c^2); c <= 0:
+// least squares, q), and the colour part's squared error (for PSNR).
 struct RayCost {
   double cost, colour_sse;
 };
-PERF_HD_INLINE RayCost CostOf(const RayOutput<float>& o) {
+PERF_HD_INLINE RayCost CostOf(const RayOutput<float>& o, float robust_scale = 0.f) {
   double sse = 0;
   for (int c = 0; c < 3; ++c) sse += static_cast<double>(o.residual[c]) * o.residual[c];
-  return {0.5 * (sse + static_cast<double>(o.residual[3]) * o.residual[3]), sse};
+  const double c2 = static_cast<double>(robust_scale) * robust_scale;
+  const double colour = robust_scale > 0 ? c2 * log1p(sse / c2) : sse;
+  return {0.5 * (colour + static_cast<double>(o.residual[3]) * o.residual[3]), sse};
 }
 
 // A rendered pixel under the render rule (render_rule.h): where the box's opacity along the ray

@@ -122,6 +122,13 @@ TEST_F(ReconstructCli, LevelsFollowThePhotosWithinTheCap) {
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("--max-resolution"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("at least --start-resolution (8)"), std::string::npos) << r.output;
+  EXPECT_EQ(summary["robust_scale"], 0.0);  // least squares unless asked
+
+  for (const char* bad : {"-1", "nan", "inf"}) {
+    r = RunCommand(Perf("reconstruct " + ws_.string() + " --robust " + bad));
+    EXPECT_EQ(r.exit_code, 2) << r.output;
+    EXPECT_NE(r.output.find(std::string("--robust = ") + bad + ": must be >= 0"), std::string::npos) << r.output;
+  }
 }
 
 TEST_F(ReconstructCli, ResumeContinuesAfterTheLastLevel) {

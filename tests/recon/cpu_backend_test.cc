@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numeric>
 
 #include "common/errors.h"
 
@@ -154,11 +155,14 @@ struct PassOutputs {
 };
 
 // Linearize, Cost and MultiplyJtJ of a 2-thread CPU backend (its Jacobian recorded or recomputed)
-// on p at p.x, each against `want`; returns the vectors for checks of their own entries.
+// on p at p.x with the robust loss of scale `robust` (0: none), each against `want`; returns the
+// vectors for checks of their own entries.
 PassOutputs ExpectPassesMatch(const TinyProblem& p, const DenseWant& want, const std::vector<float>& pv, uint32_t seed,
-                              bool cache) {
+                              bool cache, float robust = 0.f) {
   auto b = Cpu(2, cache);
-  b->SetLevel(p.Level(), kVectors);
+  LevelProblem level = p.Level();
+  level.residuals.robust_scale = robust;
+  b->SetLevel(level, kVectors);
   b->Upload(kX, p.x);
   b->Upload(kP, pv);
   const PassStats s = b->Linearize(kX, seed, kG, kD);
@@ -205,6 +209,49 @@ TEST(CpuBackendTest, ExposuresMatchTheDenseJacobian) {
   }
   const DenseJacobian without(plain, plain.x, seed, 0.1);
   EXPECT_GT(std::abs(without.Cost() - j.Cost()), 1e-3 * j.Cost());
+}
+
+// The robust loss (ResidualSettings::robust_scale): every pass against the dense Jacobian of the
+// reweighted system (colour rows and residuals times 1 / sqrt(1 + |r|^2 / c^2)), with exposures,
+// recorded and recomputed. The weights vary from ray to ray, and J^T r is the robust cost's
+// gradient: central differences of the dense robust cost agree with it.
+TEST(CpuBackendTest, RobustLossMatchesTheReweightedDenseJacobian) {
+  TinyProblem p(6);
+  p.AddExposures(6);
+  const uint32_t seed = 23;
+  const float c = 0.1f;
+  const DenseJacobian j(p, p.x, seed, 0.1, true, true, c);
+  const auto [lo, hi] = std::minmax_element(j.row_scales.begin(), j.row_scales.end());
+  EXPECT_LT(*lo, 0.5) << "some rays are down-weighted";
+  EXPECT_GT(*hi - *lo, 0.3) << "by different amounts";
+  std::mt19937 rng(9);
+  std::normal_distribution<float> normal;
+  std::vector<float> pv(p.shape.ParamCount());
+  for (int64_t i = 0; i < p.shape.ParamCount(); ++i) pv[i] = i % 4 == 3 && i >= p.shape.ExposureStart() ? 0.f : normal(rng);
+  const DenseWant want(j, pv);
+  for (bool cache : {true, false}) {
+    SCOPED_TRACE(cache ? "recorded" : "recomputed");
+    ExpectPassesMatch(p, want, pv, seed, cache, c);
+  }
+  const DenseJacobian plain(p, p.x, seed, 0.1);
+  EXPECT_LT(j.Cost(), 0.9 * plain.Cost());
+  // The gradient: central differences of the robust cost at the parameters with the largest entries.
+  const std::vector<double> g = j.Jtr();
+  std::vector<int64_t> order(g.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::partial_sort(order.begin(), order.begin() + 20, order.end(),
+                    [&](int64_t a, int64_t b) { return std::abs(g[a]) > std::abs(g[b]); });
+  std::vector<double> x(p.x.begin(), p.x.end());
+  for (int k = 0; k < 20; ++k) {
+    const int64_t i = order[k];
+    const double h = 1e-5;
+    x[i] += h;
+    const double up = DenseJacobian(p, x, seed, 0.1, true, true, c).Cost();
+    x[i] -= 2 * h;
+    const double down = DenseJacobian(p, x, seed, 0.1, true, true, c).Cost();
+    x[i] += h;
+    EXPECT_NEAR((up - down) / (2 * h), g[i], 1e-4 * std::abs(g[i]) + 1e-7) << "parameter " << i;
+  }
 }
 
 // View-dependent colour (issue 16, --sh-degree): spherical harmonics of degree 1 and 2 (the

@@ -24,6 +24,7 @@
 #include <limits>
 #include <random>
 #include <string>
+#include <utility>
 
 #include "common/errors.h"
 #include "common/subprocess.h"
@@ -156,12 +157,15 @@ TEST_F(GpuParityTest, JtJpAtTheLinearisationPoint) {
 // 13.5 warps, so the device's warp sums of the exposure entries (cuda_passes.cu WarpAddExposure)
 // meet both warps of one photo and warps shared by two.
 TEST_F(GpuParityTest, ExposuresInEveryPass) {
-  for (const int degree : {0, 2}) {  // and spherical harmonics (issue 16, --sh-degree)
-  SCOPED_TRACE(degree);
+  // With spherical harmonics (issue 16, --sh-degree), and with the robust loss (--robust).
+  for (const auto& [degree, robust] : {std::pair{0, 0.f}, std::pair{2, 0.f}, std::pair{0, 0.1f}}) {
+  SCOPED_TRACE(StrCat("degree ", degree, ", robust ", robust));
   TinyProblem p = Problem(47);
   if (degree > 0) p.AddSh(degree, 50);
   p.AddExposures(48);
-  SetLevel(p.Level(), p.x);
+  LevelProblem level = p.Level();
+  level.residuals.robust_scale = robust;
+  SetLevel(level, p.x);
   const int64_t e = p.shape.ExposureStart(), n = p.shape.ParamCount();
   const auto tail = [&](Backend* b, VecId v) {
     const std::vector<float> all = Get(b, v);

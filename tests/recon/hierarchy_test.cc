@@ -92,6 +92,21 @@ TEST_F(HierarchyMemoryTest, ALevelThatDoesNotFitEndsAutomaticLevelsAtTheOneBefor
   EXPECT_THROW(SolveHierarchy(backend.get(), scene.geometry, views, o, {}, {}), ResourceError);
 }
 
+// The robust loss starts at robust_from_level; the levels before fit by least squares.
+TEST_F(HierarchyMemoryTest, TheRobustLossStartsAtItsLevel) {
+  o.residuals.robust_scale = 0.2f;
+  auto backend = MakeCpuBackend({});
+  std::vector<float> scales;
+  HierarchyCallbacks cb;
+  cb.level_started = [&](const HierarchyLevel&) { scales.push_back(backend->level().residuals.robust_scale); };
+  SolveHierarchy(backend.get(), scene.geometry, views, o, {}, cb);
+  EXPECT_EQ(scales, (std::vector<float>{0.f, 0.2f, 0.2f}));
+  o.robust_from_level = 0;
+  scales.clear();
+  SolveHierarchy(backend.get(), scene.geometry, views, o, {}, cb);
+  EXPECT_EQ(scales, (std::vector<float>{0.2f, 0.2f, 0.2f}));
+}
+
 TEST_F(HierarchyMemoryTest, LevelIterationsOverrideTheDefaultForTheLevelsGiven) {
   o.level_iterations = {2, 0};
   o.iterations = 3;

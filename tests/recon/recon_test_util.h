@@ -114,9 +114,12 @@ struct DenseJacobian {
   // Every single visit's squared partials: what diag(J^T J) would be without merging visits.
   std::vector<std::pair<int64_t, double>> naive_diag_terms;
 
+  // robust: the Cauchy scale c of the colour residuals (ResidualSettings::robust_scale; 0: least
+  // squares); with it the rows and residuals are those of the reweighted system (jacobian.h
+  // RobustRowScale) and Cost() is the robust cost.
   template <class S>
   DenseJacobian(const TinyProblem& p, const std::vector<S>& xs, uint32_t seed, double lambda, bool jitter = true,
-                bool pixel_jitter = true) {
+                bool pixel_jitter = true, double robust = 0) {
     const std::vector<double> x(xs.begin(), xs.end());
     VolumeView<double> vol{};
     vol.params = x.data();
@@ -174,6 +177,17 @@ struct DenseJacobian {
           j[c][e + 4 + c] = 1;
         }
       }
+      // The robust loss: the colour rows and residuals times s = 1 / sqrt(1 + q / c^2), and the
+      // ray's colour cost 0.5 c^2 log(1 + q / c^2) (q = |r_colour|^2) instead of 0.5 q.
+      const double q = residual[0] * residual[0] + residual[1] * residual[1] + residual[2] * residual[2];
+      const double s = robust > 0 ? 1 / std::sqrt(1 + q / (robust * robust)) : 1.0;
+      row_scales.push_back(s);
+      colour_cost += robust > 0 ? 0.5 * robust * robust * std::log1p(q / (robust * robust)) : 0.5 * q;
+      opacity_cost += 0.5 * residual[3] * residual[3];
+      for (int c = 0; c < 3; ++c) {
+        residual[c] *= s;
+        for (double& v : j[c]) v *= s;
+      }
       for (int r = 0; r < 4; ++r) {
         rows.push_back(std::move(j[r]));
         residuals.push_back(residual[r]);
@@ -200,11 +214,9 @@ struct DenseJacobian {
       for (size_t i = 0; i < d.size(); ++i) d[i] += row[i] * row[i];
     return d;
   }
-  double Cost() const {
-    double c = 0;
-    for (double r : residuals) c += 0.5 * r * r;
-    return c;
-  }
+  double Cost() const { return colour_cost + opacity_cost; }
+  double colour_cost = 0, opacity_cost = 0;
+  std::vector<double> row_scales;  // [rays] the robust loss's (1 without)
 };
 
 // Every entry of `got` within scale_tol * max|want| + rel_tol * |want_i| of `want`, and more than a
