@@ -64,8 +64,8 @@ void AddReconstructCommand(CLI::App& app) {
       ->capture_default_str();
   cmd->add_flag("--no-aux", args->no_aux, "Switch the opacity residual off (either kind)");
   cmd->add_option("--robust", o.residuals.robust_scale,
-                  "Robust colour loss: Cauchy with this scale (a ray whose colour error is this large counts half "
-                  "as much as in least squares), solved by reweighting inside Gauss-Newton from the second level "
+                  "Robust colour loss: Cauchy with this scale (a ray whose colour error is this large gets half "
+                  "the weight it has in least squares), solved by reweighting inside Gauss-Newton from the second level "
                   "on; 0: least squares")
       ->capture_default_str();
   cmd->add_option("--stop-transmittance", o.residuals.stop_transmittance,

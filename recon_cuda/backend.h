@@ -45,8 +45,8 @@ struct ResidualSettings {
   // The weight of that alpha residual (lambda's counterpart); 0.3 (docs/tuning.md).
   float alpha_weight = 0.3f;
   // The colour residuals' robust loss: Cauchy with this scale c (a ray whose colour error |r| is c
-  // counts half as much as in least squares), solved by reweighting inside Gauss-Newton
-  // (jacobian.h RobustRowScale); 0: least squares.
+  // gets half the weight it has in least squares), solved by reweighting inside Gauss-Newton
+  // (jacobian.h RobustRowScale); 0: least squares (the default).
   float robust_scale = 0.f;
 };
 
