@@ -26,6 +26,15 @@ std::string PhotoFits::Warning(const PhotoFitOptions& o) const {
                 "training. To leave one out, set its \"split\" to \"excluded\" in scene.json");
 }
 
+nlohmann::json PhotoFits::ToJson(const PhotoFitOptions& o) const {
+  nlohmann::json list = nlohmann::json::array();
+  for (const PhotoFit& f : poor) list.push_back({{"name", f.name}, {"psnr", f.psnr}});
+  return {{"after_level", 1},
+          {"median_psnr", median_psnr},
+          {"max_db_below_median", o.max_db_below_median},
+          {"poor", list}};
+}
+
 PhotoFits FindPoorFits(std::vector<PhotoFit> fits, const PhotoFitOptions& o) {
   PhotoFits out;
   if (fits.size() < 3) return out;

@@ -7,6 +7,7 @@
 // held-out view among them lost its neighbours; docs/tuning.md "What limits the example").
 #pragma once
 
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -34,6 +35,8 @@ struct PhotoFits {
   std::vector<PhotoFit> poor;  // worst first
   // One line naming the poor fits, what they may mean and what to do; empty when there are none.
   std::string Warning(const PhotoFitOptions& options = {}) const;
+  // recon.json's `photo_fits`: after_level (1), median_psnr, max_db_below_median, poor [{name, psnr}].
+  nlohmann::json ToJson(const PhotoFitOptions& options = {}) const;
 };
 
 // The poor fits among photos `fits` (any order); none for fewer than 3 photos.

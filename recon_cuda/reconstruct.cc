@@ -496,12 +496,7 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
       const auto t0 = WallClock::now();
       const PhotoFits fits = CheckPhotoFits(backend.get(), h.params, train, train_names, fitted, comm, o.photo_fit);
       eval_seconds += SecondsSince(t0);
-      json poor = json::array();
-      for (const PhotoFit& f : fits.poor) poor.push_back({{"name", f.name}, {"psnr", f.psnr}});
-      photo_fits = {{"after_level", 1},
-                    {"median_psnr", fits.median_psnr},
-                    {"max_db_below_median", o.photo_fit.max_db_below_median},
-                    {"poor", poor}};
+      photo_fits = fits.ToJson(o.photo_fit);
       write_log({{"event", "photo_fits"}, {"photo_fits", photo_fits}});
       if (!fits.poor.empty()) say("warning: " + fits.Warning(o.photo_fit));
     }

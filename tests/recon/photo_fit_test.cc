@@ -27,6 +27,11 @@ TEST(PhotoFit, PhotosMoreThanTheMarginBelowTheMedianAreNamedWorstFirst) {
   EXPECT_DOUBLE_EQ(even.median_psnr, 24);
   ASSERT_EQ(even.poor.size(), 1u);
   EXPECT_EQ(even.poor[0].name, "a");
+  const nlohmann::json j = f.ToJson();
+  EXPECT_DOUBLE_EQ(j["median_psnr"].get<double>(), 24);
+  ASSERT_EQ(j["poor"].size(), 2u);
+  EXPECT_EQ(j["poor"][0]["name"], "b");
+  EXPECT_DOUBLE_EQ(j["poor"][1]["psnr"].get<double>(), 19.9);
   EXPECT_TRUE(FindPoorFits({{"a", 24}, {"b", 25}, {"c", 26}}).Warning().empty());
   EXPECT_TRUE(FindPoorFits({{"a", 10}, {"b", 30}}).poor.empty());  // too few photos to tell
 }
