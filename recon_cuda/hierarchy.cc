@@ -1,5 +1,8 @@
 #include "recon_cuda/hierarchy.h"
 
+#include <algorithm>
+#include <cmath>
+
 #include "common/errors.h"
 
 namespace perf::recon {
@@ -7,6 +10,13 @@ namespace perf::recon {
 VolumeShape LevelShape(const HierarchyOptions& o, int num_shells, int level) {
   return VolumeShape{o.start_resolution << level, o.start_resolution << level, num_shells, nullptr, o.exposures,
                      o.sh_degree};
+}
+
+int ShellResolution(int ladder, int64_t rays, int num_shells, double min_rays_per_texel) {
+  if (min_rays_per_texel <= 0 || num_shells <= 0) return ladder;
+  const double fit = std::sqrt(static_cast<double>(rays) / (min_rays_per_texel * 6.0 * num_shells));
+  const int floor = std::min(ladder, 8);
+  return std::max(floor, std::min(ladder, static_cast<int>(fit)));
 }
 
 VolumeShape NextLevelShape(const HierarchyOptions& o, const VolumeGeometry& geometry, const VolumeShape& shape,
@@ -27,14 +37,21 @@ std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geomet
     HierarchyLevel h;
     h.level = level;
     h.levels = o.levels;
+    h.image_downscale = o.pyramid ? PyramidFactor(train.views, geometry, shape.n, 1 << (o.levels - 1 - level)) : 1;
+    const RaySet rays = train.rays(h.image_downscale);
+    h.rays = rays.size();
+    // Shells no finer than this level's rays can pin down.
+    const int m = ShellResolution(shape.m, h.rays, shape.num_shells, o.min_rays_per_texel);
+    if (m != shape.m) {
+      const VolumeShape coarser = shape.WithShellResolution(m);
+      if (!x.empty()) x = Resample(shape, x, coarser);
+      shape = coarser;
+    }
     h.shape = shape;
     if (x.empty()) {  // level 0 of a fresh start
       x = InitialParams(h.shape, geometry, o.init);
       if (o.fixed_background) SetBackgroundShells(h.shape, o.background.data(), x);
     }
-    h.image_downscale = o.pyramid ? PyramidFactor(train.views, geometry, h.shape.n, 1 << (o.levels - 1 - level)) : 1;
-    const RaySet rays = train.rays(h.image_downscale);
-    h.rays = rays.size();
     ResidualSettings residuals = o.residuals;
     if (level < o.robust_from_level) residuals.robust_scale = 0.f;
     const LevelProblem problem{h.shape, geometry, &rays, residuals, o.fixed_background};

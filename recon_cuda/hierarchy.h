@@ -29,6 +29,11 @@ struct HierarchyOptions {
   // before fit by least squares. From the fog of the start every ray's error is large, and a
   // robust loss there fits nothing (bonsai example, docs/tuning.md "Robust loss").
   int robust_from_level = 1;
+  // The shells' texels per face side follow the grid (doubling per level) but stay coarse enough
+  // that the level's rays number at least this many per texel of all shells (ShellResolution);
+  // 0: the grid's ladder alone. 8: on the bonsai example's 64^3 level 43 texels instead of 64,
+  // +0.3 dB held-out (docs/tuning.md "Shell resolution from the rays").
+  double min_rays_per_texel = 8;
   // Training photos whose exposures every level solves (VolumeShape::exposures); 0: none.
   int exposures = 0;
   // Spherical harmonics of the grid's colour at every level (VolumeShape::sh_degree); 0: none.
@@ -48,6 +53,11 @@ struct HierarchyOptions {
     return level < static_cast<int>(level_iterations.size()) ? level_iterations[level] : iterations;
   }
 };
+
+// Texels per face side for a level whose ladder gives `ladder` and that fits `rays` rays: the
+// largest m <= ladder with rays >= min_rays_per_texel * 6 m^2 num_shells, but not below
+// min(ladder, 8).
+int ShellResolution(int ladder, int64_t rays, int num_shells, double min_rays_per_texel);
 
 // The resolutions of `level`, its grid dense.
 VolumeShape LevelShape(const HierarchyOptions& options, int num_shells, int level);

@@ -288,7 +288,8 @@ ReconstructResult Reconstruct(const ReconstructOptions& o) {
     Checkpoint c = ReadCheckpoint(path);
     CheckMatchesScene(c, scene, path);
     const VolumeShape expected = shape_of(last);
-    if (c.shape.n != expected.n || c.shape.m != expected.m || c.shape.num_shells != expected.num_shells ||
+    // (m may be below the ladder's: HierarchyOptions::min_rays_per_texel.)
+    if (c.shape.n != expected.n || c.shape.m > expected.m || c.shape.num_shells != expected.num_shells ||
         c.level != last) {
       throw InputError(path.string(), "n", std::to_string(c.shape.n),
                        StrCat("level ", last, " of this run would be ", shape_of(last).n, "^3"),

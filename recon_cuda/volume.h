@@ -65,6 +65,7 @@ struct VolumeShape {
   }
   VolumeShape WithExposures(int photos) const { return {n, m, num_shells, bricks, photos, sh_degree}; }
   VolumeShape WithShDegree(int degree) const { return {n, m, num_shells, bricks, exposures, degree}; }
+  VolumeShape WithShellResolution(int texels) const { return {n, texels, num_shells, bricks, exposures, sh_degree}; }
   bool operator==(const VolumeShape& o) const {
     return n == o.n && m == o.m && num_shells == o.num_shells && exposures == o.exposures &&
            sh_degree == o.sh_degree && (bricks == o.bricks || (bricks && o.bricks && *bricks == *o.bricks));

@@ -52,6 +52,7 @@ class HierarchyMemoryTest : public ::testing::Test {
     o.start_resolution = 8;
     o.iterations = 1;
     o.sparse = false;  // dense levels: each needs 8x the one before
+    o.min_rays_per_texel = 0;  // the shells of the ladder (ShellsFollowTheRaysOfEachLevel sets it)
   }
   // What the dense level `level` needs on a CPU backend, by its own estimate.
   int64_t Needs(int level) const {
@@ -90,6 +91,48 @@ TEST_F(HierarchyMemoryTest, ALevelThatDoesNotFitEndsAutomaticLevelsAtTheOneBefor
   // Levels as given: the level that does not fit is an error.
   o.stop_when_out_of_memory = false;
   EXPECT_THROW(SolveHierarchy(backend.get(), scene.geometry, views, o, {}, {}), ResourceError);
+}
+
+// Shell texels per face side: the ladder's, unless the rays are too few for them.
+TEST(ShellResolutionTest, TheShellsStayCoarseEnoughForTheirRays) {
+  // The bonsai example's 64^3 level: 369920 rays, 4 shells, 8 rays a texel: 43 texels a side.
+  EXPECT_EQ(ShellResolution(64, 369920, 4, 8), 43);
+  EXPECT_LE(8.0 * 6 * 43 * 43 * 4, 369920.0);
+  EXPECT_GT(8.0 * 6 * 44 * 44 * 4, 369920.0);
+  EXPECT_EQ(ShellResolution(32, 369920, 4, 8), 32);           // its 32^3 level: the ladder's
+  EXPECT_EQ(ShellResolution(128, 7369200, 4, 8), 128);        // the full capture's 128^3 level
+  EXPECT_EQ(ShellResolution(64, 369920, 4, 0), 64);           // off
+  EXPECT_EQ(ShellResolution(64, 100, 4, 8), 8);               // never below 8...
+  EXPECT_EQ(ShellResolution(4, 100, 4, 8), 4);                // ...nor above the ladder
+}
+
+// The hierarchy applies it level by level: a level's shells are the ladder's or coarser, never
+// finer than its rays allow (above the floor of 8), and the fit carries over between levels.
+TEST_F(HierarchyMemoryTest, ShellsFollowTheRaysOfEachLevel) {
+  o.min_rays_per_texel = 2;
+  auto backend = MakeCpuBackend({});
+  std::vector<int> m, ladder;
+  HierarchyCallbacks cb;
+  cb.level_started = [&](const HierarchyLevel& h) {
+    m.push_back(h.shape.m);
+    ladder.push_back(LevelShape(o, scene.geometry.num_shells(), h.level).m);
+    if (o.min_rays_per_texel > 0) {
+      EXPECT_TRUE(h.shape.m <= 8 || 2.0 * 6 * h.shape.m * h.shape.m * h.shape.num_shells <= h.rays)
+          << h.level << ": m " << h.shape.m << ", rays " << h.rays;
+    }
+    EXPECT_EQ(backend->level().shape.m, h.shape.m);
+  };
+  const std::vector<float> x = SolveHierarchy(backend.get(), scene.geometry, views, o, {}, cb);
+  ASSERT_EQ(m.size(), 3u);
+  EXPECT_EQ(m[0], ladder[0]);
+  EXPECT_LT(m[2], ladder[2]) << "the finest level's rays are too few for its ladder's texels";
+  for (size_t k = 0; k < m.size(); ++k) EXPECT_LE(m[k], ladder[k]);
+  EXPECT_EQ(static_cast<int64_t>(x.size()), LevelShape(o, scene.geometry.num_shells(), 2).WithShellResolution(m[2]).ParamCount());
+  o.min_rays_per_texel = 0;  // off: the ladder
+  m.clear();
+  ladder.clear();
+  SolveHierarchy(backend.get(), scene.geometry, views, o, {}, cb);
+  EXPECT_EQ(m, ladder);
 }
 
 // The robust loss starts at robust_from_level; the levels before fit by least squares.
