@@ -1,7 +1,5 @@
 #include "sfm_import/bad_poses.h"
 
-#include <algorithm>
-#include <cmath>
 #include <cstdio>
 #include <optional>
 
@@ -25,24 +23,13 @@ std::optional<BoundsCamera> PinholeOf(const colmap::Reconstruction& rec, const c
 }
 
 // The point the cameras look at: closest to the optical axes of the cameras that look towards
-// the first estimate (within 30 degrees), so that a few turned-away poses do not pull it; nullopt
-// unless most cameras (60 %) look at it.
+// the first estimate (bounds.h CamerasLookingAt), so that a few turned-away poses do not pull it;
+// nullopt unless most cameras look at it (IsObjectCentric).
 std::optional<Eigen::Vector3d> LookedAtPoint(const std::vector<BoundsCamera>& cameras) {
   Eigen::Vector3d p;
-  if (!ClosestPointToAxes(cameras, &p)) return std::nullopt;
-  std::vector<BoundsCamera> inward;
-  for (const BoundsCamera& c : cameras) {
-    const Eigen::Vector3d to_p = (p - c.world_from_cam.col(3)).normalized();
-    if (to_p.dot(c.world_from_cam.col(2).normalized()) > std::cos(30.0 * M_PI / 180.0)) inward.push_back(c);
-  }
-  if (inward.size() < 0.6 * static_cast<double>(cameras.size())) return std::nullopt;
-  if (!ClosestPointToAxes(inward, &p)) return std::nullopt;
+  if (!ClosestPointToAxes(cameras, &p) || !IsObjectCentric(cameras, p)) return std::nullopt;
+  if (!ClosestPointToAxes(CamerasLookingAt(cameras, p), &p)) return std::nullopt;
   return p;
-}
-
-double DegreesOffAxis(const BoundsCamera& c, const Eigen::Vector3d& p) {
-  const Eigen::Vector3d to_p = (p - c.world_from_cam.col(3)).normalized();
-  return std::acos(std::clamp(to_p.dot(c.world_from_cam.col(2).normalized()), -1.0, 1.0)) * 180.0 / M_PI;
 }
 
 }  // namespace

@@ -22,17 +22,6 @@ double Percentile(std::vector<double>& v, double q) {
   return v[k];
 }
 
-// A cameras-look-at-it test: the axes point is in front of most cameras, near their axes.
-bool IsObjectCentric(const std::vector<BoundsCamera>& cameras, const Eigen::Vector3d& p) {
-  int inward = 0;
-  for (const auto& c : cameras) {
-    const Eigen::Vector3d to_p = p - CameraCentre(c);
-    const double n = to_p.norm();
-    if (n > 0 && to_p.dot(CameraForward(c)) / n > std::cos(30.0 * M_PI / 180.0)) ++inward;
-  }
-  return inward >= 0.6 * static_cast<double>(cameras.size());
-}
-
 // world_from_box rotation: z along the capture's up; x the direction of largest spread of
 // `points` across it (or the world x axis projected) so the box hugs the object.
 Eigen::Matrix3d UpAlignedRotation(const std::vector<BoundsCamera>& cameras,
@@ -107,6 +96,25 @@ bool ClosestPointToAxes(const std::vector<BoundsCamera>& cameras, Eigen::Vector3
   if (eig.eigenvalues()(0) < 1e-3) return false;  // axes (nearly) parallel
   *point = a.ldlt().solve(b);
   return point->allFinite();
+}
+
+std::vector<BoundsCamera> CamerasLookingAt(const std::vector<BoundsCamera>& cameras, const Eigen::Vector3d& p) {
+  std::vector<BoundsCamera> inward;
+  for (const auto& c : cameras) {
+    const Eigen::Vector3d to_p = p - CameraCentre(c);
+    const double n = to_p.norm();
+    if (n > 0 && to_p.dot(CameraForward(c)) / n > std::cos(30.0 * M_PI / 180.0)) inward.push_back(c);
+  }
+  return inward;
+}
+
+bool IsObjectCentric(const std::vector<BoundsCamera>& cameras, const Eigen::Vector3d& p) {
+  return static_cast<double>(CamerasLookingAt(cameras, p).size()) >= 0.6 * static_cast<double>(cameras.size());
+}
+
+double DegreesOffAxis(const BoundsCamera& c, const Eigen::Vector3d& p) {
+  const Eigen::Vector3d to_p = (p - CameraCentre(c)).normalized();
+  return std::acos(std::clamp(to_p.dot(CameraForward(c)), -1.0, 1.0)) * 180.0 / M_PI;
 }
 
 bool InFrustum(const BoundsCamera& c, const Eigen::Vector3d& p) {

@@ -75,6 +75,15 @@ bool ClosestPointToAxes(const std::vector<BoundsCamera>& cameras, Eigen::Vector3
 // True if `p` projects inside the camera's image, in front of it.
 bool InFrustum(const BoundsCamera& camera, const Eigen::Vector3d& p);
 
+// The cameras whose optical axis is within 30 degrees of the direction to `p`.
+std::vector<BoundsCamera> CamerasLookingAt(const std::vector<BoundsCamera>& cameras, const Eigen::Vector3d& p);
+
+// Whether the cameras look at `p` (a 360-degree capture around it): 60 % of them do (CamerasLookingAt).
+bool IsObjectCentric(const std::vector<BoundsCamera>& cameras, const Eigen::Vector3d& p);
+
+// Degrees between the camera's optical axis and the direction to `p`.
+double DegreesOffAxis(const BoundsCamera& camera, const Eigen::Vector3d& p);
+
 // Places box and shells. `points` may be empty (NeRF json). `source` names the input in
 // messages. Throws InputError when the points give no extent (all coincident).
 BoundsResult EstimateBounds(const std::vector<BoundsCamera>& cameras,

@@ -124,10 +124,7 @@ TEST(CpuBackendTest, JtJpMatchesTheDenseJacobianCachedAndRecomputed) {
   const TinyProblem p(3);
   const uint32_t seed = 11;
   const DenseJacobian j(p, p.x, seed, 0.1);
-  std::mt19937 rng(4);
-  std::normal_distribution<float> g;
-  std::vector<float> pv(p.shape.ParamCount());
-  for (float& v : pv) v = g(rng);
+  const std::vector<float> pv = test::RandomDirection(p.shape, 4);
   const std::vector<double> want = j.Jtu(j.Jp(std::vector<double>(pv.begin(), pv.end())));
   for (bool cache : {true, false}) {
     auto b = Cpu(2, cache);
@@ -190,10 +187,7 @@ TEST(CpuBackendTest, ExposuresMatchTheDenseJacobian) {
   p.AddExposures(6);
   const uint32_t seed = 19;
   const DenseJacobian j(p, p.x, seed, 0.1);
-  std::mt19937 rng(8);
-  std::normal_distribution<float> normal;
-  std::vector<float> pv(p.shape.ParamCount());
-  for (int64_t i = 0; i < p.shape.ParamCount(); ++i) pv[i] = i % 4 == 3 && i >= p.shape.ExposureStart() ? 0.f : normal(rng);
+  const std::vector<float> pv = test::RandomDirection(p.shape, 8);
   const DenseWant want(j, pv);
   for (bool cache : {true, false}) {
     SCOPED_TRACE(cache ? "recorded" : "recomputed");
@@ -224,10 +218,7 @@ TEST(CpuBackendTest, RobustLossMatchesTheReweightedDenseJacobian) {
   const auto [lo, hi] = std::minmax_element(j.row_scales.begin(), j.row_scales.end());
   EXPECT_LT(*lo, 0.5) << "some rays are down-weighted";
   EXPECT_GT(*hi - *lo, 0.3) << "by different amounts";
-  std::mt19937 rng(9);
-  std::normal_distribution<float> normal;
-  std::vector<float> pv(p.shape.ParamCount());
-  for (int64_t i = 0; i < p.shape.ParamCount(); ++i) pv[i] = i % 4 == 3 && i >= p.shape.ExposureStart() ? 0.f : normal(rng);
+  const std::vector<float> pv = test::RandomDirection(p.shape, 9);
   const DenseWant want(j, pv);
   for (bool cache : {true, false}) {
     SCOPED_TRACE(cache ? "recorded" : "recomputed");
@@ -265,15 +256,7 @@ TEST(CpuBackendTest, SphericalHarmonicsMatchTheDenseJacobian) {
     if (degree == 2) p.AddExposures(9);
     const uint32_t seed = 23;
     const DenseJacobian j(p, p.x, seed, 0.1);
-    std::mt19937 rng(10);
-    std::normal_distribution<float> normal;
-    std::vector<float> pv(p.shape.ParamCount());
-    for (float& v : pv) v = normal(rng);
-    for (int64_t c = 0; c < p.shape.StoredCells(); ++c)  // the padding zeros stay zero
-      for (int k = 3 * ShBands(degree); k < ShStride(degree); ++k) pv[p.shape.ShStart() + ShStride(degree) * c + k] = 0;
-    for (int64_t i = p.shape.ExposureStart(); i < p.shape.ParamCount(); ++i) {
-      if ((i - p.shape.ExposureStart()) % 4 == 3) pv[i] = 0;
-    }
+    const std::vector<float> pv = test::RandomDirection(p.shape, 10);
     const DenseWant want(j, pv);
     for (bool cache : {true, false}) {
       SCOPED_TRACE(cache ? "recorded" : "recomputed");
@@ -317,10 +300,7 @@ TEST(CpuBackendTest, SparseLevelEqualsTheDenseOneWhereTheBricksAreEmpty) {
   EXPECT_LT(a.samples, b.samples * 3 / 4) << "the march skips the empty bricks";
   test::ExpectAllClose(get(sparse.get(), kG), s.Stored(get(dense.get(), kG)), 1e-5, 1e-5, "J^T r");
   test::ExpectAllClose(get(sparse.get(), kD), s.Stored(get(dense.get(), kD)), 1e-5, 1e-5, "diag(J^T J)");
-  std::mt19937 rng(2);
-  std::normal_distribution<float> normal;
-  std::vector<float> pv(s.level.shape.ParamCount());
-  for (float& v : pv) v = normal(rng);
+  const std::vector<float> pv = test::RandomDirection(s.level.shape, 2);
   sparse->Upload(kP, pv);
   dense->Upload(kP, s.Dense(pv));
   sparse->MultiplyJtJ(kP, kOut);

@@ -188,10 +188,7 @@ TEST_F(GpuParityTest, ExposuresInEveryPass) {
       EXPECT_LT(cpu->MaxAbsVolume(kD), cpu->MaxAbs(kD));  // a photo's entries outweigh any cell's
     }
   }
-  std::mt19937 rng(49);
-  std::normal_distribution<float> normal;
-  std::vector<float> pv(n);
-  for (int64_t i = 0; i < n; ++i) pv[i] = i >= e && (i - e) % 4 == 3 ? 0.f : normal(rng);
+  const std::vector<float> pv = test::RandomDirection(p.shape, 49);
   for (Backend* b : {cpu.get(), gpu.get()}) b->Upload(kP, pv);
   cpu->MultiplyJtJ(kP, kOut);
   gpu->MultiplyJtJ(kP, kOut);

@@ -106,6 +106,25 @@ struct TinyProblem {
   }
 };
 
+// A direction for J^T J p checks: standard normal entries, except the padding zeros that never
+// move (the spherical harmonics' stride beyond their bands, the fourth value of each exposure
+// group), which stay 0.
+inline std::vector<float> RandomDirection(const VolumeShape& shape, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> normal;
+  std::vector<float> p(shape.ParamCount());
+  for (float& v : p) v = normal(rng);
+  if (shape.sh_degree > 0) {
+    const int stride = ShStride(shape.sh_degree);
+    for (int64_t c = 0; c < shape.StoredCells(); ++c)
+      for (int k = 3 * ShBands(shape.sh_degree); k < stride; ++k) p[shape.ShStart() + stride * c + k] = 0;
+  }
+  for (int64_t i = shape.ExposureStart(); i < shape.ParamCount(); ++i) {
+    if ((i - shape.ExposureStart()) % 4 == 3) p[i] = 0;
+  }
+  return p;
+}
+
 // The dense Jacobian [4 rays, params] and residuals of every ray, in double, from the per-ray
 // math at x (as floats widened to double) with the rays' jitter for `seed`.
 struct DenseJacobian {
