@@ -1,290 +1,39 @@
 #include "sfm_import/colmap_runner.h"
 
-#include <signal.h>
-#include <sys/stat.h>
-#include <unistd.h>
-
 #include <algorithm>
-#include <array>
-#include <cctype>
 #include <cerrno>
 #include <chrono>
 #include <cstdint>
-#include <cstdio>
-#include <cstdlib>
 #include <cstring>
-#include <ctime>
-#include <deque>
 #include <fstream>
 #include <optional>
-#include <regex>
 #include <set>
 #include <system_error>
 #include <vector>
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
-#include "common/subprocess.h"
 #include "sfm_import/camera_groups.h"
 #include "sfm_import/capture_order.h"
-#include "sfm_import/camera_models.h"
-#include "sfm_import/colmap_model.h"
+#include "sfm_import/colmap_process.h"
+#include "sfm_import/sfm_inputs.h"
+#include "sfm_import/sfm_models.h"
 
 namespace fs = std::filesystem;
 
 namespace perf {
 namespace {
 
+using namespace sfm_detail;
 using Clock = std::chrono::steady_clock;
 
-constexpr const char* kCommandLine = "command line";
-constexpr size_t kLogTailLines = 15;
+// The photos' header tags, one per input photo (ReadPhotoTags).
+using PhotoTags = std::vector<std::optional<CameraTags>>;
 
-void Report(const SfmOptions& options, const std::string& line) {
-  if (options.progress) options.progress(line);
-}
-
-// --------------------------------------------------------------------------------------------
-// Input photos
-
-// What COLMAP (through FreeImage) reads in practice. Counting by extension, not by decoding,
-// keeps this cheap on large folders; COLMAP itself skips files it cannot decode.
-bool LooksLikeImage(const fs::path& path) {
-  static constexpr std::array<std::string_view, 11> kExtensions = {
-      ".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".ppm", ".pgm", ".webp", ".jp2", ".exr"};
-  std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return std::find(kExtensions.begin(), kExtensions.end(), ext) != kExtensions.end();
-}
-
-// The photos under `images` (recursively, as COLMAP's ImageReader does), as COLMAP names them:
-// '/'-separated paths relative to `images`, sorted.
-std::vector<std::string> ListInputImages(const fs::path& images) {
-  std::error_code ec;
-  if (!fs::exists(images, ec)) {
-    throw InputError(kCommandLine, "--images", images.string(), "the images folder does not exist",
-                     "pass the folder that holds your photos");
-  }
-  if (!fs::is_directory(images, ec)) {
-    throw InputError(kCommandLine, "--images", images.string(), "not a folder",
-                     "pass the folder that holds your photos, not a single file");
-  }
-  std::vector<std::string> names;
-  fs::recursive_directory_iterator it(images, fs::directory_options::skip_permission_denied, ec);
-  if (ec) {
-    throw IoError(images.string(), "cannot list the images folder: " + ec.message(),
-                  "check its permissions");
-  }
-  for (const fs::recursive_directory_iterator end; it != end; it.increment(ec)) {
-    if (ec) {
-      throw IoError(images.string(), "cannot list the images folder: " + ec.message(),
-                    "check its permissions");
-    }
-    if (it->is_regular_file(ec) && LooksLikeImage(it->path())) {
-      names.push_back(it->path().lexically_relative(images).generic_string());
-    }
-  }
-  if (names.empty()) {
-    throw InputError(kCommandLine, "--images", images.string(),
-                     "the folder holds no images (looked for .jpg, .jpeg, .png, .tif, .tiff, .bmp, "
-                     ".ppm, .pgm, .webp, .jp2, .exr, also in sub-folders)",
-                     "put your photos in it or pass the folder that holds them");
-  }
-  std::sort(names.begin(), names.end());
-  return names;
-}
-
-// --------------------------------------------------------------------------------------------
-// Finding and running colmap
-
-fs::path FindColmap(const std::string& binary) {
-  return FindExecutable(binary,
-                        "install COLMAP (`sudo apt-get install colmap`, or run scripts/setup.sh), or pass its path "
-                        "with --colmap-binary");
-}
-
-// What a line of a step's output says about progress, as a short status, or nullopt.
-using ProgressParser = std::function<std::optional<std::string>(const std::string& line)>;
-
-struct StepResult {
-  int exit_code = 0;             // valid when signal == 0
-  int signal = 0;                // the signal that killed the process, or 0
-  std::deque<std::string> tail;  // last output lines
-  bool saw(const std::string& needle) const {
-    return std::any_of(tail.begin(), tail.end(),
-                       [&](const std::string& l) { return l.find(needle) != std::string::npos; });
-  }
-};
-
-std::string Timestamp() {
-  const std::time_t now = std::time(nullptr);
-  std::tm tm{};
-  ::localtime_r(&now, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M:%S", &tm);
-  return buf;
-}
-
-// Runs `colmap <args>` without a shell (paths with spaces or quotes pass through untouched),
-// headless, with stdout and stderr through one pipe: every byte is appended to `log` and every
-// line is offered to `parse`, whose status is reported at most once a second.
-StepResult RunColmapStep(const fs::path& colmap, const std::vector<std::string>& args,
-                         const std::string& stage, const ProgressParser& parse,
-                         const SfmOptions& options, std::ofstream& log, const fs::path& log_path) {
-  const std::string command_line = CommandLine(colmap, args);
-  // A prefix of our own: COLMAP's headings are lines of '=' already.
-  log << "\n[perf " << Timestamp() << "] run: " << command_line << "\n" << std::flush;
-
-  StepResult result;
-  std::string partial;
-  std::string pending_status;
-  Clock::time_point last_report = Clock::now();
-  auto handle_line = [&](std::string line) {
-    if (line.empty()) return;
-    if (auto status = parse ? parse(line) : std::nullopt) pending_status = *status;
-    if (!pending_status.empty() && Clock::now() - last_report >= std::chrono::seconds(1)) {
-      Report(options, stage + ": " + pending_status);
-      pending_status.clear();
-      last_report = Clock::now();
-    }
-    result.tail.push_back(std::move(line));
-    if (result.tail.size() > kLogTailLines) result.tail.pop_front();
-  };
-  // COLMAP links Qt even for its CLI commands; without a display, Qt aborts unless told to use
-  // the offscreen platform.
-  const ProcessResult process = RunProcess(colmap, args, {"QT_QPA_PLATFORM=offscreen"}, [&](std::string_view chunk) {
-    log.write(chunk.data(), static_cast<std::streamsize>(chunk.size()));
-    log.flush();  // so the log is useful while a long step runs
-    if (!log) throw IoError(log_path.string(), "cannot write the log (disk full?)");
-    for (const char c : chunk) {
-      // COLMAP rewrites some lines with '\r'; either ends a line for us.
-      if (c == '\n' || c == '\r') {
-        handle_line(std::move(partial));
-        partial.clear();
-      } else if (partial.size() < 4096) {  // bounded even if a tool never ends a line
-        partial += c;
-      }
-    }
-  });
-  handle_line(std::move(partial));
-  // The last status of a step (e.g. 12/12 images) is worth showing even if it came fast.
-  if (!pending_status.empty()) Report(options, stage + ": " + pending_status);
-  result.exit_code = process.exit_code;
-  result.signal = process.signal;
-  log << "[perf " << Timestamp() << "] "
-      << (result.signal ? StrCat("killed by signal ", result.signal)
-                        : StrCat("exit code ", result.exit_code))
-      << "\n"
-      << std::flush;
-  return result;
-}
-
-[[noreturn]] void ThrowStepFailed(const std::string& step, const StepResult& r,
-                                  const fs::path& log_path) {
-  std::string problem = r.signal ? StrCat("colmap ", step, " was killed by signal ", r.signal, " (",
-                                          strsignal(r.signal), ")")
-                                 : StrCat("colmap ", step, " failed with exit code ", r.exit_code);
-  problem += StrCat("; last lines of ", log_path.string(), ":");
-  for (const auto& line : r.tail) problem += "\n  | " + line;
-  std::string hint = StrCat("see the full log in ", log_path.string());
-  if (r.signal == SIGKILL)
-    hint +=
-        "; a kill by signal 9 is often the out-of-memory killer: try a smaller --max-image-size";
-  throw IoError(log_path.string(), problem, hint);
-}
-
-// --------------------------------------------------------------------------------------------
-// Progress parsers for the three steps (COLMAP 3.8 output).
-
-ProgressParser ExtractionParser() {
-  static const std::regex re(R"(Processed file \[(\d+)/(\d+)\])");
-  return [](const std::string& line) -> std::optional<std::string> {
-    std::smatch m;
-    if (!std::regex_search(line, m, re)) return std::nullopt;
-    return StrCat(m[1].str(), "/", m[2].str(), " images");
-  };
-}
-
-ProgressParser ExhaustiveParser() {
-  static const std::regex re(R"(Matching block \[(\d+)/(\d+), (\d+)/(\d+)\])");
-  return [](const std::string& line) -> std::optional<std::string> {
-    std::smatch m;
-    if (!std::regex_search(line, m, re)) return std::nullopt;
-    const long a = std::stol(m[1]), b = std::stol(m[2]), c = std::stol(m[3]), d = std::stol(m[4]);
-    return StrCat("block ", (a - 1) * d + c, "/", b * d);
-  };
-}
-
-ProgressParser SequentialParser() {
-  static const std::regex re(R"(Matching image \[(\d+)/(\d+)\])");
-  return [](const std::string& line) -> std::optional<std::string> {
-    std::smatch m;
-    if (!std::regex_search(line, m, re)) return std::nullopt;
-    return StrCat(m[1].str(), "/", m[2].str(), " images");
-  };
-}
-
-ProgressParser MapperParser(int num_images) {
-  static const std::regex re(R"(Registering image #\d+ \((\d+)\))");
-  return [num_images](const std::string& line) -> std::optional<std::string> {
-    std::smatch m;
-    if (!std::regex_search(line, m, re)) return std::nullopt;
-    return StrCat(m[1].str(), "/", num_images, " images registered");
-  };
-}
-
-// --------------------------------------------------------------------------------------------
-// Models
-
-struct ModelCounts {
-  int num_images = 0;
-  int num_points = 0;
-};
-
-// The record count at the start of a COLMAP binary file (uint64, little-endian). Reading only
-// the header keeps model selection independent of the full reader and cheap for big models.
-std::optional<uint64_t> ReadBinaryCount(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  unsigned char bytes[8];
-  if (!in.read(reinterpret_cast<char*>(bytes), sizeof bytes)) return std::nullopt;
-  uint64_t n = 0;
-  for (int i = 7; i >= 0; --i) n = (n << 8) | bytes[i];
-  return n;
-}
-
-// Counts of a binary model in `dir`, or nullopt if it is not a complete one.
-std::optional<ModelCounts> ReadModelCounts(const fs::path& dir) {
-  std::error_code ec;
-  if (!fs::is_regular_file(dir / "cameras.bin", ec)) return std::nullopt;
-  const auto images = ReadBinaryCount(dir / "images.bin");
-  const auto points = ReadBinaryCount(dir / "points3D.bin");
-  // Counts beyond int range can only come from a garbled file.
-  if (!images || !points || *images > INT32_MAX || *points > INT32_MAX) return std::nullopt;
-  return ModelCounts{static_cast<int>(*images), static_cast<int>(*points)};
-}
-
-// The photos a model holds (COLMAP image names); nullopt when it cannot be read in full.
-std::optional<std::set<std::string>> RegisteredNames(const fs::path& dir) {
-  try {
-    std::set<std::string> names;
-    for (const auto& [id, im] : colmap::ReadReconstruction(dir).images) names.insert(im.name);
-    return names;
-  } catch (const Error&) {
-    return std::nullopt;
-  }
-}
-
-// The inputs a model left out, when its names can be read.
-std::optional<std::vector<std::string>> LeftOut(const std::vector<std::string>& inputs, const fs::path& dir) {
-  const auto registered = RegisteredNames(dir);
-  if (!registered) return std::nullopt;
-  std::vector<std::string> out;
-  for (const std::string& name : inputs) {
-    if (!registered->count(name)) out.push_back(name);
-  }
-  return out;
-}
+constexpr const char* kTooFewHint =
+    "photos need more overlap (each point seen in 3+ photos, neighbours sharing 60-80% of the "
+    "view), more texture, or more photos; if they were not taken in order, try --matcher "
+    "exhaustive";
 
 // "71, 8 and 3", largest first.
 std::string ModelSizes(std::vector<int> sizes) {
@@ -302,87 +51,323 @@ std::string NameList(const std::vector<std::string>& names, size_t shown = 8) {
   return list;
 }
 
-// Copies `src` to `dst` so that `dst` is either the old model or the complete new one, never a
-// mix: copy into a temporary folder beside it, move the old one aside, move the new one in.
-void ReplaceDirectory(const fs::path& src, const fs::path& dst) {
-  EnsureWritableDirectory(dst.parent_path());
-  const fs::path tmp = TempPathFor(dst);
-  const fs::path old = TempPathFor(dst.string() + ".old");
+// What every step of one run shares: the options, the photos, COLMAP, its files and its log.
+struct SfmRun {
+  SfmRun(const SfmOptions& o, const std::vector<std::string>& photos)
+      : options(o), inputs(photos), n(static_cast<int>(photos.size())) {}
+
+  // Runs one COLMAP step with this run's log and progress.
+  StepResult Step(const std::vector<std::string>& args, const std::string& stage, const ProgressParser& parse) {
+    return RunColmapStep(colmap, args, stage, parse, options, log, log_path);
+  }
+
+  const SfmOptions& options;
+  const std::vector<std::string>& inputs;  // the photos, as COLMAP names them
+  int n = 0;                                // how many
+  fs::path colmap;                          // the binary
+  fs::path colmap_dir;                      // WORKSPACE/colmap
+  fs::path log_path, database, models_dir;  // in colmap_dir
+  std::ofstream log;
+  std::string threads;  // every step's number of threads
+};
+
+// The models of one mapper run. COLMAP writes one numbered folder per disconnected model; the
+// one with the most images is the scene, the others are fragments it could not attach.
+struct Mapping {
+  std::optional<fs::path> best_dir;  // the model with the most images (then points), if any
+  ModelCounts best;
+  std::vector<int> model_sizes;   // photos in each model COLMAP made
+  bool no_initial_pair = false;  // COLMAP found no pair of photos to start from
+};
+
+// A matcher's arguments with the SIFT matching settings every matching step shares.
+std::vector<std::string> WithSiftMatching(const SfmRun& run, std::vector<std::string> args) {
+  args.insert(args.end(), {"--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", run.threads});
+  return args;
+}
+
+// Without --force, a model already at WORKSPACE/sparse/0 is kept: says so and fills `result`'s
+// counts from it. False when there is none (or --force).
+bool KeepExistingModel(const SfmOptions& options, SfmResult* result) {
+  if (options.force) return false;
+  const auto counts = ReadModelCounts(result->sparse_dir);
+  if (!counts) return false;
+  Report(options, StrCat("sfm: skipped, ", result->sparse_dir.string(), " already exists (",
+                         counts->num_images, " images, ", counts->num_points,
+                         " points); use --force to run COLMAP again"));
+  result->num_registered_images = counts->num_images;
+  result->num_points = counts->num_points;
+  return true;
+}
+
+// Finds colmap, clears WORKSPACE/colmap of an earlier run's database and models, and opens the
+// log (appended to).
+SfmRun StartRun(const SfmOptions& options, const std::vector<std::string>& inputs) {
+  SfmRun run(options, inputs);
+  run.colmap = FindColmap(options.colmap_binary);
+  run.colmap_dir = options.workspace / "colmap";
+  EnsureWritableDirectory(run.colmap_dir);
+  run.log_path = run.colmap_dir / "colmap.log";
+  run.database = run.colmap_dir / "database.db";
+  run.models_dir = run.colmap_dir / "sparse";
+
+  // Start from scratch: COLMAP silently keeps the cameras and features already in a database
+  // (so a changed --camera-model or --max-image-size would not take effect), and model folders
+  // from an earlier run would compete with the new ones.
   std::error_code ec;
-  fs::remove_all(tmp, ec);
-  fs::copy(src, tmp, fs::copy_options::recursive, ec);
-  if (ec) {
-    fs::remove_all(tmp, ec);
-    throw IoError(dst.string(),
-                  "cannot copy the sparse model from " + src.string() + ": " + ec.message(),
-                  "check free disk space and permissions");
-  }
-  const bool had_old = fs::exists(dst, ec);
-  if (had_old) {
-    fs::rename(dst, old, ec);
-    if (ec) {
-      const std::string why = ec.message();
-      fs::remove_all(tmp, ec);
-      throw IoError(dst.string(), "cannot replace the existing model: " + why,
-                    "remove it by hand and run again");
-    }
-  }
-  fs::rename(tmp, dst, ec);
-  if (ec) {
-    const std::string why = ec.message();
-    if (had_old) fs::rename(old, dst, ec);  // put the old model back
-    fs::remove_all(tmp, ec);
-    throw IoError(dst.string(), "cannot move the new model into place: " + why,
+  for (const char* suffix : {"", "-shm", "-wal"}) fs::remove(run.database.string() + suffix, ec);
+  fs::remove_all(run.models_dir, ec);
+  EnsureWritableDirectory(run.models_dir);
+
+  run.log.open(run.log_path, std::ios::app | std::ios::binary);
+  if (!run.log) {
+    throw IoError(run.log_path.string(),
+                  StrCat("cannot open the log for writing: ", std::strerror(errno)),
                   "check that the workspace is writable");
   }
-  if (had_old) fs::remove_all(old, ec);
+  run.threads = std::to_string(options.num_threads);
+  return run;
+}
+
+// Beyond the exhaustive limit, auto mode lets the photos' capture times choose the matcher.
+bool OrderMatters(const SfmRun& run) {
+  return run.options.matcher == "auto" && run.n > run.options.exhaustive_max_images;
+}
+
+// The photos' headers, read once: for the camera groups (ExtractFeatures), and beyond the
+// exhaustive limit for the capture order (ChooseExhaustive); empty when neither needs them.
+PhotoTags ReadTagsIfNeeded(const SfmRun& run) {
+  PhotoTags tags;
+  if (run.options.single_camera || OrderMatters(run)) tags = ReadPhotoTags(run.options.images, run.inputs);
+  return tags;
+}
+
+// (a) Features. CPU SIFT: this build of COLMAP has no CUDA, and GPU SIFT would need an
+// OpenGL context that a headless machine lacks.
+// With a shared camera, one per group of photos that agree on size and EXIF camera
+// (camera_groups.h): each group's extraction run (its own image list) adds one camera.
+void ExtractFeatures(SfmRun& run, const PhotoTags& tags) {
+  const SfmOptions& options = run.options;
+  std::vector<CameraGroup> groups;
+  if (options.single_camera) {
+    groups = GroupByCamera(run.inputs, tags);
+    Report(options, "sfm: " + DescribeGroups(groups));
+  }
+  Report(options, StrCat("sfm: extracting features from ", run.n, " images (", run.colmap.string(), ")"));
+  const auto extract = [&](const std::vector<std::string>& list_args) {
+    std::vector<std::string> args = {"feature_extractor", "--database_path", run.database.string(), "--image_path",
+                                     options.images.string(), "--ImageReader.camera_model", options.camera_model,
+                                     "--ImageReader.single_camera", options.single_camera ? "1" : "0",
+                                     "--SiftExtraction.use_gpu", "0", "--SiftExtraction.max_image_size",
+                                     std::to_string(options.max_image_size), "--SiftExtraction.max_num_features",
+                                     std::to_string(options.max_num_features), "--SiftExtraction.num_threads", run.threads};
+    args.insert(args.end(), list_args.begin(), list_args.end());
+    const StepResult r = run.Step(args, "features", ExtractionParser());
+    if (r.signal || r.exit_code != 0) ThrowStepFailed("feature_extractor", r, run.log_path);
+  };
+  if (groups.size() > 1) {
+    for (size_t g = 0; g < groups.size(); ++g) {
+      const fs::path list = run.colmap_dir / StrCat("camera_", g + 1, "_images.txt");
+      std::string text;
+      for (const std::string& name : groups[g].names) text += name + "\n";
+      WriteFileAtomically(list, text);
+      extract({"--image_list_path", list.string()});
+    }
+  } else {
+    extract({});
+  }
+}
+
+// (b) Matching. Exhaustive is quadratic in the number of images but robust to any capture
+// order; sequential assumes photos were taken in order (a walk around the object).
+// True for exhaustive.
+bool ChooseExhaustive(const SfmRun& run, const PhotoTags& tags) {
+  const SfmOptions& options = run.options;
+  bool exhaustive = options.matcher == "exhaustive" ||
+                    (options.matcher == "auto" && run.n <= options.exhaustive_max_images);
+  if (OrderMatters(run)) {
+    // Beyond the exhaustive limit: do the photos' capture times say the names are in order?
+    const CaptureOrder order = OrderFromTags(tags);
+    Report(options, "sfm: " + order.Describe());
+    exhaustive = order.Known() && !order.NamesFollowTime();
+  }
+  return exhaustive;
+}
+
+// Runs the matcher chosen (ChooseExhaustive) over the features in the database.
+void Match(SfmRun& run, bool exhaustive) {
+  const SfmOptions& options = run.options;
+  std::vector<std::string> args;
+  ProgressParser parser;
+  if (exhaustive) {
+    Report(options, StrCat("sfm: matching all ", run.n * (run.n - 1) / 2, " pairs (exhaustive)"));
+    args = {"exhaustive_matcher", "--database_path", run.database.string()};
+    parser = ExhaustiveParser();
+  } else {
+    Report(options, StrCat("sfm: matching each image with its ", options.sequential_overlap,
+                           " neighbours (sequential)"));
+    args = {"sequential_matcher",
+            "--database_path",
+            run.database.string(),
+            "--SequentialMatching.overlap",
+            std::to_string(options.sequential_overlap),
+            "--SequentialMatching.quadratic_overlap",
+            "1"};
+    parser = SequentialParser();
+  }
+  const StepResult r = run.Step(WithSiftMatching(run, args), "matching", parser);
+  if (r.signal || r.exit_code != 0) {
+    ThrowStepFailed(exhaustive ? "exhaustive_matcher" : "sequential_matcher", r, run.log_path);
+  }
+}
+
+// (c) Incremental mapping into a fresh colmap/sparse; reads the sizes of the models it made.
+Mapping Map(SfmRun& run) {
+  Report(run.options, "sfm: mapping (incremental reconstruction)");
+  std::error_code ec;
+  fs::remove_all(run.models_dir, ec);
+  EnsureWritableDirectory(run.models_dir);
+  Mapping m;
+  const StepResult r = run.Step(
+      {"mapper", "--database_path", run.database.string(), "--image_path", run.options.images.string(),
+       "--output_path", run.models_dir.string(), "--Mapper.num_threads", run.threads},
+      "mapping", MapperParser(run.n));
+  // COLMAP 3.8 exits with 1 when no initial pair could be found: a property of the photos,
+  // not a failure of the tool.
+  m.no_initial_pair = !r.signal && r.exit_code != 0 && r.saw("failed to create sparse model");
+  if ((r.signal || r.exit_code != 0) && !m.no_initial_pair) ThrowStepFailed("mapper", r, run.log_path);
+  for (const auto& entry : fs::directory_iterator(run.models_dir, ec)) {
+    const std::string name = entry.path().filename().string();
+    if (!entry.is_directory() || name.empty() || name.find_first_not_of("0123456789") != std::string::npos) continue;
+    const auto counts = ReadModelCounts(entry.path());
+    if (!counts) continue;
+    m.model_sizes.push_back(counts->num_images);
+    if (!m.best_dir || counts->num_images > m.best.num_images ||
+        (counts->num_images == m.best.num_images && counts->num_points > m.best.num_points)) {
+      m.best_dir = entry.path();
+      m.best = *counts;
+    }
+  }
+  return m;
+}
+
+// Sequential matching assumed the photos were taken in order (file names give no other clue
+// when EXIF is stripped). A model of fewer than half of them says they were not: match the
+// remaining pairs (COLMAP keeps the pairs already matched) and map again.
+void RematchIfOutOfOrder(SfmRun& run, bool* exhaustive, Mapping* mapping) {
+  if (*exhaustive || run.options.matcher != "auto" || mapping->best.num_images >= run.n / 2) return;
+  Report(run.options, StrCat("sfm: sequential matching put only ", mapping->best.num_images, " of ", run.n,
+                             " photos in a model, so they were not taken in order: matching every pair and mapping again"));
+  const StepResult r = run.Step(WithSiftMatching(run, {"exhaustive_matcher", "--database_path", run.database.string()}),
+                                "matching", ExhaustiveParser());
+  if (r.signal || r.exit_code != 0) ThrowStepFailed("exhaustive_matcher", r, run.log_path);
+  *exhaustive = true;
+  *mapping = Map(run);
+}
+
+// Throws InputError when the largest model holds too few photos, or there is none.
+void CheckEnoughRegistered(const SfmRun& run, const Mapping& mapping) {
+  const SfmOptions& options = run.options;
+  if (!mapping.best_dir && mapping.no_initial_pair) {
+    throw InputError(options.images.string(), "registered images", StrCat("0 of ", run.n),
+                     "COLMAP could not reconstruct any part of the scene (no pair of photos "
+                     "with enough matches; see " + run.log_path.string() + ")",
+                     kTooFewHint);
+  }
+  if (!mapping.best_dir || mapping.best.num_images < options.min_registered_images) {
+    throw InputError(
+        options.images.string(), "registered images", StrCat(mapping.best.num_images, " of ", run.n),
+        StrCat("too few images registered (at least ", options.min_registered_images,
+               " needed; largest of ", mapping.model_sizes.size(), " models in ", run.models_dir.string(), ")"),
+        kTooFewHint);
+  }
+}
+
+// Writes colmap/second_pass_pairs.txt: each photo in `missing` with every other photo, each
+// pair once. `num_pairs` gets their count.
+fs::path WriteSecondPassPairs(const SfmRun& run, const std::vector<std::string>& missing, int64_t* num_pairs) {
+  const fs::path pairs = run.colmap_dir / "second_pass_pairs.txt";
+  std::string text;
+  const std::set<std::string> missing_set(missing.begin(), missing.end());
+  for (const std::string& a : missing) {
+    for (const std::string& b : run.inputs) {
+      if (a == b || (missing_set.count(b) && b < a)) continue;  // each pair once
+      text += a + " " + b + "\n";
+      ++*num_pairs;
+    }
+  }
+  WriteFileAtomically(pairs, text);
+  return pairs;
+}
+
+// (d) Sequential matching misses photos taken out of order: match those left out with every
+// other photo and register them into the model (COLMAP's image_registrator), then adjust. The
+// result replaces the best model only when every step worked and it holds more photos.
+void RegisterLeftOut(SfmRun& run, bool exhaustive, Mapping* mapping) {
+  if (exhaustive || !run.options.second_pass || mapping->best.num_images >= run.n) return;
+  const auto missing = LeftOut(run.inputs, *mapping->best_dir);
+  if (!missing || missing->empty()) return;
+  int64_t num_pairs = 0;
+  const fs::path pairs = WriteSecondPassPairs(run, *missing, &num_pairs);
+  Report(run.options, StrCat("sfm: ", mapping->best.num_images, "/", run.n, " images registered after sequential matching; matching the ",
+                             missing->size(), " left out with every other photo (", num_pairs, " pairs)"));
+  const fs::path second = run.models_dir / "second_pass";
+  EnsureWritableDirectory(second);
+  bool ok = true;
+  const auto step = [&](const std::vector<std::string>& args, const std::string& stage, const ProgressParser& parse) {
+    if (!ok) return;
+    const StepResult r = run.Step(args, stage, parse);
+    ok = !r.signal && r.exit_code == 0;
+    if (!ok) Report(run.options, StrCat("sfm: ", args.front(), " failed (see ", run.log_path.string(), "); keeping the first model"));
+  };
+  step(WithSiftMatching(run, {"matches_importer", "--database_path", run.database.string(), "--match_list_path",
+                              pairs.string(), "--match_type", "pairs"}),
+       "matching", ExhaustiveParser());
+  step({"image_registrator", "--database_path", run.database.string(), "--input_path", mapping->best_dir->string(),
+        "--output_path", second.string(), "--Mapper.num_threads", run.threads},
+       "registering", MapperParser(run.n));
+  step({"bundle_adjuster", "--input_path", second.string(), "--output_path", second.string()}, "adjusting",
+       [](const std::string&) { return std::optional<std::string>(); });
+  const auto counts = ok ? ReadModelCounts(second) : std::nullopt;
+  if (counts && counts->num_images > mapping->best.num_images) {
+    *std::max_element(mapping->model_sizes.begin(), mapping->model_sizes.end()) = counts->num_images;  // it grew
+    mapping->best_dir = second;
+    mapping->best = *counts;
+  }
+}
+
+// The chosen model becomes WORKSPACE/sparse/0; `result` gets its counts and the photos it left out.
+void InstallModel(const SfmRun& run, const Mapping& mapping, SfmResult* result) {
+  ReplaceDirectory(*mapping.best_dir, result->sparse_dir);
+  result->num_registered_images = mapping.best.num_images;
+  result->num_points = mapping.best.num_points;
+  if (const auto missing = LeftOut(run.inputs, result->sparse_dir)) result->left_out = *missing;
+}
+
+// The closing lines: what the model holds, the photos it left out, and what to try when it
+// left out many.
+void ReportModel(const SfmRun& run, const Mapping& mapping, bool exhaustive, const SfmResult& result) {
+  const ModelCounts& best = mapping.best;
+  const std::vector<int>& model_sizes = mapping.model_sizes;
+  const int n = run.n;
+  Report(
+      run.options,
+      StrCat("sfm: ", best.num_images, "/", n, " images registered, ", best.num_points, " points",
+             model_sizes.size() > 1 ? StrCat(" (the largest of ", model_sizes.size(), " models of ", ModelSizes(model_sizes), " photos)")
+                                    : "",
+             ", in ",
+             static_cast<int>(result.seconds + 0.5), " s -> ", result.sparse_dir.string()));
+  if (!result.left_out.empty()) Report(run.options, "sfm: left out: " + NameList(result.left_out));
+  if (best.num_images < 0.9 * n) {
+    Report(run.options, StrCat("sfm: warning: only ", best.num_images, " of ", n, " photos (",
+                               static_cast<int>(100.0 * best.num_images / n), " %) are in the model; ",
+                               exhaustive ? "try more features (--max-num-features) or larger images (--max-image-size)"
+                                          : "try --matcher exhaustive (slower, order-free)",
+                               ", or add photos that overlap those left out"));
+  }
 }
 
 }  // namespace
-
-// ----------------------------------------------------------------------------------------------
-
-void SfmOptions::Check() const {
-  if (images.empty()) {
-    throw InputError(kCommandLine, "--images", "", "no images folder given",
-                     "pass the folder that holds your photos");
-  }
-  if (workspace.empty()) {
-    throw InputError(kCommandLine, "--workspace", "", "no workspace folder given",
-                     "pass a folder for COLMAP's files and the sparse model");
-  }
-  if (colmap_binary.empty()) {
-    throw InputError(kCommandLine, "--colmap-binary", "", "empty",
-                     "pass `colmap` (looked up on PATH) or the path of the binary");
-  }
-  if (!colmap::FindCameraModel(camera_model)) {
-    throw InputError(kCommandLine, "--camera-model", camera_model, "not a COLMAP camera model",
-                     "use one of SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, "
-                     "OPENCV_FISHEYE, FULL_OPENCV (upper case)");
-  }
-  if (matcher != "auto" && matcher != "exhaustive" && matcher != "sequential") {
-    throw InputError(kCommandLine, "--matcher", matcher, "unknown matcher",
-                     "use auto, exhaustive or sequential");
-  }
-  auto check_at_least = [](const char* field, int value, int min, const char* hint) {
-    if (value < min) {
-      throw InputError(kCommandLine, field, std::to_string(value), StrCat("must be at least ", min),
-                       hint);
-    }
-  };
-  check_at_least("--exhaustive-max-images", exhaustive_max_images, 0,
-                 "0 always uses the sequential matcher in auto mode");
-  check_at_least("--sequential-overlap", sequential_overlap, 1,
-                 "how many following photos each photo is matched with, e.g. 10");
-  check_at_least("--max-image-size", max_image_size, 1, "longest side in pixels, e.g. 1600");
-  check_at_least("--max-num-features", max_num_features, 1, "features per image, e.g. 8192");
-  check_at_least("--min-registered-images", min_registered_images, 2,
-                 "a model needs at least two images");
-  if (num_threads != -1 && num_threads < 1) {
-    throw InputError(kCommandLine, "--num-threads", std::to_string(num_threads),
-                     "must be -1 (all cores) or at least 1");
-  }
-}
 
 SfmResult RunSfm(const SfmOptions& options) {
   options.Check();
@@ -393,252 +378,23 @@ SfmResult RunSfm(const SfmOptions& options) {
   const std::vector<std::string> inputs = ListInputImages(options.images);
   result.num_input_images = static_cast<int>(inputs.size());
   result.sparse_dir = options.workspace / "sparse" / "0";
-
-  if (!options.force) {
-    if (const auto counts = ReadModelCounts(result.sparse_dir)) {
-      Report(options, StrCat("sfm: skipped, ", result.sparse_dir.string(), " already exists (",
-                             counts->num_images, " images, ", counts->num_points,
-                             " points); use --force to run COLMAP again"));
-      result.num_registered_images = counts->num_images;
-      result.num_points = counts->num_points;
-      result.seconds = elapsed();
-      return result;
-    }
+  if (KeepExistingModel(options, &result)) {
+    result.seconds = elapsed();
+    return result;
   }
 
-  const fs::path colmap = FindColmap(options.colmap_binary);
-  const fs::path colmap_dir = options.workspace / "colmap";
-  EnsureWritableDirectory(colmap_dir);
-  const fs::path log_path = colmap_dir / "colmap.log";
-  const fs::path database = colmap_dir / "database.db";
-  const fs::path models_dir = colmap_dir / "sparse";
-
-  // Start from scratch: COLMAP silently keeps the cameras and features already in a database
-  // (so a changed --camera-model or --max-image-size would not take effect), and model folders
-  // from an earlier run would compete with the new ones.
-  std::error_code ec;
-  for (const char* suffix : {"", "-shm", "-wal"}) fs::remove(database.string() + suffix, ec);
-  fs::remove_all(models_dir, ec);
-  EnsureWritableDirectory(models_dir);
-
-  std::ofstream log(log_path, std::ios::app | std::ios::binary);
-  if (!log) {
-    throw IoError(log_path.string(),
-                  StrCat("cannot open the log for writing: ", std::strerror(errno)),
-                  "check that the workspace is writable");
-  }
-
-  const std::string threads = std::to_string(options.num_threads);
-  const int n = result.num_input_images;
-
-  // (a) Features. CPU SIFT: this build of COLMAP has no CUDA, and GPU SIFT would need an
-  // OpenGL context that a headless machine lacks.
-  // With a shared camera, one per group of photos that agree on size and EXIF camera
-  // (camera_groups.h): each group's extraction run (its own image list) adds one camera.
-  // The photos' headers, read once: for the camera groups, and beyond the exhaustive limit for
-  // the capture order (b).
-  const bool order_matters = options.matcher == "auto" && n > options.exhaustive_max_images;
-  std::vector<std::optional<CameraTags>> tags;
-  if (options.single_camera || order_matters) tags = ReadPhotoTags(options.images, inputs);
-  std::vector<CameraGroup> groups;
-  if (options.single_camera) {
-    groups = GroupByCamera(inputs, tags);
-    Report(options, "sfm: " + DescribeGroups(groups));
-  }
-  Report(options, StrCat("sfm: extracting features from ", n, " images (", colmap.string(), ")"));
-  const auto extract = [&](const std::vector<std::string>& list_args) {
-    std::vector<std::string> args = {"feature_extractor", "--database_path", database.string(), "--image_path",
-                                     options.images.string(), "--ImageReader.camera_model", options.camera_model,
-                                     "--ImageReader.single_camera", options.single_camera ? "1" : "0",
-                                     "--SiftExtraction.use_gpu", "0", "--SiftExtraction.max_image_size",
-                                     std::to_string(options.max_image_size), "--SiftExtraction.max_num_features",
-                                     std::to_string(options.max_num_features), "--SiftExtraction.num_threads", threads};
-    args.insert(args.end(), list_args.begin(), list_args.end());
-    const StepResult r = RunColmapStep(colmap, args, "features", ExtractionParser(), options, log, log_path);
-    if (r.signal || r.exit_code != 0) ThrowStepFailed("feature_extractor", r, log_path);
-  };
-  if (groups.size() > 1) {
-    for (size_t g = 0; g < groups.size(); ++g) {
-      const fs::path list = colmap_dir / StrCat("camera_", g + 1, "_images.txt");
-      std::string text;
-      for (const std::string& name : groups[g].names) text += name + "\n";
-      WriteFileAtomically(list, text);
-      extract({"--image_list_path", list.string()});
-    }
-  } else {
-    extract({});
-  }
-
-  // (b) Matching. Exhaustive is quadratic in the number of images but robust to any capture
-  // order; sequential assumes photos were taken in order (a walk around the object).
-  bool exhaustive = options.matcher == "exhaustive" ||
-                    (options.matcher == "auto" && n <= options.exhaustive_max_images);
-  if (order_matters) {
-    // Beyond the exhaustive limit: do the photos' capture times say the names are in order?
-    const CaptureOrder order = OrderFromTags(tags);
-    Report(options, "sfm: " + order.Describe());
-    exhaustive = order.Known() && !order.NamesFollowTime();
-  }
-  // A matcher's arguments with the SIFT matching settings every matching step shares.
-  const auto with_sift_matching = [&](std::vector<std::string> args) {
-    args.insert(args.end(), {"--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", threads});
-    return args;
-  };
-  {
-    std::vector<std::string> args;
-    ProgressParser parser;
-    if (exhaustive) {
-      Report(options, StrCat("sfm: matching all ", n * (n - 1) / 2, " pairs (exhaustive)"));
-      args = {"exhaustive_matcher", "--database_path", database.string()};
-      parser = ExhaustiveParser();
-    } else {
-      Report(options, StrCat("sfm: matching each image with its ", options.sequential_overlap,
-                             " neighbours (sequential)"));
-      args = {"sequential_matcher",
-              "--database_path",
-              database.string(),
-              "--SequentialMatching.overlap",
-              std::to_string(options.sequential_overlap),
-              "--SequentialMatching.quadratic_overlap",
-              "1"};
-      parser = SequentialParser();
-    }
-    const StepResult r = RunColmapStep(colmap, with_sift_matching(args), "matching", parser, options, log, log_path);
-    if (r.signal || r.exit_code != 0) {
-      ThrowStepFailed(exhaustive ? "exhaustive_matcher" : "sequential_matcher", r, log_path);
-    }
-  }
-
-  // (c) Incremental mapping. COLMAP writes one numbered folder per disconnected model; the one
-  // with the most images is the scene, the others are fragments it could not attach.
-  const std::string too_few_hint =
-      "photos need more overlap (each point seen in 3+ photos, neighbours sharing 60-80% of the "
-      "view), more texture, or more photos; if they were not taken in order, try --matcher "
-      "exhaustive";
-  std::optional<fs::path> best_dir;
-  ModelCounts best;
-  std::vector<int> model_sizes;  // photos in each model COLMAP made
-  bool no_initial_pair = false;
-  const auto map = [&] {
-    Report(options, "sfm: mapping (incremental reconstruction)");
-    fs::remove_all(models_dir, ec);
-    EnsureWritableDirectory(models_dir);
-    best_dir.reset();
-    best = {};
-    model_sizes.clear();
-    const StepResult r = RunColmapStep(
-        colmap,
-        {"mapper", "--database_path", database.string(), "--image_path", options.images.string(),
-         "--output_path", models_dir.string(), "--Mapper.num_threads", threads},
-        "mapping", MapperParser(n), options, log, log_path);
-    // COLMAP 3.8 exits with 1 when no initial pair could be found: a property of the photos,
-    // not a failure of the tool.
-    no_initial_pair = !r.signal && r.exit_code != 0 && r.saw("failed to create sparse model");
-    if ((r.signal || r.exit_code != 0) && !no_initial_pair) ThrowStepFailed("mapper", r, log_path);
-    for (const auto& entry : fs::directory_iterator(models_dir, ec)) {
-      const std::string name = entry.path().filename().string();
-      if (!entry.is_directory() || name.empty() || name.find_first_not_of("0123456789") != std::string::npos) continue;
-      const auto counts = ReadModelCounts(entry.path());
-      if (!counts) continue;
-      model_sizes.push_back(counts->num_images);
-      if (!best_dir || counts->num_images > best.num_images ||
-          (counts->num_images == best.num_images && counts->num_points > best.num_points)) {
-        best_dir = entry.path();
-        best = *counts;
-      }
-    }
-  };
-  map();
-  // Sequential matching assumed the photos were taken in order (file names give no other clue
-  // when EXIF is stripped). A model of fewer than half of them says they were not: match the
-  // remaining pairs (COLMAP keeps the pairs already matched) and map again.
-  if (!exhaustive && options.matcher == "auto" && best.num_images < n / 2) {
-    Report(options, StrCat("sfm: sequential matching put only ", best.num_images, " of ", n,
-                           " photos in a model, so they were not taken in order: matching every pair and mapping again"));
-    const StepResult r = RunColmapStep(colmap, with_sift_matching({"exhaustive_matcher", "--database_path", database.string()}),
-                                       "matching", ExhaustiveParser(), options, log, log_path);
-    if (r.signal || r.exit_code != 0) ThrowStepFailed("exhaustive_matcher", r, log_path);
-    exhaustive = true;
-    map();
-  }
-  if (!best_dir && no_initial_pair) {
-    throw InputError(options.images.string(), "registered images", StrCat("0 of ", n),
-                     "COLMAP could not reconstruct any part of the scene (no pair of photos "
-                     "with enough matches; see " + log_path.string() + ")",
-                     too_few_hint);
-  }
-  if (!best_dir || best.num_images < options.min_registered_images) {
-    throw InputError(
-        options.images.string(), "registered images", StrCat(best.num_images, " of ", n),
-        StrCat("too few images registered (at least ", options.min_registered_images,
-               " needed; largest of ", model_sizes.size(), " models in ", models_dir.string(), ")"),
-        too_few_hint);
-  }
-
-  // (d) Sequential matching misses photos taken out of order: match those left out with every
-  // other photo and register them into the model (COLMAP's image_registrator), then adjust.
-  if (!exhaustive && options.second_pass && best.num_images < n) {
-    if (const auto missing = LeftOut(inputs, *best_dir); missing && !missing->empty()) {
-      const fs::path pairs = colmap_dir / "second_pass_pairs.txt";
-      std::string text;
-      int64_t num_pairs = 0;
-      const std::set<std::string> missing_set(missing->begin(), missing->end());
-      for (const std::string& a : *missing) {
-        for (const std::string& b : inputs) {
-          if (a == b || (missing_set.count(b) && b < a)) continue;  // each pair once
-          text += a + " " + b + "\n";
-          ++num_pairs;
-        }
-      }
-      WriteFileAtomically(pairs, text);
-      Report(options, StrCat("sfm: ", best.num_images, "/", n, " images registered after sequential matching; matching the ",
-                             missing->size(), " left out with every other photo (", num_pairs, " pairs)"));
-      const fs::path second = models_dir / "second_pass";
-      EnsureWritableDirectory(second);
-      bool ok = true;
-      const auto step = [&](const std::vector<std::string>& args, const std::string& stage, const ProgressParser& parse) {
-        if (!ok) return;
-        const StepResult r = RunColmapStep(colmap, args, stage, parse, options, log, log_path);
-        ok = !r.signal && r.exit_code == 0;
-        if (!ok) Report(options, StrCat("sfm: ", args.front(), " failed (see ", log_path.string(), "); keeping the first model"));
-      };
-      step(with_sift_matching({"matches_importer", "--database_path", database.string(), "--match_list_path",
-                               pairs.string(), "--match_type", "pairs"}),
-           "matching", ExhaustiveParser());
-      step({"image_registrator", "--database_path", database.string(), "--input_path", best_dir->string(),
-            "--output_path", second.string(), "--Mapper.num_threads", threads},
-           "registering", MapperParser(n));
-      step({"bundle_adjuster", "--input_path", second.string(), "--output_path", second.string()}, "adjusting",
-           [](const std::string&) { return std::optional<std::string>(); });
-      const auto counts = ok ? ReadModelCounts(second) : std::nullopt;
-      if (counts && counts->num_images > best.num_images) {
-        *std::max_element(model_sizes.begin(), model_sizes.end()) = counts->num_images;  // it grew
-        best_dir = second;
-        best = *counts;
-      }
-    }
-  }
-
-  ReplaceDirectory(*best_dir, result.sparse_dir);
-  result.num_registered_images = best.num_images;
-  result.num_points = best.num_points;
-  if (const auto missing = LeftOut(inputs, result.sparse_dir)) result.left_out = *missing;
+  SfmRun run = StartRun(options, inputs);
+  const PhotoTags tags = ReadTagsIfNeeded(run);
+  ExtractFeatures(run, tags);
+  bool exhaustive = ChooseExhaustive(run, tags);
+  Match(run, exhaustive);
+  Mapping mapping = Map(run);
+  RematchIfOutOfOrder(run, &exhaustive, &mapping);
+  CheckEnoughRegistered(run, mapping);
+  RegisterLeftOut(run, exhaustive, &mapping);
+  InstallModel(run, mapping, &result);
   result.seconds = elapsed();
-  Report(
-      options,
-      StrCat("sfm: ", best.num_images, "/", n, " images registered, ", best.num_points, " points",
-             model_sizes.size() > 1 ? StrCat(" (the largest of ", model_sizes.size(), " models of ", ModelSizes(model_sizes), " photos)")
-                                    : "",
-             ", in ",
-             static_cast<int>(result.seconds + 0.5), " s -> ", result.sparse_dir.string()));
-  if (!result.left_out.empty()) Report(options, "sfm: left out: " + NameList(result.left_out));
-  if (best.num_images < 0.9 * n) {
-    Report(options, StrCat("sfm: warning: only ", best.num_images, " of ", n, " photos (",
-                           static_cast<int>(100.0 * best.num_images / n), " %) are in the model; ",
-                           exhaustive ? "try more features (--max-num-features) or larger images (--max-image-size)"
-                                      : "try --matcher exhaustive (slower, order-free)",
-                           ", or add photos that overlap those left out"));
-  }
+  ReportModel(run, mapping, exhaustive, result);
   return result;
 }
 

@@ -115,10 +115,19 @@ void PlaceBoundsAndShells(const ImportOptions& o, const std::vector<BoundsPoint>
 
 // ---- COLMAP ----
 
-void ImportColmap(const ImportOptions& o, ImportResult* r) {
-  const fs::path model_dir = o.colmap_dir;
-  const colmap::ModelFormat format = colmap::DetectModelFormat(model_dir);
-  colmap::Reconstruction rec = colmap::ReadReconstruction(model_dir);
+// The photos of a COLMAP model: their folder, the image files in it and, for the model's photos
+// found there, what their headers say, by camera.
+struct ColmapPhotos {
+  fs::path dir;                   // --images, or <model>/../../images
+  std::set<std::string> on_disk;  // image files under `dir` (ListImages)
+  std::map<uint32_t, std::vector<std::pair<fs::path, ImageInfo>>> by_camera;
+  PixelFormat format = PixelFormat::kUInt8;  // the photos' pixel format (the last one read)
+  int64_t largest_decode = 0;                // bytes of the largest photo decoded
+};
+
+// The model's photos whose pose looks wrong (bad_poses.h): name -> why, each with a warning.
+std::map<std::string, std::string> WarnBadPoses(const ImportOptions& o, const colmap::Reconstruction& rec,
+                                                ImportResult* r) {
   std::map<std::string, std::string> bad_poses;  // image name -> why
   for (const BadPose& b : FindBadPoses(rec)) {
     bad_poses[b.name] = StrCat("pose looks wrong: ", b.Describe());
@@ -127,33 +136,42 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
                                  o.keep_bad_poses ? "kept (--keep-bad-poses)"
                                                   : "left out of training and scoring (--keep-bad-poses keeps it)"));
   }
-  std::error_code ec;
-  for (fs::directory_iterator it(model_dir, ec), end; !ec && it != end; it.increment(ec)) ProtectInput(it->path());
+  return bad_poses;
+}
 
-  fs::path images_dir = o.images_dir;
-  if (images_dir.empty()) images_dir = model_dir.parent_path().parent_path() / "images";
-  if (!fs::is_directory(images_dir)) {
-    throw InputError(kCommandLine, "--images", images_dir.string(), "not a folder",
+// The photos' folder and its image files; throws InputError when it is no folder or holds none.
+ColmapPhotos ListColmapPhotos(const ImportOptions& o, const fs::path& model_dir) {
+  ColmapPhotos photos;
+  photos.dir = o.images_dir;
+  if (photos.dir.empty()) photos.dir = model_dir.parent_path().parent_path() / "images";
+  if (!fs::is_directory(photos.dir)) {
+    throw InputError(kCommandLine, "--images", photos.dir.string(), "not a folder",
                      "pass the folder of photos the COLMAP model was made from");
   }
-  const std::set<std::string> on_disk = ListImages(images_dir);
-  if (on_disk.empty()) {
-    throw InputError(images_dir.string(), "", "", "no image files found (JPEG, PNG, TIFF, EXR...)",
+  photos.on_disk = ListImages(photos.dir);
+  if (photos.on_disk.empty()) {
+    throw InputError(photos.dir.string(), "", "", "no image files found (JPEG, PNG, TIFF, EXR...)",
                      "pass the folder of photos the COLMAP model was made from with --images");
   }
+  return photos;
+}
 
+// The model's images missing on disk are an error, or with --skip-missing a warning (unless
+// all are missing); photos on disk that the model lacks are a warning.
+void CheckModelAgainstDisk(const ImportOptions& o, const colmap::Reconstruction& rec, const ColmapPhotos& photos,
+                           ImportResult* r) {
   std::vector<std::string> missing;
   std::set<std::string> in_model;
   for (const auto& [id, im] : rec.images) {
     in_model.insert(im.name);
-    if (!on_disk.count(im.name)) missing.push_back(im.name);
+    if (!photos.on_disk.count(im.name)) missing.push_back(im.name);
   }
   if (!missing.empty()) {
     std::string list;
     for (size_t i = 0; i < missing.size() && i < 5; ++i) list += (i ? ", " : "") + missing[i];
     if (missing.size() > 5) list += ", ...";
     if (!o.skip_missing || missing.size() == rec.images.size()) {
-      throw InputError(images_dir.string(), "image", missing.front(),
+      throw InputError(photos.dir.string(), "image", missing.front(),
                        StrCat(missing.size(), " of ", rec.images.size(),
                               " images in the model are not in the folder: ", list),
                        o.skip_missing ? "none of the model's images is there: check --images"
@@ -162,29 +180,32 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
     r->warnings.push_back(StrCat("skipped ", missing.size(), " images missing on disk: ", list));
   }
   std::vector<std::string> extra;
-  for (const auto& n : on_disk) {
+  for (const auto& n : photos.on_disk) {
     if (!in_model.count(n)) extra.push_back(n);
   }
   if (!extra.empty()) {
-    r->warnings.push_back(StrCat(extra.size(), " images in ", images_dir.string(),
+    r->warnings.push_back(StrCat(extra.size(), " images in ", photos.dir.string(),
                                  " are not in the model (not registered by COLMAP?) and are ignored, e.g. ", extra.front()));
   }
+}
 
-  // Check each image's size against its camera: equal, or an exact integer downscale
-  // (mip-NeRF 360's images_4/), which scales the intrinsics.
-  std::map<uint32_t, std::vector<std::pair<fs::path, ImageInfo>>> by_camera;
-  PixelFormat source_format = PixelFormat::kUInt8;
-  int64_t largest_decode = 0;
+// Reads the headers of the model's photos on disk, each protected as an input, into `photos`.
+void ReadPhotoHeaders(const colmap::Reconstruction& rec, ColmapPhotos* photos) {
   for (const auto& [id, im] : rec.images) {
-    if (!on_disk.count(im.name)) continue;
-    const fs::path p = images_dir / im.name;
+    if (!photos->on_disk.count(im.name)) continue;
+    const fs::path p = photos->dir / im.name;
     ProtectInput(p);
     const ImageInfo info = ReadImageInfo(p);
-    source_format = info.format;
-    largest_decode = std::max(largest_decode, DecodedBytes(info));
-    by_camera[im.camera_id].emplace_back(p, info);
+    photos->format = info.format;
+    photos->largest_decode = std::max(photos->largest_decode, DecodedBytes(info));
+    photos->by_camera[im.camera_id].emplace_back(p, info);
   }
-  for (const auto& [cam_id, infos] : by_camera) {
+}
+
+// Checks each image's size against its camera: equal, or an exact integer downscale
+// (mip-NeRF 360's images_4/), which scales the intrinsics.
+void CheckCameraSizes(const colmap::Reconstruction& rec, const ColmapPhotos& photos) {
+  for (const auto& [cam_id, infos] : photos.by_camera) {
     CheckOneSize(infos, StrCat("camera ", cam_id), "images of one camera must all have one size");
     const colmap::Camera& cam = rec.cameras.at(cam_id);
     const auto& [p, info] = infos.front();
@@ -201,30 +222,37 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
                        "pass the images the model was made from (or a folder like images_4/ that is an exact downscale)");
     }
   }
+}
 
-  // Cameras: scale to the size on disk, undistort to pinhole, then apply --downscale.
+// Scales a camera (of `model`) to the size of its photos on disk.
+void ScaleToSize(const colmap::CameraModelInfo& model, const ImageInfo& size, colmap::Camera* cam) {
+  const double sx = static_cast<double>(size.width) / cam->width;
+  const double sy = static_cast<double>(size.height) / cam->height;
+  if (sx != 1.0 || sy != 1.0) {
+    // COLMAP's pixel convention (corner at 0) makes scaling f and c by the size ratio exact.
+    if (colmap::NumFocalParams(model.id) == 3) {
+      cam->params[0] *= 0.5 * (sx + sy);
+      cam->params[1] *= sx;
+      cam->params[2] *= sy;
+    } else {
+      cam->params[0] *= sx;
+      cam->params[1] *= sy;
+      cam->params[2] *= sx;
+      cam->params[3] *= sy;
+    }
+    cam->width = static_cast<uint64_t>(size.width);
+    cam->height = static_cast<uint64_t>(size.height);
+  }
+}
+
+// Cameras: scale to the size on disk, undistort to pinhole, then apply --downscale; returns their undistorters.
+std::map<uint32_t, Undistorter> AddCameras(const ImportOptions& o, const colmap::Reconstruction& rec,
+                                           const fs::path& model_dir, const ColmapPhotos& photos, ImportResult* r) {
   std::map<uint32_t, Undistorter> undistorters;
-  for (const auto& [cam_id, infos] : by_camera) {  // one size each (CheckOneSize)
-    const ImageInfo& size = infos.front().second;
+  for (const auto& [cam_id, infos] : photos.by_camera) {  // one size each (CheckOneSize)
     colmap::Camera cam = rec.cameras.at(cam_id);
     const auto* model = colmap::FindCameraModel(cam.model_id);
-    const double sx = static_cast<double>(size.width) / cam.width;
-    const double sy = static_cast<double>(size.height) / cam.height;
-    if (sx != 1.0 || sy != 1.0) {
-      // COLMAP's pixel convention (corner at 0) makes scaling f and c by the size ratio exact.
-      if (colmap::NumFocalParams(model->id) == 3) {
-        cam.params[0] *= 0.5 * (sx + sy);
-        cam.params[1] *= sx;
-        cam.params[2] *= sy;
-      } else {
-        cam.params[0] *= sx;
-        cam.params[1] *= sy;
-        cam.params[2] *= sx;
-        cam.params[3] *= sy;
-      }
-      cam.width = static_cast<uint64_t>(size.width);
-      cam.height = static_cast<uint64_t>(size.height);
-    }
+    ScaleToSize(*model, infos.front().second, &cam);
     Undistorter u = Undistorter::Create(cam, StrCat((model_dir / "cameras").string(), " camera ", cam_id));
     const PinholeIntrinsics& pin = u.pinhole();
     SceneCamera sc;
@@ -239,31 +267,56 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
     r->scene.cameras.push_back(sc);
     undistorters.emplace(cam_id, std::move(u));
   }
+  return undistorters;
+}
 
-  const std::string ext = OutputExtension(source_format);
+// The scene's images, one per model photo on disk (those with a bad pose excluded unless
+// --keep-bad-poses), in the model's order; returns the job that writes each.
+std::vector<ImageJob> AddImages(const ImportOptions& o, const colmap::Reconstruction& rec, const ColmapPhotos& photos,
+                                const std::map<std::string, std::string>& bad_poses,
+                                const std::map<uint32_t, Undistorter>& undistorters, ImportResult* r) {
+  const std::string ext = OutputExtension(photos.format);
   std::vector<ImageJob> jobs;
   std::set<std::string> taken;
   for (const auto& [id, im] : rec.images) {
-    if (!on_disk.count(im.name)) continue;
+    if (!photos.on_disk.count(im.name)) continue;
     SceneImage si;
     si.name = im.name;
     si.path = ClaimOutputName("images", im.name, ext, &taken);
-    si.source_path = fs::absolute(images_dir / im.name).lexically_normal().string();
+    si.source_path = fs::absolute(photos.dir / im.name).lexically_normal().string();
     si.camera_id = static_cast<int>(im.camera_id);
     si.world_from_cam = WorldFromCam(im);
     if (!o.keep_bad_poses && bad_poses.count(im.name)) {
       si.split = Split::kExcluded;
-      si.excluded_because = bad_poses[im.name];
+      si.excluded_because = bad_poses.at(im.name);
     }
     const SceneCamera& sc = r->scene.camera(si.camera_id);
-    jobs.push_back({images_dir / im.name, si.path, "", &undistorters.at(im.camera_id), sc.width, sc.height});
+    jobs.push_back({photos.dir / im.name, si.path, "", &undistorters.at(im.camera_id), sc.width, sc.height});
     r->scene.images.push_back(std::move(si));
   }
+  return jobs;
+}
+
+// A COLMAP model and its photos, in the steps above; the scene's images end sorted by name.
+void ImportColmap(const ImportOptions& o, ImportResult* r) {
+  const fs::path model_dir = o.colmap_dir;
+  const colmap::ModelFormat format = colmap::DetectModelFormat(model_dir);
+  const colmap::Reconstruction rec = colmap::ReadReconstruction(model_dir);
+  const std::map<std::string, std::string> bad_poses = WarnBadPoses(o, rec, r);
+  std::error_code ec;
+  for (fs::directory_iterator it(model_dir, ec), end; !ec && it != end; it.increment(ec)) ProtectInput(it->path());
+
+  ColmapPhotos photos = ListColmapPhotos(o, model_dir);
+  CheckModelAgainstDisk(o, rec, photos, r);
+  ReadPhotoHeaders(rec, &photos);
+  CheckCameraSizes(rec, photos);
+  const std::map<uint32_t, Undistorter> undistorters = AddCameras(o, rec, model_dir, photos, r);
+  const std::vector<ImageJob> jobs = AddImages(o, rec, photos, bad_poses, undistorters, r);
 
   std::sort(r->scene.images.begin(), r->scene.images.end(),
             [](const SceneImage& a, const SceneImage& b) { return a.name < b.name; });
   r->scene.source = {"colmap", fs::absolute(model_dir).lexically_normal().string(),
-                     fs::absolute(images_dir).lexically_normal().string(),
+                     fs::absolute(photos.dir).lexically_normal().string(),
                      format == colmap::ModelFormat::kBinary ? "binary" : "text", o.downscale};
   std::vector<BoundsPoint> points;
   points.reserve(rec.points3D.size());
@@ -272,7 +325,7 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
   }
   PlaceBoundsAndShells(o, points, model_dir.string(), r);
   EnsureWritableDirectory(o.workspace / "images");
-  RunJobs(jobs, o, largest_decode);
+  RunJobs(jobs, o, photos.largest_decode);
 }
 
 // ---- NeRF json ----

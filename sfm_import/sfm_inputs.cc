@@ -1,0 +1,116 @@
+#include "sfm_import/sfm_inputs.h"
+
+#include <algorithm>
+#include <array>
+#include <cctype>
+#include <string_view>
+#include <system_error>
+
+#include "common/errors.h"
+#include "sfm_import/camera_models.h"
+#include "sfm_import/colmap_runner.h"
+
+namespace fs = std::filesystem;
+
+namespace perf {
+namespace {
+
+constexpr const char* kCommandLine = "command line";
+
+// What COLMAP (through FreeImage) reads in practice. Counting by extension, not by decoding,
+// keeps this cheap on large folders; COLMAP itself skips files it cannot decode.
+bool LooksLikeImage(const fs::path& path) {
+  static constexpr std::array<std::string_view, 11> kExtensions = {
+      ".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".ppm", ".pgm", ".webp", ".jp2", ".exr"};
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return std::find(kExtensions.begin(), kExtensions.end(), ext) != kExtensions.end();
+}
+
+}  // namespace
+
+namespace sfm_detail {
+
+std::vector<std::string> ListInputImages(const fs::path& images) {
+  std::error_code ec;
+  if (!fs::exists(images, ec)) {
+    throw InputError(kCommandLine, "--images", images.string(), "the images folder does not exist",
+                     "pass the folder that holds your photos");
+  }
+  if (!fs::is_directory(images, ec)) {
+    throw InputError(kCommandLine, "--images", images.string(), "not a folder",
+                     "pass the folder that holds your photos, not a single file");
+  }
+  std::vector<std::string> names;
+  fs::recursive_directory_iterator it(images, fs::directory_options::skip_permission_denied, ec);
+  if (ec) {
+    throw IoError(images.string(), "cannot list the images folder: " + ec.message(),
+                  "check its permissions");
+  }
+  for (const fs::recursive_directory_iterator end; it != end; it.increment(ec)) {
+    if (ec) {
+      throw IoError(images.string(), "cannot list the images folder: " + ec.message(),
+                    "check its permissions");
+    }
+    if (it->is_regular_file(ec) && LooksLikeImage(it->path())) {
+      names.push_back(it->path().lexically_relative(images).generic_string());
+    }
+  }
+  if (names.empty()) {
+    throw InputError(kCommandLine, "--images", images.string(),
+                     "the folder holds no images (looked for .jpg, .jpeg, .png, .tif, .tiff, .bmp, "
+                     ".ppm, .pgm, .webp, .jp2, .exr, also in sub-folders)",
+                     "put your photos in it or pass the folder that holds them");
+  }
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+}  // namespace sfm_detail
+
+// ----------------------------------------------------------------------------------------------
+
+void SfmOptions::Check() const {
+  if (images.empty()) {
+    throw InputError(kCommandLine, "--images", "", "no images folder given",
+                     "pass the folder that holds your photos");
+  }
+  if (workspace.empty()) {
+    throw InputError(kCommandLine, "--workspace", "", "no workspace folder given",
+                     "pass a folder for COLMAP's files and the sparse model");
+  }
+  if (colmap_binary.empty()) {
+    throw InputError(kCommandLine, "--colmap-binary", "", "empty",
+                     "pass `colmap` (looked up on PATH) or the path of the binary");
+  }
+  if (!colmap::FindCameraModel(camera_model)) {
+    throw InputError(kCommandLine, "--camera-model", camera_model, "not a COLMAP camera model",
+                     "use one of SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, "
+                     "OPENCV_FISHEYE, FULL_OPENCV (upper case)");
+  }
+  if (matcher != "auto" && matcher != "exhaustive" && matcher != "sequential") {
+    throw InputError(kCommandLine, "--matcher", matcher, "unknown matcher",
+                     "use auto, exhaustive or sequential");
+  }
+  auto check_at_least = [](const char* field, int value, int min, const char* hint) {
+    if (value < min) {
+      throw InputError(kCommandLine, field, std::to_string(value), StrCat("must be at least ", min),
+                       hint);
+    }
+  };
+  check_at_least("--exhaustive-max-images", exhaustive_max_images, 0,
+                 "0 always uses the sequential matcher in auto mode");
+  check_at_least("--sequential-overlap", sequential_overlap, 1,
+                 "how many following photos each photo is matched with, e.g. 10");
+  check_at_least("--max-image-size", max_image_size, 1, "longest side in pixels, e.g. 1600");
+  check_at_least("--max-num-features", max_num_features, 1, "features per image, e.g. 8192");
+  check_at_least("--min-registered-images", min_registered_images, 2,
+                 "a model needs at least two images");
+  if (num_threads != -1 && num_threads < 1) {
+    throw InputError(kCommandLine, "--num-threads", std::to_string(num_threads),
+                     "must be -1 (all cores) or at least 1");
+  }
+}
+
+}  // namespace perf
