@@ -19,8 +19,8 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
-#include "recon_cuda/training_data.h"
-#include "recon_cuda/volume.h"
+#include "recon_cuda/data/training_data.h"
+#include "recon_cuda/data/volume.h"
 #include "workspace/image_io.h"
 #include "workspace/scene.h"
 

@@ -5,9 +5,9 @@
 
 #include "common/errors.h"
 #include "common/stopwatch.h"
-#include "recon_cuda/cpu_backend.h"
-#include "recon_cuda/evaluation.h"
-#include "recon_cuda/reconstruct.h"
+#include "recon_cuda/backends/cpu_backend.h"
+#include "recon_cuda/run/evaluation.h"
+#include "recon_cuda/run/reconstruct.h"
 #include "workspace/scene.h"
 
 namespace perf::bench {
@@ -59,7 +59,7 @@ json RunMode(const CpuHierarchySettings& s, bool sparse, const Scene& scene, con
            {"seconds_cost_pass", probe.seconds},
            {"memory_bytes", h.memory.Total()},
            {"test_psnr", psnr},
-           {"seconds_total", summary.seconds_total}};
+           {"solver", summary.ToJson()}};
     std::printf("%-6s level %d  %4d^3  %9lld cells (%6lld of %6lld bricks)  %6.1f samples/ray  %7.2f s/it "
                 "(linearize %.2f, J^T J p %.3f, cost %.3f s)  %7.1f MiB  held-out %.2f dB\n",
                 mode, h.level, h.shape.n, static_cast<long long>(cells), static_cast<long long>(bricks),

@@ -6,7 +6,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "recon_cuda/occupancy.h"
+#include "recon_cuda/data/occupancy.h"
 
 namespace perf::bench {
 

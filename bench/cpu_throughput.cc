@@ -18,9 +18,9 @@
 
 #include "bench/cpu_hierarchy.h"
 #include "common/errors.h"
-#include "recon_cuda/checkpoint.h"
-#include "recon_cuda/cpu_backend.h"
-#include "recon_cuda/solver.h"
+#include "recon_cuda/backends/cpu_backend.h"
+#include "recon_cuda/data/checkpoint.h"
+#include "recon_cuda/solve/solver.h"
 
 using namespace perf;
 using namespace perf::recon;

@@ -1,4 +1,4 @@
-// Time to quality on the GPU (issue 4, paper figure 1): the hierarchy of perf reconstruct run
+// Time to quality on the GPU (paper figure 1): the hierarchy of perf reconstruct run
 // with Gauss-Newton and with Adam on the same representation, data and device, recording the
 // held-out PSNR against solver wall time, pass throughput against a roofline estimate, and peak
 // GPU memory. Writes JSON and an SVG plot after every evaluation and every level (atomically:
@@ -27,8 +27,8 @@
 #include "bench/time_to_quality.h"
 #include "common/errors.h"
 #include "common/stopwatch.h"
-#include "recon_cuda/cuda_backend.h"
-#include "recon_cuda/training_data.h"
+#include "recon_cuda/backends/cuda_backend.h"
+#include "recon_cuda/data/training_data.h"
 
 using namespace perf;
 using namespace perf::recon;
@@ -40,6 +40,31 @@ namespace {
 
 std::atomic<bool> g_stop{false};
 extern "C" void OnStopSignal(int) { g_stop.store(true); }
+
+// --check-data: every level's rays built from the data, their sizes and means printed (no GPU).
+int CheckData(const BenchData& d, const BenchSettings& s) {
+  std::vector<ViewFrustum> cams;
+  std::vector<PosedImage> images;
+  for (const View& v : d.views) {
+    if (v.train) cams.push_back({v.camera, v.width, v.height});
+  }
+  for (int level = 0; level < s.levels; ++level) {
+    const int n = s.start << level, f = PyramidFactor(cams, d.geometry, n, 1 << (s.levels - 1 - level));
+    images.clear();
+    double sum = 0;
+    for (const View& v : d.views) {
+      if (v.train) images.push_back(ToPosed(v, f));
+    }
+    const RaySet rays = MakeRaySet(images);
+    for (float c : rays.colours) sum += c;
+    double alpha_sum = 0;
+    for (float a : rays.alphas) alpha_sum += a;
+    std::printf("level %d: %d^3, images / %d, %lld rays, mean colour %.4f, mean alpha %s\n", level, n, f,
+                static_cast<long long>(rays.size()), sum / std::max<size_t>(1, rays.colours.size()),
+                rays.alphas.empty() ? "(none)" : StrCat(alpha_sum / rays.alphas.size()).c_str());
+  }
+  return 0;
+}
 
 }  // namespace
 
@@ -91,29 +116,7 @@ int main(int argc, char** argv) {
     s.solver.psnr_ray_stride = 0;  // the benchmark measures held-out PSNR itself
     const auto t_start = WallClock::now();
     const BenchData d = LoadBenchData(data);
-    if (check_data) {
-      std::vector<ViewFrustum> cams;
-      std::vector<PosedImage> images;
-      for (const View& v : d.views) {
-        if (v.train) cams.push_back({v.camera, v.width, v.height});
-      }
-      for (int level = 0; level < s.levels; ++level) {
-        const int n = s.start << level, f = PyramidFactor(cams, d.geometry, n, 1 << (s.levels - 1 - level));
-        images.clear();
-        double sum = 0;
-        for (const View& v : d.views) {
-          if (v.train) images.push_back(ToPosed(v, f));
-        }
-        const RaySet rays = MakeRaySet(images);
-        for (float c : rays.colours) sum += c;
-        double alpha_sum = 0;
-        for (float a : rays.alphas) alpha_sum += a;
-        std::printf("level %d: %d^3, images / %d, %lld rays, mean colour %.4f, mean alpha %s\n", level, n, f,
-                    static_cast<long long>(rays.size()), sum / std::max<size_t>(1, rays.colours.size()),
-                    rays.alphas.empty() ? "(none)" : StrCat(alpha_sum / rays.alphas.size()).c_str());
-      }
-      return 0;
-    }
+    if (check_data) return CheckData(d, s);
     std::signal(SIGTERM, OnStopSignal);
     std::signal(SIGINT, OnStopSignal);
     auto backend = MakeCudaBackend({});

@@ -8,10 +8,10 @@
 #include "common/atomic_file.h"
 #include "common/errors.h"
 #include "common/stopwatch.h"
-#include "recon_cuda/evaluation.h"
-#include "recon_cuda/hierarchy.h"
-#include "recon_cuda/training_data.h"
-#include "recon_cuda/volume.h"
+#include "recon_cuda/data/training_data.h"
+#include "recon_cuda/data/volume.h"
+#include "recon_cuda/run/evaluation.h"
+#include "recon_cuda/solve/hierarchy.h"
 
 namespace perf::bench {
 namespace fs = std::filesystem;
@@ -159,7 +159,7 @@ void RunHierarchy(Backend* backend, const BenchData& d, SolverType type, const B
   std::vector<PosedImage> test_images;
   for (const View* v : test) test_images.push_back(ToPosed(*v, 1));
 
-  // The hierarchy of perf reconstruct (recon_cuda/hierarchy.h) with its default residuals and,
+  // The hierarchy of perf reconstruct (recon_cuda/solve/hierarchy.h) with its default residuals and,
   // with alpha, the shells fixed at the background.
   HierarchyOptions ho;
   ho.levels = s.levels;
@@ -256,17 +256,9 @@ void RunHierarchy(Backend* backend, const BenchData& d, SolverType type, const B
                {"rays", h.rays},
                {"iterations", summary.iterations},
                {"seconds", level_seconds},
-               {"seconds_linearize", summary.seconds_linearize},
-               {"seconds_cg", summary.seconds_cg},
-               {"seconds_line_search", summary.seconds_line_search},
-               {"seconds_update", summary.seconds_update},
-               {"seconds_psnr", summary.seconds_psnr},
-               {"passes", {{"linearize", summary.linearize_passes},
-                           {"jtj_p", summary.jtj_passes},
-                           {"cost", summary.cost_passes}}},
+               {"solver", summary.ToJson()},
                {"memory_estimate_bytes", h.memory.Total()},
-               {"throughput", passes},
-               {"report", summary.BriefReport()}};
+               {"throughput", passes}};
     if (!stopped.empty()) entry["stopped"] = stopped;
     run->levels.push_back(entry);
     std::printf("%s level %d (%s, %lld rays, images / %d): %.2f s; %s%s\n", SolverName(type), h.level,

@@ -16,9 +16,9 @@
 #include <utility>
 #include <vector>
 
-#include "recon_cuda/backend.h"
-#include "recon_cuda/render_rule.h"
-#include "recon_cuda/solver.h"
+#include "recon_cuda/core/render_rule.h"
+#include "recon_cuda/solve/backend.h"
+#include "recon_cuda/solve/solver.h"
 
 namespace perf::bench {
 

@@ -13,7 +13,7 @@
 #include <fstream>
 
 #include "common/atomic_file.h"
-#include "recon_cuda/cpu_backend.h"
+#include "recon_cuda/backends/cpu_backend.h"
 #include "tests/recon/synthetic_scene.h"
 
 namespace perf::bench {

@@ -1,4 +1,4 @@
-// The processes of one reconstruction (issue 17, docs/scaling.md): rank and size, sums over all
+// The processes of one reconstruction (docs/scaling.md): rank and size, sums over all
 // ranks, a barrier, and ending the whole job. The solver and the backends never see which
 // transport runs underneath: one process (SingleProcess, the default), MPI between processes
 // (mpi_comm.h, with PERF_WITH_MPI), or NCCL between GPUs (its device sums, bootstrapped over MPI).

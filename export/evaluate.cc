@@ -10,8 +10,8 @@
 #include "export/export.h"
 #include "export/masks.h"
 #include "export/report_html.h"
-#include "recon_cuda/render_views.h"
-#include "recon_cuda/training_data.h"
+#include "recon_cuda/data/training_data.h"
+#include "recon_cuda/run/render_views.h"
 #include "workspace/image_io.h"
 
 namespace perf::exporter {

@@ -13,8 +13,8 @@
 #include <vector>
 
 #include "export/metrics.h"
-#include "recon_cuda/device_choice.h"
-#include "recon_cuda/render_rule.h"
+#include "recon_cuda/backends/make_backend.h"
+#include "recon_cuda/core/render_rule.h"
 
 namespace perf::exporter {
 

@@ -11,9 +11,9 @@
 #include "common/atomic_file.h"
 #include "common/errors.h"
 #include "common/stopwatch.h"
-#include "recon_cuda/evaluation.h"
-#include "recon_cuda/render_views.h"
-#include "recon_cuda/training_data.h"
+#include "recon_cuda/data/training_data.h"
+#include "recon_cuda/run/evaluation.h"
+#include "recon_cuda/run/render_views.h"
 #include "workspace/image_io.h"
 
 namespace perf::exporter {

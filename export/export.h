@@ -21,8 +21,8 @@
 #include "export/mesh_export.h"
 #include "export/orbit.h"
 #include "export/vdb_export.h"
-#include "recon_cuda/device_choice.h"
-#include "recon_cuda/render_rule.h"
+#include "recon_cuda/backends/make_backend.h"
+#include "recon_cuda/core/render_rule.h"
 
 namespace perf::exporter {
 

@@ -7,8 +7,8 @@
 #include <cmath>
 
 #include "common/errors.h"
-#include "recon_cuda/evaluation.h"
-#include "recon_cuda/training_data.h"
+#include "recon_cuda/data/training_data.h"
+#include "recon_cuda/run/evaluation.h"
 #include "sfm_import/camera_models.h"
 #include "sfm_import/colmap_model.h"
 #include "sfm_import/undistort.h"

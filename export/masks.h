@@ -6,7 +6,7 @@
 
 #include <vector>
 
-#include "recon_cuda/backend.h"
+#include "recon_cuda/solve/backend.h"
 #include "workspace/image.h"
 #include "workspace/scene.h"
 

@@ -11,7 +11,7 @@
 #include <iosfwd>
 #include <vector>
 
-#include "recon_cuda/checkpoint.h"
+#include "recon_cuda/data/checkpoint.h"
 
 namespace perf::exporter {
 

@@ -6,7 +6,7 @@
 #include <cmath>
 
 #include "common/errors.h"
-#include "recon_cuda/evaluation.h"
+#include "recon_cuda/run/evaluation.h"
 
 namespace perf::exporter {
 

@@ -6,7 +6,7 @@
 
 #include <vector>
 
-#include "recon_cuda/ray_math.h"
+#include "recon_cuda/core/ray_math.h"
 #include "workspace/scene.h"
 
 namespace perf::exporter {

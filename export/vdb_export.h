@@ -16,7 +16,7 @@
 #include <filesystem>
 #include <string>
 
-#include "recon_cuda/checkpoint.h"
+#include "recon_cuda/data/checkpoint.h"
 
 namespace perf::exporter {
 

@@ -1,4 +1,4 @@
-// libFuzzer target for the checkpoint reader (recon_cuda/checkpoint.h). Every input must either
+// libFuzzer target for the checkpoint reader (recon_cuda/data/checkpoint.h). Every input must either
 // read or throw perf::Error; anything else (another exception such as bad_alloc, a crash,
 // undefined behaviour, a hang, an allocation out of proportion to the input) is a bug. A
 // checkpoint that reads must write and read back to the same bytes.
@@ -14,7 +14,7 @@
 #include <string>
 
 #include "common/errors.h"
-#include "recon_cuda/checkpoint.h"
+#include "recon_cuda/data/checkpoint.h"
 
 namespace {
 

@@ -7,13 +7,42 @@
 #include "pipeline/cli_choice.h"
 #include "pipeline/commands.h"
 #include "pipeline/stage_progress.h"
-#include "recon_cuda/reconstruct.h"
+#include "recon_cuda/run/reconstruct.h"
 #ifdef PERF_WITH_NCCL
-#include "recon_cuda/nccl_comm.h"
+#include "recon_cuda/backends/nccl_comm.h"
 #endif
-#include "recon_cuda/render_views.h"
+#include "recon_cuda/run/render_views.h"
 
 namespace perf {
+
+namespace {
+
+// The solver's options of `perf reconstruct` (SolverOptions).
+void AddSolverOptions(CLI::App* cmd, recon::SolverOptions* solver) {
+  cmd->add_option("--max-cg-iterations", solver->max_cg_iterations, "PCG iterations per Gauss-Newton step at most")
+      ->capture_default_str();
+  cmd->add_option("--smooth-grid", solver->smooth_grid,
+                  "Smoothness between neighbouring grid cells, relative to the photos (1: a pair as stiff as the mean "
+                  "cell's data; 0: off; default: 0.3 where the background is learned, 0 where it is fixed)");
+  cmd->add_option("--smooth-shells", solver->smooth_shells,
+                  "Smoothness between neighbouring shell texels, across cube-map seams too, relative to the photos (0: off)")
+      ->capture_default_str();
+  cmd->add_option("--cg-exit-ratio", solver->cg_exit_ratio, "PCG leaves when |r|^2 falls by less than this factor (paper: 0.85; default inf: never)")
+      ->capture_default_str();
+  cmd->add_option("--damping", solver->damping, "Levenberg-Marquardt damping of the diagonal (0: Gauss-Newton)")
+      ->capture_default_str();
+  cmd->add_option("--initial-step", solver->initial_step, "First step length tried by the line search (paper: 1)")
+      ->capture_default_str();
+  cmd->add_option("--diagonal-floor", solver->diagonal_floor,
+                  "Preconditioner floor relative to the largest diag(J^T J) entry")->capture_default_str();
+  cmd->add_option("--line-search-stride", solver->line_search_ray_stride,
+                  "Evaluate the line search on every k-th ray")->capture_default_str();
+  cmd->add_option("--lr-colour", solver->adam.lr_colour, "Adam learning rate of colours and shell opacities")
+      ->capture_default_str();
+  cmd->add_option("--lr-density", solver->adam.lr_density, "Adam learning rate of densities")->capture_default_str();
+}
+
+}  // namespace
 
 void AddReconstructCommand(CLI::App& app) {
   struct Args {
@@ -86,27 +115,7 @@ void AddReconstructCommand(CLI::App& app) {
                   "Sparse levels: the kept cells grow by this many cells of the level before")
       ->check(CLI::Range(0, 8))
       ->capture_default_str();
-  cmd->add_option("--max-cg-iterations", o.solver.max_cg_iterations, "PCG iterations per Gauss-Newton step at most")
-      ->capture_default_str();
-  cmd->add_option("--smooth-grid", o.smooth_grid,
-                  "Smoothness between neighbouring grid cells, relative to the photos (1: a pair as stiff as the mean "
-                  "cell's data; 0: off; default: 0.3 where the background is learned, 0 where it is fixed)");
-  cmd->add_option("--smooth-shells", o.smooth_shells,
-                  "Smoothness between neighbouring shell texels, across cube-map seams too, relative to the photos (0: off)")
-      ->capture_default_str();
-  cmd->add_option("--cg-exit-ratio", o.solver.cg_exit_ratio, "PCG leaves when |r|^2 falls by less than this factor (paper: 0.85; default inf: never)")
-      ->capture_default_str();
-  cmd->add_option("--damping", o.solver.damping, "Levenberg-Marquardt damping of the diagonal (0: Gauss-Newton)")
-      ->capture_default_str();
-  cmd->add_option("--initial-step", o.solver.initial_step, "First step length tried by the line search (paper: 1)")
-      ->capture_default_str();
-  cmd->add_option("--diagonal-floor", o.solver.diagonal_floor,
-                  "Preconditioner floor relative to the largest diag(J^T J) entry")->capture_default_str();
-  cmd->add_option("--line-search-stride", o.solver.line_search_ray_stride,
-                  "Evaluate the line search on every k-th ray")->capture_default_str();
-  cmd->add_option("--lr-colour", o.solver.adam.lr_colour, "Adam learning rate of colours and shell opacities")
-      ->capture_default_str();
-  cmd->add_option("--lr-density", o.solver.adam.lr_density, "Adam learning rate of densities")->capture_default_str();
+  AddSolverOptions(cmd, &o.solver);
   cmd->add_option("--init-opacity", o.init.box_opacity,
                   "Opacity of the box across its shortest side at the start")->capture_default_str();
   cmd->add_flag("--init-shells-mean", o.init_shells_from_photos, "Shells start at the photos' mean colour (else random)");

@@ -5,7 +5,7 @@
 #include "common/errors.h"
 #include "common/system_memory.h"
 #include "pipeline/cli_choice.h"
-#include "recon_cuda/render_rule.h"
+#include "recon_cuda/core/render_rule.h"
 
 namespace perf {
 

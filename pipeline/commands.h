@@ -8,7 +8,7 @@
 #include <string_view>
 
 #include "common/workspace_lock.h"
-#include "recon_cuda/device_choice.h"
+#include "recon_cuda/backends/make_backend.h"
 
 namespace CLI {
 class App;
@@ -37,7 +37,7 @@ std::unique_ptr<WorkspaceLock> LockWorkspace(const std::filesystem::path& worksp
 // --device and -j,--threads: the same for every command that runs a backend.
 void AddDeviceOptions(CLI::App* cmd, recon::DeviceChoice* device, int* threads);
 
-// --min-box-opacity: the render rule (recon_cuda/render_rule.h) for what `use` names.
+// --min-box-opacity: the render rule (recon_cuda/core/render_rule.h) for what `use` names.
 void AddMinBoxOpacityOption(CLI::App* cmd, float* min_box_opacity, const std::string& use);
 
 }  // namespace perf

@@ -15,8 +15,8 @@
 #include "export/evaluate.h"
 #include "export/export.h"
 #include "pipeline/stage_progress.h"
-#include "recon_cuda/checkpoint.h"
-#include "recon_cuda/reconstruct.h"
+#include "recon_cuda/data/checkpoint.h"
+#include "recon_cuda/run/reconstruct.h"
 #include "sfm_import/colmap_runner.h"
 #include "sfm_import/importer.h"
 
@@ -66,29 +66,11 @@ class StageLog {
   JsonLog log_;
 };
 
-// The reconstruction stage's options from the run's (the same on every rank): it resumes when
-// the last checkpoint is newer than scene.json and --force was not given.
-recon::ReconstructOptions ReconstructOptionsFor(const RunOptions& o, const PresetSettings& preset) {
-  const int last = recon::LastCheckpointLevel(o.workspace);
-  const bool fresh = last >= 0 && NewerThan(recon::CheckpointPath(o.workspace, last), ModTime(o.workspace / "scene.json"));
-  recon::ReconstructOptions ro;
-  ro.workspace = o.workspace;
-  ro.comm = o.comm;
-  ro.device = o.device;
-  ro.threads = o.threads;
-  ro.levels = preset.levels;
-  ro.max_resolution = preset.max_resolution;
-  ro.iterations = preset.iterations;
-  ro.exposure = o.exposure;
-  ro.resume = fresh && !o.force;
-  return ro;
-}
-
-// A rank other than 0: waits for rank 0's sfm and import (and its removal of stale checkpoints),
-// then fits its share of the photos; rank 0 exports.
+// A rank other than 0: waits for rank 0's sfm and import, then fits its share of the photos;
+// rank 0 exports.
 void RunAsRank(const RunOptions& o) {
   o.comm->Barrier();
-  recon::Reconstruct(ReconstructOptionsFor(o, PresetFor(o)));
+  recon::Reconstruct(o.ReconstructStage(PresetFor(o)));
 }
 
 class Runner {
@@ -190,12 +172,7 @@ class Runner {
   }
 
   void Reconstruct(StageReport* s) {
-    const int last = recon::LastCheckpointLevel(o_.workspace);
-    recon::ReconstructOptions ro = ReconstructOptionsFor(o_, preset_);
-    if (!ro.resume) {
-      // Checkpoints of an older import (or --force): start over, so none of them is exported.
-      for (int k = 0; k <= last; ++k) fs::remove(recon::CheckpointPath(o_.workspace, k));
-    }
+    recon::ReconstructOptions ro = o_.ReconstructStage(preset_);
     if (o_.comm != nullptr) o_.comm->Barrier();  // the other ranks start from this workspace (RunAsRank)
     Progress progress("reconstruct", o_.quiet);
     ro.on_event = [&](const recon::ReconstructOptions::Event& e) {
@@ -276,6 +253,22 @@ class Runner {
 };
 
 }  // namespace
+
+recon::ReconstructOptions RunOptions::ReconstructStage(const PresetSettings& preset) const {
+  const int last = recon::LastCheckpointLevel(workspace);
+  const bool fresh = last >= 0 && NewerThan(recon::CheckpointPath(workspace, last), ModTime(workspace / "scene.json"));
+  recon::ReconstructOptions ro;
+  ro.workspace = workspace;
+  ro.comm = comm;
+  ro.device = device;
+  ro.threads = threads;
+  ro.levels = preset.levels;
+  ro.max_resolution = preset.max_resolution;
+  ro.iterations = preset.iterations;
+  ro.exposure = exposure;
+  ro.resume = fresh && !force;
+  return ro;
+}
 
 void RunOptions::Check() const {
   const int sources = !colmap.empty() + !nerf.empty();

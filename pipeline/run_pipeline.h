@@ -17,9 +17,12 @@
 #include <vector>
 
 #include "common/comm.h"
-#include "recon_cuda/device_choice.h"
+#include "recon_cuda/backends/make_backend.h"
+#include "recon_cuda/run/reconstruct_options.h"
 
 namespace perf {
+
+struct PresetSettings;
 
 struct RunOptions {
   std::filesystem::path images, colmap, nerf, workspace;
@@ -39,6 +42,11 @@ struct RunOptions {
   Communicator* comm = nullptr;
 
   void Check() const;  // InputError naming the option
+
+  // The reconstruction stage's options under `preset` (the same on every rank): it resumes when
+  // the last checkpoint is newer than scene.json and `force` is not set; else it starts over, and
+  // the earlier run's checkpoints stay until it has a level of its own (previous_run.h).
+  recon::ReconstructOptions ReconstructStage(const PresetSettings& preset) const;
 };
 
 // What a preset sets (printed at the start of a run).

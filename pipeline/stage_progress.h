@@ -6,7 +6,7 @@
 #include <string>
 
 #include "pipeline/progress.h"
-#include "recon_cuda/reconstruct.h"
+#include "recon_cuda/run/reconstruct.h"
 
 namespace perf {
 

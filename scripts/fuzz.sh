@@ -29,7 +29,7 @@ data=${PERF_SHARED_DATA_DIR:-$root/../shared/data}
 # no CMake), extra compiler flags, the seed maker's arguments and the largest input.
 declare -A srcs=(
   [colmap_bin]="sfm_import/colmap_model.cc sfm_import/colmap_model_binary.cc sfm_import/colmap_model_text.cc sfm_import/camera_models.cc common/errors.cc common/atomic_file.cc"
-  [checkpoint]="recon_cuda/checkpoint.cc recon_cuda/brick_grid.cc common/errors.cc common/atomic_file.cc"
+  [checkpoint]="recon_cuda/data/checkpoint.cc recon_cuda/data/brick_grid.cc common/errors.cc common/atomic_file.cc"
   [nerf_json]="sfm_import/nerf_reader.cc workspace/image_io.cc common/errors.cc common/atomic_file.cc common/system_memory.cc"
 )
 declare -A flags=(

@@ -4,7 +4,7 @@
 set -euo pipefail
 
 PACKAGES=(
-  build-essential cmake ninja-build ccache pkg-config git
+  build-essential cmake ninja-build ccache pkg-config git python3
   libopenimageio-dev openimageio-tools   # image I/O and filtered resize; oiiotool for tests
   libopencv-dev                          # undistortion, image metrics
   libeigen3-dev                          # geometry

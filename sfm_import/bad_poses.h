@@ -1,4 +1,4 @@
-// Photos that COLMAP registered in the wrong place (issue 16). Such a pose sits far outside the
+// Photos that COLMAP registered in the wrong place. Such a pose sits far outside the
 // cameras' spread and either sees fewer of the model's points than most, or, in a capture whose
 // cameras look at a common point, does not have that point in its view although its photo shows
 // the object like its neighbours. shared/data/bonsai has five: DSCF5842, 5845 and 5848 17.7-19.2

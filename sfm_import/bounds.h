@@ -46,8 +46,9 @@ struct BoundsOptions {
   int num_shells = 4;
   double outer_margin = 1.1;       // outermost shell >= this x farthest camera (and farthest point without quantiles)
   double min_outer_factor = 4.0;   // without quantiles: outermost shell >= this x innermost
-  // Shells at quantiles of the points beyond the innermost shell, when there are this many
-  // (docs/tuning.md 2026-12-02: +0.5 dB held-out on the bonsai example against the square ladder).
+  // Shells at quantiles of the points beyond the innermost shell, when there are this many: the
+  // radii follow where the scene's content lies, which generalises better held-out than the
+  // square ladder (docs/tuning.md "Real photos: poses, shells, smoothness").
   int min_points_for_quantiles = 50;
   double outer_point_quantile = 0.9;  // the outermost shell's quantile
   double min_radius_step = 1.05;      // each radius at least this x the one inside it

@@ -1,4 +1,4 @@
-// Which photos share a camera (issue 19): COLMAP refines one set of intrinsics per camera, so
+// Which photos share a camera: COLMAP refines one set of intrinsics per camera, so
 // photos share one only when they agree on size and on what EXIF says of the camera (make, model,
 // focal length). Photos from one camera and zoom form one group; a set taken with several cameras,
 // zooms or crops gets one camera per group, not one for all (wrong for all but one group) nor one

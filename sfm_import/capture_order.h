@@ -1,4 +1,4 @@
-// What the photos' EXIF capture times say of their file-name order (issue 19). Sequential
+// What the photos' EXIF capture times say of their file-name order. Sequential
 // matching pairs each photo with its neighbours by name, which is right only when the names follow
 // the capture (a walk around the object). Where the photos carry DateTimeOriginal, the times say
 // whether they do before any matching is spent; without times, the first model's size is the

@@ -7,7 +7,7 @@
 #include <cstdint>
 #include <functional>
 
-#include "recon_cuda/checkpoint.h"
+#include "recon_cuda/data/checkpoint.h"
 
 namespace perf::exporter::test {
 

@@ -7,10 +7,10 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
-#include "recon_cuda/checkpoint.h"
-#include "workspace/image_io.h"
+#include "recon_cuda/data/checkpoint.h"
 #include "tests/pipeline/synthetic_workspace.h"
 #include "tests/test_util.h"
+#include "workspace/image_io.h"
 
 namespace perf {
 namespace {

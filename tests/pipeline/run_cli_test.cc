@@ -1,7 +1,8 @@
 // `perf run` as a user runs it on a small synthetic capture (NeRF-style transforms.json): every
 // stage runs, a second run skips them all, a newer input re-runs from import; and a run stopped
 // mid-reconstruction (Ctrl-C, or killed outright) resumes after the last checkpoint and ends
-// with a complete workspace in which no file is damaged.
+// with a complete workspace in which no file is damaged; a forced run that fails before its first
+// level leaves the previous result as it was.
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
@@ -12,10 +13,10 @@
 #include <thread>
 
 #include "common/atomic_file.h"
-#include "recon_cuda/checkpoint.h"
-#include "workspace/scene.h"
+#include "recon_cuda/data/checkpoint.h"
 #include "tests/pipeline/synthetic_workspace.h"
 #include "tests/test_util.h"
+#include "workspace/scene.h"
 
 namespace perf {
 namespace {
@@ -86,16 +87,16 @@ TEST_F(RunCli, RunsEveryStageThenSkipsWhatIsUpToDate) {
   EXPECT_NE(r.output.find("--preset"), std::string::npos) << r.output;
 }
 
-// Starts `perf run` in the background; stops it with `sig` once level 0's checkpoint is written
-// (the solve is then inside level 1), and returns its exit status.
-int StopDuringLevel1(const std::string& command, const fs::path& ws, int sig) {
+// Starts `command` in the background; stops it with `sig` 300 ms after `sign` exists, and returns
+// its exit status.
+int StopWhenExists(const std::string& command, const fs::path& sign, int sig) {
   const pid_t pid = ::fork();
   if (pid == 0) {
     ::execl("/bin/sh", "sh", "-c", ("exec " + command + " > /dev/null 2>&1").c_str(), static_cast<char*>(nullptr));
     ::_exit(127);
   }
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::minutes(5);
-  while (!fs::exists(recon::CheckpointPath(ws, 0)) && std::chrono::steady_clock::now() < deadline) {
+  while (!fs::exists(sign) && std::chrono::steady_clock::now() < deadline) {
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
@@ -103,6 +104,11 @@ int StopDuringLevel1(const std::string& command, const fs::path& ws, int sig) {
   int status = 0;
   ::waitpid(pid, &status, 0);
   return status;
+}
+
+// Stops `perf run` with `sig` once level 0's checkpoint is written (the solve is then inside level 1).
+int StopDuringLevel1(const std::string& command, const fs::path& ws, int sig) {
+  return StopWhenExists(command, recon::CheckpointPath(ws, 0), sig);
 }
 
 TEST_F(RunCli, CtrlCStopsCleanlyAndTheNextRunResumes) {
@@ -129,6 +135,24 @@ TEST_F(RunCli, KilledMidReconstructionResumesWithNoDamagedFile) {
   ExpectCompleteWorkspace(2);
   const nlohmann::json run = RunJson();
   EXPECT_TRUE(run["stages"][0]["skipped"].get<bool>()) << "import was complete before the kill";
+}
+
+// --force starts the reconstruction over, but the last good result stays until the new run has a
+// level of its own (recon/previous/ holds it meanwhile): stopped before, the result is as it was.
+TEST_F(RunCli, ForcedRunStoppedBeforeItsFirstLevelLeavesThePreviousResult) {
+  auto r = RunCommand(Run("--levels 1 --iterations 3"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const fs::path level0 = recon::CheckpointPath(ws_, 0), summary = ws_ / "recon" / "recon.json";
+  const std::string checkpoint = ReadFileToString(level0), recon_json = ReadFileToString(summary);
+
+  const int status = StopWhenExists(Run("--force --levels 1 --iterations 400"), ws_ / "recon" / "previous", SIGINT);
+  ASSERT_TRUE(WIFEXITED(status)) << "Ctrl-C should stop perf at a safe point, not kill it";
+  EXPECT_EQ(WEXITSTATUS(status), 130);
+  ASSERT_TRUE(fs::exists(level0)) << "the forced run destroyed the last good result";
+  EXPECT_EQ(ReadFileToString(level0), checkpoint) << "stopped too late to test anything, or the result changed";
+  EXPECT_EQ(ReadFileToString(summary), recon_json);
+  EXPECT_FALSE(fs::exists(ws_ / "recon" / "previous"));
+  EXPECT_TRUE(fs::exists(ws_ / "export.json"));
 }
 
 }  // namespace

@@ -6,7 +6,7 @@
 #include <string>
 
 #include "common/errors.h"
-#include "recon_cuda/backend.h"
+#include "recon_cuda/backends/make_backend.h"
 
 namespace perf::recon {
 namespace {

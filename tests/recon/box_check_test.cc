@@ -1,7 +1,7 @@
 // BoxFaces and CutOffWarning (box_check.h): density against a side face is named with its share,
 // density on the bottom face (where the object stands) and inside the box is not, and a sparse
 // grid's inactive cells are empty.
-#include "recon_cuda/box_check.h"
+#include "recon_cuda/run/box_check.h"
 
 #include <gtest/gtest.h>
 

@@ -8,8 +8,8 @@
 
 #include <cstdio>
 
-#include "recon_cuda/cpu_backend.h"
-#include "recon_cuda/solver.h"
+#include "recon_cuda/backends/cpu_backend.h"
+#include "recon_cuda/solve/solver.h"
 #include "tests/recon/recon_test_util.h"
 
 namespace perf::recon {

@@ -1,5 +1,5 @@
 // Checkpoints: round trips through both overloads, and every kind of damage named clearly.
-#include "recon_cuda/checkpoint.h"
+#include "recon_cuda/data/checkpoint.h"
 
 #include <gtest/gtest.h>
 

@@ -5,10 +5,10 @@
 #include <gtest/gtest.h>
 
 #include "common/errors.h"
-#include "recon_cuda/cpu_backend.h"
-#include "recon_cuda/evaluation.h"
-#include "recon_cuda/solver.h"
-#include "recon_cuda/volume.h"
+#include "recon_cuda/backends/cpu_backend.h"
+#include "recon_cuda/data/volume.h"
+#include "recon_cuda/run/evaluation.h"
+#include "recon_cuda/solve/solver.h"
 #include "tests/recon/synthetic_scene.h"
 
 namespace perf::recon {

@@ -1,7 +1,7 @@
 // The CPU backend's passes against a dense Jacobian from the double-precision per-ray math:
 // cost, J^T r, the exact diag(J^T J), J^T J p (cached and recomputed partials), the line-search
 // cost on a subset, thread-count independence, and the render path.
-#include "recon_cuda/cpu_backend.h"
+#include "recon_cuda/backends/cpu_backend.h"
 
 #include <gtest/gtest.h>
 
@@ -11,7 +11,7 @@
 
 #include "common/errors.h"
 
-#include "recon_cuda/volume.h"
+#include "recon_cuda/data/volume.h"
 #include "tests/recon/recon_test_util.h"
 
 namespace perf::recon {

@@ -9,9 +9,9 @@
 
 #include "common/comm.h"
 #include "common/errors.h"
-#include "recon_cuda/cpu_backend.h"
-#include "recon_cuda/distributed_backend.h"
-#include "recon_cuda/solver.h"
+#include "recon_cuda/backends/cpu_backend.h"
+#include "recon_cuda/backends/distributed_backend.h"
+#include "recon_cuda/solve/solver.h"
 #include "tests/recon/synthetic_scene.h"
 #include "tests/recon/thread_group.h"
 

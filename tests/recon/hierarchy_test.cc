@@ -1,14 +1,15 @@
 // The hierarchy's level count (level_choice.h) and its memory stop (HierarchyOptions::
 // stop_when_out_of_memory) on a small synthetic scene.
-#include "recon_cuda/hierarchy.h"
+#include "recon_cuda/solve/hierarchy.h"
 
 #include <gtest/gtest.h>
 
 #include "common/errors.h"
-#include "recon_cuda/cpu_backend.h"
-#include "recon_cuda/level_choice.h"
-#include "recon_cuda/reconstruct.h"
+#include "recon_cuda/backends/cpu_backend.h"
+#include "recon_cuda/run/level_choice.h"
+#include "recon_cuda/run/reconstruct.h"
 #include "tests/recon/synthetic_scene.h"
+#include "workspace/scene.h"
 
 namespace perf::recon {
 namespace {
@@ -30,6 +31,59 @@ TEST(LevelChoiceTest, AutomaticLevelsReachThePhotosWithinTheCap) {
   EXPECT_EQ(ChooseLevels(0, 1e6, 32, 4096).levels, 6);  // at most 6
   EXPECT_EQ(ChooseLevels(0, 215, 16, 1024).levels, 5);
   EXPECT_EQ(ChooseLevels(0, 215, 32, 32).levels, 1);
+}
+
+// ReconstructOptions::Hierarchy: the choices perf reconstruct derives from its options and the scene.
+TEST(ReconstructOptionsTest, TheHierarchyIsDerivedForTheScene) {
+  Scene scene;
+  scene.cameras.push_back(SceneCamera{});
+  scene.source.type = "colmap";
+  for (const Split split : {Split::kTrain, Split::kTrain, Split::kTrain, Split::kTest, Split::kExcluded}) {
+    SceneImage im;
+    im.split = split;
+    scene.images.push_back(im);
+  }
+  scene.background = Eigen::Vector3d(0.25, 0.5, 0.75);
+  ReconstructOptions o;
+  o.start_resolution = 16;
+  o.iterations = 7;
+  o.level_iterations = {3};
+  o.dense = true;
+  o.sh_degree = 1;
+  LevelChoice automatic = ChooseLevels(0, 100, 16, 64);
+  HierarchyOptions h = o.Hierarchy(scene, automatic);
+  EXPECT_EQ(h.levels, automatic.levels);
+  EXPECT_TRUE(h.stop_when_out_of_memory) << "automatic levels end early for memory";
+  EXPECT_EQ(h.start_resolution, 16);
+  EXPECT_EQ(h.IterationsAt(0), 3);
+  EXPECT_EQ(h.IterationsAt(1), 7);
+  EXPECT_FALSE(h.sparse);
+  EXPECT_EQ(h.sh_degree, 1);
+  // COLMAP photos without alpha: learned shells, the automatic grid smoothness, exposures solved.
+  EXPECT_FALSE(h.fixed_background);
+  EXPECT_EQ(h.solver.smooth_grid, kAutoSmoothGrid);
+  EXPECT_EQ(h.solver.smooth_shells, o.solver.smooth_shells);
+  EXPECT_EQ(h.exposures, 3) << "one per training photo";
+  EXPECT_EQ(h.background[2], 0.75f);
+
+  // Every photo with alpha: fixed shells, no grid smoothness unless asked for; given levels run all.
+  for (SceneImage& im : scene.images) im.alpha_path = "alpha/" + im.name;
+  o.exposure = ExposureChoice::kOff;
+  h = o.Hierarchy(scene, ChooseLevels(2, 100, 16, 64));
+  EXPECT_TRUE(h.fixed_background);
+  EXPECT_EQ(h.solver.smooth_grid, 0.0);
+  EXPECT_FALSE(h.stop_when_out_of_memory);
+  EXPECT_EQ(h.exposures, 0);
+  o.solver.smooth_grid = 0.05;
+  EXPECT_EQ(o.Hierarchy(scene, automatic).solver.smooth_grid, 0.05) << "a given weight is kept";
+  o.background = BackgroundChoice::kLearn;
+  EXPECT_FALSE(o.Hierarchy(scene, automatic).fixed_background);
+
+  // Adam runs no smoothness.
+  o.solver.type = SolverType::kAdam;
+  h = o.Hierarchy(scene, automatic);
+  EXPECT_EQ(h.solver.smooth_grid, 0.0);
+  EXPECT_EQ(h.solver.smooth_shells, 0.0);
 }
 
 TEST(LevelChoiceTest, GivenLevelsAreKeptAndAdvised) {

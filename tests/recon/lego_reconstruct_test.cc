@@ -14,9 +14,9 @@
 
 #include "export/evaluate.h"
 #include "export/export.h"
-#include "recon_cuda/checkpoint.h"
-#include "recon_cuda/box_check.h"
-#include "recon_cuda/reconstruct.h"
+#include "recon_cuda/data/checkpoint.h"
+#include "recon_cuda/run/box_check.h"
+#include "recon_cuda/run/reconstruct.h"
 #include "sfm_import/importer.h"
 #include "tests/test_util.h"
 

@@ -1,13 +1,13 @@
-// Occupancy between levels (recon_cuda/occupancy.h): which bricks of the next level a fitted
+// Occupancy between levels (recon_cuda/data/occupancy.h): which bricks of the next level a fitted
 // level keeps (occupied cells, dilated) and which no training photo can see (SeenBricks).
-#include "recon_cuda/occupancy.h"
+#include "recon_cuda/data/occupancy.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <vector>
 
-#include "recon_cuda/brick_grid.h"
+#include "recon_cuda/data/brick_grid.h"
 
 namespace perf::recon {
 namespace {

@@ -2,7 +2,7 @@
 // differences (the backends use their own visitors: cpu_backend.cc, cuda_passes.cu).
 #pragma once
 
-#include "recon_cuda/ray_math.h"
+#include "recon_cuda/core/ray_math.h"
 
 namespace perf::recon {
 

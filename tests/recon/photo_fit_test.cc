@@ -1,11 +1,11 @@
-// The photo-fit check (recon_cuda/photo_fit.h): the rule on given PSNRs, and on a known scene a
+// The photo-fit check (recon_cuda/run/photo_fit.h): the rule on given PSNRs, and on a known scene a
 // training photo that does not belong to its pose is the one named.
-#include "recon_cuda/photo_fit.h"
+#include "recon_cuda/run/photo_fit.h"
 
 #include <gtest/gtest.h>
 
-#include "recon_cuda/cpu_backend.h"
-#include "recon_cuda/evaluation.h"
+#include "recon_cuda/backends/cpu_backend.h"
+#include "recon_cuda/run/evaluation.h"
 #include "tests/recon/synthetic_scene.h"
 
 namespace perf::recon {

@@ -3,7 +3,7 @@
 
 #include <random>
 
-#include "recon_cuda/ray_math.h"
+#include "recon_cuda/core/ray_math.h"
 
 namespace perf::recon::test {
 

@@ -1,6 +1,6 @@
-// Per-ray math (recon_cuda/ray_math.h) in double: every partial of the backward sweep against
+// Per-ray math (recon_cuda/core/ray_math.h) in double: every partial of the backward sweep against
 // central finite differences of the forward, plus the geometry pieces it is built from.
-#include "recon_cuda/ray_math.h"
+#include "recon_cuda/core/ray_math.h"
 
 #include <gtest/gtest.h>
 

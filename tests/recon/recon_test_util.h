@@ -13,9 +13,9 @@
 #include <utility>
 #include <vector>
 
-#include "recon_cuda/backend.h"
-#include "recon_cuda/brick_grid.h"
-#include "recon_cuda/ray_math.h"
+#include "recon_cuda/core/ray_math.h"
+#include "recon_cuda/data/brick_grid.h"
+#include "recon_cuda/solve/backend.h"
 #include "tests/recon/per_param_visitor.h"
 
 namespace perf::recon::test {

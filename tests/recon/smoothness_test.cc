@@ -3,7 +3,7 @@
 // grid's stored ones), the backend's term against Ceres (each pair a residual block) and against
 // central differences, and the solver with it: smoother shells where the photos do not say
 // otherwise.
-#include "recon_cuda/smoothness.h"
+#include "recon_cuda/core/smoothness.h"
 
 #include <ceres/ceres.h>
 #include <gtest/gtest.h>
@@ -13,8 +13,8 @@
 #include <random>
 #include <set>
 
-#include "recon_cuda/cpu_backend.h"
-#include "recon_cuda/solver.h"
+#include "recon_cuda/backends/cpu_backend.h"
+#include "recon_cuda/solve/solver.h"
 #include "tests/recon/recon_test_util.h"
 
 namespace perf::recon {

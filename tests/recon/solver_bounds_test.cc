@@ -8,9 +8,9 @@
 #include <random>
 #include <vector>
 
-#include "recon_cuda/cpu_backend.h"
-#include "recon_cuda/param_ops.h"
-#include "recon_cuda/solver.h"
+#include "recon_cuda/backends/cpu_backend.h"
+#include "recon_cuda/core/param_ops.h"
+#include "recon_cuda/solve/solver.h"
 #include "recon_test_util.h"
 
 namespace perf::recon {

@@ -1,4 +1,4 @@
-// Brick-sparse grids (recon_cuda/brick_grid.h, ray_types.h): the table's marks, the moves between
+// Brick-sparse grids (recon_cuda/data/brick_grid.h, ray_types.h): the table's marks, the moves between
 // the dense and the sparse layout, and the per-ray math on the sparse layout in double: the
 // march that skips empty bricks equals the dense march wherever the skipped space is empty (the
 // same residuals and the same J^T r, bit for bit), and every partial matches central differences.
@@ -10,8 +10,8 @@
 #include <vector>
 
 #include "common/errors.h"
-#include "recon_cuda/brick_grid.h"
-#include "recon_cuda/ray_math.h"
+#include "recon_cuda/core/ray_math.h"
+#include "recon_cuda/data/brick_grid.h"
 #include "tests/recon/per_param_visitor.h"
 #include "tests/recon/random_rays.h"
 

@@ -7,8 +7,8 @@
 #include <cmath>
 #include <vector>
 
-#include "recon_cuda/backend.h"
-#include "recon_cuda/ray_math.h"
+#include "recon_cuda/core/ray_math.h"
+#include "recon_cuda/solve/backend.h"
 #include "tests/recon/recon_test_util.h"
 
 namespace perf::recon::test {

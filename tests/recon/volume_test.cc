@@ -1,15 +1,15 @@
 // The host-side volume: level-to-level resampling (exact for constant and linear fields),
 // the random start, the valid-range projection, and placement from scene.json.
-#include "recon_cuda/exposure.h"
-#include "recon_cuda/volume.h"
+#include "recon_cuda/data/volume.h"
+#include "recon_cuda/run/exposure.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 
 #include "common/errors.h"
-#include "recon_cuda/reconstruct.h"
-#include "recon_cuda/training_data.h"
+#include "recon_cuda/data/training_data.h"
+#include "recon_cuda/run/reconstruct.h"
 #include "workspace/scene.h"
 
 namespace perf::recon {

@@ -1,0 +1,492 @@
+#include "recon_cuda/backends/cpu_backend.h"
+
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+
+#include "common/errors.h"
+#include "common/stopwatch.h"
+#include "common/system_memory.h"
+#include "recon_cuda/backends/cpu_jacobian_record.h"
+#include "recon_cuda/backends/cpu_vectors.h"
+#include "recon_cuda/core/jacobian.h"
+#include "recon_cuda/core/training_ray.h"
+
+namespace perf::recon {
+
+namespace {
+
+using namespace cpu;  // the sinks and the Jacobian record (cpu_jacobian_record.h)
+
+constexpr int64_t kBlockRays = 1024;      // rays per task; fixes the cost's summation order
+
+class CpuBackend final : public Backend {
+ public:
+  explicit CpuBackend(const CpuBackendOptions& o)
+      : options_(o),
+        threads_(o.threads > 0 ? o.threads : CoreCount()),
+        vectors_(threads_) {}
+
+  BackendKind kind() const override { return BackendKind::kCpu; }
+  std::string Describe() const override { return StrCat("cpu (", threads_, " thread", threads_ == 1 ? "" : "s", ")"); }
+
+  MemoryEstimate EstimateMemory(const LevelProblem& p, int num_vectors) const override {
+    MemoryEstimate e;
+    const int64_t params = p.shape.ParamCount();
+    e.vectors = num_vectors * params * 4;
+    e.scratch = int64_t{threads_} * 2 * params * 4;
+    e.rays = p.rays ? p.rays->Bytes() : 0;
+    if (options_.cache_jacobian && p.rays) e.jacobian_cache = CacheBytes(p);
+    e.available = options_.max_memory > 0 ? options_.max_memory : AvailableMemory() * 9 / 10;
+    return e;
+  }
+
+  MemoryEstimate SetLevel(const LevelProblem& problem, int num_vectors) override {
+    LevelProblem p = problem;
+    if (!p.rays) p.rays = &NoRays();  // render-only
+    PERF_CHECK(p.shape.num_shells == p.geometry.num_shells() && p.shape.num_shells <= kMaxShells);
+    vectors_.Assign(0, 0);
+    blocks_.clear();
+    scratch_.clear();
+    level_ = p;
+    rays_ = {p.rays->cameras.data(), p.rays->pixels.data(), p.rays->colours.data(),
+             UsesAlpha(p) ? p.rays->alphas.data() : nullptr, p.rays->size(), p.rays->first_index,
+             ExposureSlots(p)};
+    weight_ = OpacityResidualWeight(p);
+    robust_ = p.residuals.robust_scale;
+    const MemoryEstimate e = EstimateMemory(p, num_vectors);
+    if (!e.Fits()) {
+      throw ResourceError(StrCat("level ", DescribeShape(p.shape), " needs ", e.Needed() >> 20, " MiB for the solver's ",
+                                 num_vectors, " vectors, per-thread sums and rays, but only ", e.available >> 20,
+                                 " MiB are available; use fewer --levels, fewer --threads, or a larger --downscale"));
+    }
+    cache_ = options_.cache_jacobian && (e.available == 0 || e.Needed() + e.jacobian_cache <= e.available);
+    vectors_.Assign(num_vectors, p.shape.ParamCount());
+    const int64_t nblocks = (p.rays->size() + kBlockRays - 1) / kBlockRays;
+    if (cache_) blocks_.resize(nblocks);
+    const float* size = &p.geometry.box.size.x;
+    const float longest = std::max({size[0], size[1], size[2]}), shortest = std::min({size[0], size[1], size[2]});
+    // The march of any ray: its chord is at most the box diagonal.
+    max_samples_ = static_cast<int>(std::ceil(std::sqrt(3.0) * longest / shortest * p.shape.n)) + 2;
+    linearized_ = false;
+    return e;
+  }
+
+  const LevelProblem& level() const override { return level_; }
+  bool CachesJacobian() const override { return cache_; }
+
+  void Upload(VecId v, std::span<const float> host) override { vectors_.Upload(v, host); }
+  void Download(VecId v, std::span<float> host) const override { vectors_.Download(v, host); }
+  void Fill(VecId v, float value) override { vectors_.Fill(v, value); }
+  void SumAcrossRanks(VecId v, Communicator& comm) override { comm.SumInPlace(vectors_[v]); }
+  void Copy(VecId dst, VecId src) override { vectors_.Copy(dst, src); }
+  void Axpy(VecId y, double a, VecId x) override { vectors_.Axpy(y, a, x); }
+  void Xpby(VecId y, VecId x, double b) override { vectors_.Xpby(y, x, b); }
+  void DivideClamped(VecId z, VecId r, VecId d, float floor) override { vectors_.DivideClamped(z, r, d, floor); }
+  void AxpyDiag(VecId y, double a, VecId d, VecId x) override { vectors_.AxpyDiag(y, a, d, x); }
+  double Dot(VecId a, VecId b) const override { return vectors_.Dot(a, b); }
+  double MaxAbs(VecId v) const override { return vectors_.MaxAbs(v); }
+  double MaxAbsVolume(VecId v) const override { return vectors_.MaxAbs(v, level_.shape.ExposureStart()); }
+  void AddSmoothness(VecId v, const SmoothnessWeights& w, VecId out, VecId diag) override {
+    vectors_.AddSmoothness(v, level_.shape, w, out, diag);
+  }
+  double SmoothnessCost(VecId v, const SmoothnessWeights& w) const override {
+    return vectors_.SmoothnessCost(v, level_.shape, w);
+  }
+  std::array<double, kParamKinds> SumByKind(VecId v) const override { return vectors_.SumByKind(v, level_.shape); }
+  void Project(VecId x) override { vectors_.Project(x, level_.shape); }
+  void HoldParameters(VecId x, VecId g, VecId free, bool bounds) override {
+    vectors_.HoldParameters(x, g, free, level_.shape, level_.fixed_shells, bounds);
+  }
+  void Multiply(VecId y, VecId m) override { vectors_.Multiply(y, m); }
+  // Drops the recorded samples that reach no free parameter with a non-zero value (jacobian.h
+  // SkippableSample). In carved empty space this is most of the march.
+  void RestrictJacobian(VecId free) override {
+    if (!linearized_ || !recorded_) return;
+    const float* pf = vec(free).data();
+    const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, nullptr);
+    vectors_.arena().execute([&] {
+      tbb::parallel_for(int64_t{0}, static_cast<int64_t>(blocks_.size()), [&](int64_t b) {
+        BlockJ& block = blocks_[b];
+        uint32_t first = 0, kept = 0;
+        for (size_t r = 0; r < block.end.size(); ++r) {
+          const BoxRay<float> ray = RayOf(b * kBlockRays + static_cast<int64_t>(r), lin_seed_);
+          for (uint32_t j = first; j < block.end[r]; ++j) {
+            const SampleJ& sj = block.samples[j];
+            if (SkippableSample(TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(sj.t)), sj.sp, pf)) continue;
+            block.samples[kept++] = sj;
+          }
+          first = block.end[r];
+          block.end[r] = kept;
+        }
+        block.samples.resize(kept);
+      });
+    });
+  }
+
+  void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) override {
+    vectors_.AdamStep(x, g, m, v, s, t, level_.shape);
+  }
+
+  PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset) override {
+    PERF_CHECK(subset.Valid());
+    const auto t0 = WallClock::now();
+    const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, vec(x).data());
+    const bool want_diag = diag != kNoVector;
+    const bool record = cache_ && want_diag;  // Adam (no diagonal) never multiplies by J^T J
+    const uint64_t pass = BeginPass();
+    PassStats stats = ForBlocks(want_diag ? 2 : 1, pass, [&](int64_t block, int64_t begin, int64_t end, Scratch& s) {
+      BlockJ* out = record ? &blocks_[block] : nullptr;
+      if (out) ClearBlock(out, end - begin);
+      return want_diag ? LinearizeBlock<true>(vol, seed, subset, begin, end, s, out)
+                       : LinearizeBlock<false>(vol, seed, subset, begin, end, s, out);
+    });
+    if (want_diag) {
+      ReduceInterleaved(pass, g, diag);
+    } else {
+      ReduceInto(pass, g);
+    }
+    lin_x_ = x;
+    lin_seed_ = seed;
+    linearized_ = true;
+    recorded_ = record;
+    stats.seconds = SecondsSince(t0);
+    return stats;
+  }
+
+  PassStats MultiplyJtJ(VecId p, VecId out) override {
+    PERF_CHECK_MSG(linearized_, "MultiplyJtJ before Linearize");
+    const auto t0 = WallClock::now();
+    const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, vec(lin_x_).data());
+    const float* pp = vec(p).data();
+    const int k_shells = level_.shape.num_shells;
+    const uint64_t pass = BeginPass();
+    PassStats stats = ForBlocks(1, pass, [&](int64_t block, int64_t begin, int64_t end, Scratch& s) {
+      BlockStats bs;
+      AddSink sink{s.acc.data()};
+      for (int64_t i = begin; i < end; ++i) {
+        const TrainingRay tr = TrainingRayOf(i, lin_seed_);
+        const BoxRay<float>& ray = tr.ray;
+        const SampleJ* samples;
+        const ShellJ* shells;
+        const float* h;
+        float scale;
+        int count;
+        if (recorded_) {
+          const BlockJ& b = blocks_[block];
+          const int64_t r = i - begin;
+          const uint32_t first = r == 0 ? 0 : b.end[r - 1];
+          samples = b.samples.data() + first;
+          count = static_cast<int>(b.end[r] - first);
+          shells = &b.shells[r * k_shells];
+          h = &b.h[3 * r];
+          scale = b.scale[r];
+        } else {
+          RecomputeRow(vol, tr, i, s);
+          samples = s.row.samples.data();
+          count = static_cast<int>(s.row.samples.size());
+          shells = s.row.shells.data();
+          h = s.row.h.data();
+          scale = s.row.scale[0];
+        }
+        const RayExposure<float> e = ExposureAt(vol, i, h, scale);
+        const RaySh<float> sh = ShOfRay(vol, ray);
+        float u[4] = {0, 0, 0, 0};
+        TexelSample<float> ts[kMaxShells];
+        for (int k = 0; k < k_shells; ++k) {
+          if (shells[k].coord.face < 0) continue;
+          ts[k] = TexelWeights(vol.GridParams(), vol.m, k, shells[k].coord);
+          AddJpShell(pp, ts[k], shells[k].sp, u);
+        }
+        GridSample<float>* w = s.weights.data();
+        for (int j = 0; j < count; ++j) {
+          w[j] = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(samples[j].t));
+          AddJpSample(pp, w[j], samples[j].sp, u, sh);
+        }
+        FinishJp(e, pp, u);
+        float uv[4];
+        VolumeU(e, u, uv);
+        for (int k = 0; k < k_shells; ++k) {
+          if (shells[k].coord.face < 0) continue;
+          ScatterJtuShell(ts[k], shells[k].sp, uv, sink);
+        }
+        if (sh.degree == 0) {
+          // Direct scatter: measured faster here than merging cells (CellMerger) first.
+          for (int j = 0; j < count; ++j) ScatterJtuSample(w[j], samples[j].sp, uv, sink, sh);
+        } else {
+          // With spherical harmonics each cell's bands are written once per ray from its merged
+          // colour values, not once per sample (3 to 5 samples reach a cell).
+          MergedScatter flush{sink, sh};
+          CellMerger<float, 4> merger;
+          for (int j = 0; j < count; ++j) {
+            float v[4];
+            JtuValues(samples[j].sp, uv, v);
+            merger.Sample(w[j], v, flush);
+          }
+          merger.Finish(flush);
+        }
+        ScatterJtuExposure(e, u, sink);
+        bs.rays += 1;
+        bs.samples += count;
+      }
+      return bs;
+    });
+    ReduceInto(pass, out);
+    stats.seconds = SecondsSince(t0);
+    return stats;
+  }
+
+  PassStats Cost(VecId x, uint32_t seed, RaySubset subset) override {
+    const auto t0 = WallClock::now();
+    const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, vec(x).data());
+    PERF_CHECK(subset.Valid());
+    PassStats stats = ForBlocks(0, 0, [&](int64_t, int64_t begin, int64_t end, Scratch&) {
+      BlockStats bs;
+      int64_t i = begin + ((subset.offset - begin % subset.stride) + subset.stride) % subset.stride;
+      for (; i < end; i += subset.stride) {
+        const TrainingRay tr = TrainingRayOf(i, seed);
+        const RayOutput<float> fwd =
+            Forward(vol, tr.ray, tr.jit, &level_.rays->colours[3 * i], weight_, level_.residuals.stop_transmittance,
+                    nullptr, AlphaOf(rays_, i), TransformAt(vol, i));
+        bs.Add(fwd, robust_);
+      }
+      return bs;
+    });
+    stats.seconds = SecondsSince(t0);
+    return stats;
+  }
+
+  RenderOutput Render(VecId x, const PinholeCamera<float>& camera, int width, int height,
+                      float min_box_opacity) override {
+    const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, vec(x).data());
+    RenderOutput r;
+    r.width = width;
+    r.height = height;
+    r.colour.resize(static_cast<size_t>(width) * height * 3);
+    r.opacity.resize(static_cast<size_t>(width) * height);
+    const float zero[3] = {0, 0, 0};
+    vectors_.arena().execute([&] {
+      tbb::parallel_for(0, height, [&](int y) {
+        for (int px = 0; px < width; ++px) {
+          const Jitter none{0, 0, false, false};
+          const BoxRay<float> ray = PixelBoxRay(camera, level_.geometry.box, vol.n, px, y, none);
+          const RayOutput<float> o = Forward(vol, ray, none, zero, 0.f, level_.residuals.stop_transmittance);
+          const size_t i = static_cast<size_t>(y) * width + px;
+          RulePixel(o, min_box_opacity, &r.colour[3 * i], &r.opacity[i]);
+        }
+      });
+    });
+    return r;
+  }
+
+ private:
+  struct BlockStats {
+    double cost = 0, colour_sse = 0, subset_cost = 0;
+    int64_t rays = 0, samples = 0;
+    void Add(const RayOutput<float>& o, float robust_scale, bool in_subset = false) {
+      const RayCost c = CostOf(o, robust_scale);
+      colour_sse += c.colour_sse;
+      cost += c.cost;
+      if (in_subset) subset_cost += c.cost;
+      rays += 1;
+      samples += o.count;
+    }
+  };
+
+  std::vector<float>& vec(VecId v) { return vectors_[v]; }
+  const std::vector<float>& vec(VecId v) const { return vectors_[v]; }
+
+  template <bool kDiag>
+  BlockStats LinearizeBlock(const VolumeView<float>& vol, uint32_t seed, RaySubset subset, int64_t begin,
+                            int64_t end, Scratch& s, BlockJ* out) const {
+    BlockStats bs;
+    for (int64_t i = begin; i < end; ++i) {
+      const TrainingRay tr = TrainingRayOf(i, seed);
+      const BoxRay<float>& ray = tr.ray;
+      const Jitter& jit = tr.jit;
+      const ColourTransform<float> xf = TransformAt(vol, i);
+      const RayOutput<float> fwd =
+          Forward(vol, ray, jit, &level_.rays->colours[3 * i], weight_, level_.residuals.stop_transmittance,
+                  s.record.data(), AlphaOf(rays_, i), xf);
+      const float scale = RobustRowScale(fwd.residual, robust_);
+      const RayExposure<float> e = ExposureOfRay(vol.ExposureStart(), ExposureSlotOf(rays_, i), xf, fwd.h, scale);
+      float r[4];  // the weighted system's residuals
+      ScaledResidual(e, fwd.residual, r);
+      LinearizeVisitor<kDiag> v{{},
+                                {},
+                                AddSink{s.acc.data(), kDiag ? 1 : 0, 0},
+                                AddSink{kDiag ? s.acc.data() : nullptr, 1, 4},
+                                out,
+                                out ? &out->shells[(i - begin) * level_.shape.num_shells] : nullptr};
+      VolumeU(e, r, v.r);
+      GainSquared(e, v.g2);
+      v.sh = ShOfRay(vol, ray);
+      Backward(vol, ray, jit, fwd, v, s.record.data());
+      v.Finish();
+      ScatterJtuExposure(e, r, v.g);
+      if constexpr (kDiag) AddDiagExposure(e, v.d);
+      if (out) {
+        out->end[i - begin] = static_cast<uint32_t>(out->samples.size());
+        for (int c = 0; c < 3; ++c) out->h[3 * (i - begin) + c] = fwd.h[c];
+        out->scale[i - begin] = scale;
+      }
+      bs.Add(fwd, robust_, subset.Contains(i));
+    }
+    return bs;
+  }
+
+  // The exposure slots the level's rays read (RaySet::exposure_slot), or nullptr when the level
+  // solves no exposures.
+  static const int32_t* ExposureSlots(const LevelProblem& p) {
+    if (p.shape.exposures == 0) return nullptr;
+    PERF_CHECK_MSG(p.rays->exposure_slot.size() == p.rays->cameras.size(), "exposure slots for every camera");
+    for (int32_t slot : p.rays->exposure_slot) PERF_CHECK(slot >= 0 && slot < p.shape.exposures);
+    return p.rays->exposure_slot.data();
+  }
+  // Ray i's photo's colour transform at vol's parameters, and its exposure's partials given H.
+  ColourTransform<float> TransformAt(const VolumeView<float>& vol, int64_t i) const {
+    return TransformOfRay(rays_, vol, i);
+  }
+  RayExposure<float> ExposureAt(const VolumeView<float>& vol, int64_t i, const float* h, float scale) const {
+    return ExposureOfRay(vol.ExposureStart(), ExposureSlotOf(rays_, i), TransformAt(vol, i), h, scale);
+  }
+
+  // Ray i in the iteration of `seed` (training_ray.h, as the CUDA passes read it).
+  BoxRay<float> RayOf(int64_t i, uint32_t seed) const { return TrainingRayOf(i, seed).ray; }
+  TrainingRay TrainingRayOf(int64_t i, uint32_t seed) const {
+    return recon::RayOf(rays_, level_.geometry.box, level_.shape.n, i, seed, level_.residuals.jitter,
+                        level_.residuals.pixel_jitter);
+  }
+
+  void ClearBlock(BlockJ* b, int64_t rays) const {
+    b->samples.clear();
+    b->end.assign(rays, 0);
+    b->shells.assign(rays * level_.shape.num_shells, ShellJ{{-1, 0.f, 0.f}, {}});
+    b->h.assign(3 * rays, 0.f);
+    b->scale.assign(rays, 1.f);
+  }
+
+  // The partials of ray i at the linearisation point, into s.row (no recorded Jacobian).
+  void RecomputeRow(const VolumeView<float>& vol, const TrainingRay& tr, int64_t i, Scratch& s) const {
+    const BoxRay<float>& ray = tr.ray;
+    const Jitter& jit = tr.jit;
+    ClearBlock(&s.row, 1);
+    const RayOutput<float> fwd =
+        Forward(vol, ray, jit, &level_.rays->colours[3 * i], weight_, level_.residuals.stop_transmittance,
+                s.record.data(), AlphaOf(rays_, i), TransformAt(vol, i));
+    RecordOnly visitor{&s.row};
+    Backward(vol, ray, jit, fwd, visitor, s.record.data());
+    for (int c = 0; c < 3; ++c) s.row.h[c] = fwd.h[c];
+    s.row.scale[0] = RobustRowScale(fwd.residual, robust_);
+  }
+  // A cell's merged J^T u values (JtuValues summed along the ray) into the grid and its bands.
+  struct MergedScatter {
+    AddSink& sink;
+    const RaySh<float>& sh;
+    void operator()(int64_t cell, const float* acc) {
+      sink.Add4(GridParam(cell, 0), acc[0], acc[1], acc[2], acc[3]);
+      ScatterSh(sh, cell, acc, sink);
+    }
+  };
+
+  // Records a ray's partials without scattering anything.
+  struct RecordOnly {
+    BlockJ* row;
+    void Shell(int k, const CubeCoord<float>& c, const TexelSample<float>&, const ShellPartials<float>& sp) {
+      row->shells[k] = {c, sp};
+    }
+    void Sample(int, const MarchStep<float>& st, const GridSample<float>&, const SamplePartials<float>& sp) {
+      row->samples.push_back({st.t, sp});
+    }
+  };
+
+  int64_t CacheBytes(const LevelProblem& p) const { return RecordedJacobianBytes(p, kBlockRays, vectors_); }
+
+  uint64_t BeginPass() { return ++pass_; }
+
+  // Runs fn(block, begin, end, scratch) over all blocks of rays; with width > 0 the per-thread
+  // sums (width floats per parameter) are zeroed on a thread's first block of `pass`. Block
+  // statistics are combined in block order.
+  template <class Fn>
+  PassStats ForBlocks(int width, uint64_t pass, Fn&& fn) {
+    const int64_t n = level_.rays->size();
+    const int64_t nblocks = (n + kBlockRays - 1) / kBlockRays;
+    std::vector<BlockStats> per_block(nblocks);
+    const int64_t params = level_.shape.ParamCount();
+    vectors_.arena().execute([&] {
+      tbb::parallel_for(tbb::blocked_range<int64_t>(0, nblocks, 1), [&](const tbb::blocked_range<int64_t>& r) {
+        Scratch& s = scratch_.local();
+        if (static_cast<int>(s.record.size()) < max_samples_) {
+          s.record.resize(max_samples_);
+          s.weights.resize(max_samples_);
+        }
+        if (width > 0 && s.pass != pass) {
+          s.acc.assign(params * width, 0.f);
+          s.pass = pass;
+        }
+        for (int64_t b = r.begin(); b < r.end(); ++b) {
+          per_block[b] = fn(b, b * kBlockRays, std::min(n, (b + 1) * kBlockRays), s);
+        }
+      });
+    });
+    PassStats stats;
+    for (const BlockStats& b : per_block) {
+      stats.cost += b.cost;
+      stats.colour_sse += b.colour_sse;
+      stats.rays += b.rays;
+      stats.samples += b.samples;
+      stats.subset_cost += b.subset_cost;
+    }
+    return stats;
+  }
+
+  // The per-thread sums of `pass`.
+  std::vector<const float*> SumsOf(uint64_t pass) {
+    std::vector<const float*> parts;
+    for (Scratch& s : scratch_) {
+      if (s.pass == pass && !s.acc.empty()) parts.push_back(s.acc.data());
+    }
+    return parts;
+  }
+
+  // out = the sum of the per-thread sums of `pass`.
+  void ReduceInto(uint64_t pass, VecId out) { SumParts(vectors_, SumsOf(pass), vec(out).data()); }
+
+  // g and diag = the sums of the per-thread interleaved sums (AddSink) of `pass`.
+  void ReduceInterleaved(uint64_t pass, VecId g, VecId diag) {
+    SumInterleavedParts(vectors_, SumsOf(pass), vec(g).data(), vec(diag).data());
+  }
+
+  CpuBackendOptions options_;
+  int threads_;
+  CpuVectors vectors_;  // and the arena every pass runs in
+  LevelProblem level_;
+  std::vector<BlockJ> blocks_;
+  tbb::enumerable_thread_specific<Scratch> scratch_;
+  bool cache_ = false, linearized_ = false, recorded_ = false;
+  int max_samples_ = 0;
+  TrainingRays<float> rays_{};     // the level's rays (alphas: nullptr unless UsesAlpha)
+  float weight_ = 0;               // OpacityResidualWeight
+  float robust_ = 0;               // ResidualSettings::robust_scale
+  VecId lin_x_ = kNoVector;
+  uint32_t lin_seed_ = 0;
+  uint64_t pass_ = 0;
+};
+
+}  // namespace
+
+std::unique_ptr<Backend> MakeCpuBackend(const CpuBackendOptions& options) {
+  // TBB crashes destroying an arena of ~100000 slots (perf render -j 100000 died with SIGSEGV).
+  const int most = MaxWorkerThreads();
+  if (options.threads < 0 || options.threads > most) {
+    throw InputError("command line", "-j/--threads", std::to_string(options.threads),
+                     StrCat("must be 0 (all cores) or 1 to ", most, " (8 times this machine's cores)"));
+  }
+  return std::make_unique<CpuBackend>(options);
+}
+
+}  // namespace perf::recon

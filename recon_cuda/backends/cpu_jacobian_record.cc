@@ -1,0 +1,55 @@
+#include "recon_cuda/backends/cpu_jacobian_record.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+
+#include "recon_cuda/backends/cpu_vectors.h"
+
+namespace perf::recon::cpu {
+
+// Bytes of the recorded Jacobian: every ray's march length (no jitter needed for the count;
+// early termination only shortens it; a sparse grid's march counted sample by sample, plus an
+// eighth for the jittered samples that land differently, on every 4th ray of a block and scaled
+// to the block: an estimate, and a quarter of a march) times the per-sample record, plus the
+// shell records.
+int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, const CpuVectors& vectors) {
+  constexpr int64_t kSparseStride = 4;
+  const VolumeView<float> vol = MakeView(p.shape, p.geometry, nullptr);
+  const int64_t n = p.rays->size();
+  std::vector<int64_t> per_block((n + block_rays - 1) / block_rays, 0);
+  vectors.arena().execute([&] {
+    tbb::parallel_for(int64_t{0}, static_cast<int64_t>(per_block.size()), [&](int64_t b) {
+      int64_t count = 0, sparse_count = 0, sparse_rays = 0;
+      const int64_t begin = b * block_rays, end = std::min(n, (b + 1) * block_rays);
+      for (int64_t i = begin; i < end; i += vol.brick_slot ? kSparseStride : 1) {
+        const RayPixel& px = p.rays->pixels[i];
+        const BoxRay<float> ray = PixelBoxRay(p.rays->cameras[px.camera], p.geometry.box, p.shape.n, px.x, px.y,
+                                              Jitter{0, 0, false, false});
+        const March<float> march = MakeMarch(vol, ray);
+        if (!vol.brick_slot) {
+          count += march.count;
+          continue;
+        }
+        const Jitter none{0, 0, false, false};
+        MarchStep<float> st;
+        int taken = 0;
+        for (int k = TakeSample(vol, ray, march, 0, 1, none, &st); k < march.count;
+             k = TakeSample(vol, ray, march, k + 1, 1, none, &st)) {
+          ++taken;
+        }
+        sparse_count += std::min(march.count, taken + taken / 8 + 2);
+        ++sparse_rays;
+      }
+      if (sparse_rays > 0) count += (sparse_count * (end - begin) + sparse_rays - 1) / sparse_rays;
+      per_block[b] = count;
+    });
+  });
+  int64_t samples = 0;
+  for (int64_t c : per_block) samples += c;
+  return samples * static_cast<int64_t>(sizeof(SampleJ)) +
+         n * (static_cast<int64_t>(sizeof(uint32_t) + 4 * sizeof(float)) +
+              p.shape.num_shells * static_cast<int64_t>(sizeof(ShellJ)));
+}
+
+}  // namespace perf::recon::cpu

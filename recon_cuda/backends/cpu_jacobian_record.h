@@ -1,0 +1,110 @@
+// The CPU backend's per-ray sinks and the Jacobian record that Linearize keeps for MultiplyJtJ
+// (cpu_backend.cc): the partials of every sample and shell of every ray, block by block. Internal
+// to the CPU backend.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "recon_cuda/core/jacobian.h"
+#include "recon_cuda/core/ray_math.h"
+#include "recon_cuda/solve/backend.h"
+
+namespace perf::recon {
+class CpuVectors;
+}
+
+namespace perf::recon::cpu {
+
+// Plain adds into a per-thread buffer. Linearize keeps J^T r and the diagonal in one buffer,
+// interleaved in groups of 4 (element i of g at 2 (i - i % 4) + i % 4, of diag 4 further), so that
+// a cell's flush touches one 32-byte block instead of two distant ones: shift 1, offset 0 or 4.
+struct AddSink {
+  float* a;
+  int shift = 0, offset = 0;
+  void Add4(int64_t i, float x, float y, float z, float w) {
+    float* p = a + (i << shift) + offset;
+    p[0] += x;
+    p[1] += y;
+    p[2] += z;
+    p[3] += w;
+  }
+};
+
+// One ray's Jacobian, as recorded by Linearize.
+struct SampleJ {
+  float t;
+  SamplePartials<float> sp;
+};
+struct ShellJ {
+  CubeCoord<float> coord;  // face -1: the ray misses this shell
+  ShellPartials<float> sp;
+};
+
+// The recorded Jacobian of one block of rays.
+struct BlockJ {
+  std::vector<SampleJ> samples;
+  std::vector<uint32_t> end;  // [rays]: one past the ray's last sample in `samples`
+  std::vector<ShellJ> shells;  // [rays, num_shells]
+  std::vector<float> h;        // [rays, 3] the composited colour H (the exposure's partials)
+  std::vector<float> scale;    // [rays] the robust loss's row scale (jacobian.h RobustRowScale)
+};
+
+struct Scratch {
+  std::vector<SampleRecord<float>> record;  // [max samples a ray]
+  std::vector<GridSample<float>> weights;   // [max samples a ray]
+  BlockJ row;                               // one ray, when recomputing
+  std::vector<float> acc;                   // per-thread sums (Linearize: g and diag interleaved)
+  uint64_t pass = 0;                        // the pass acc was zeroed for
+};
+
+// Collects a ray's partials: the gradient (and diagonal) scatter, merged cell by cell along the
+// ray (jacobian.h), and optionally the record that MultiplyJtJ reuses.
+// With the diagonal, J^T r goes through the same merge as the diagonal's row entries (needed for
+// exactness there, and it halves the scatters); without (Adam), a direct scatter measured faster.
+template <bool kDiag>
+struct LinearizeVisitor {
+  static constexpr int K = 9;  // J^T r values, then the 5 row values of diag
+  float r[4];          // the residuals the volume's partials multiply (jacobian.h VolumeU)
+  float g2[3];         // the squared gains of the ray's photo (jacobian.h GainSquared)
+  AddSink g, d;
+  BlockJ* out;         // nullptr: nothing recorded
+  ShellJ* out_shells;  // [num_shells] of this ray
+  RaySh<float> sh{};   // the ray's spherical harmonics (degree 0: none)
+  CellMerger<float, K> merger{};
+
+  void Shell(int k, const CubeCoord<float>& c, const TexelSample<float>& ts, const ShellPartials<float>& sp) {
+    ScatterJtuShell(ts, sp, r, g);
+    if constexpr (kDiag) AddDiagShell(ts, sp, g2, d);
+    if (out_shells) out_shells[k] = {c, sp};
+  }
+  void Sample(int, const MarchStep<float>& st, const GridSample<float>& gs, const SamplePartials<float>& sp) {
+    if constexpr (kDiag) {
+      float v[K];
+      JtuValues(sp, r, v);
+      RowValues(sp, v + 4);
+      merger.Sample(gs, v, *this);
+    } else {
+      ScatterJtuSample(gs, sp, r, g, sh);
+    }
+    if (out) out->samples.push_back({st.t, sp});
+  }
+  // A cell's merged sums are complete.
+  void operator()(int64_t cell, const float* acc) {
+    g.Add4(GridParam(cell, 0), acc[0], acc[1], acc[2], acc[3]);
+    AddDiagFromRow(cell, acc + 4, g2, d);
+    if (sh.degree > 0) {
+      ScatterSh(sh, cell, acc, g);
+      AddDiagSh(sh, cell, acc[4], g2, d);
+    }
+  }
+  void Finish() {
+    if constexpr (kDiag) merger.Finish(*this);
+  }
+};
+
+// Bytes of the Jacobian record of `p`'s rays, in blocks of `block_rays` rays (an estimate made by
+// marching the rays, on the arena of `vectors`).
+int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, const CpuVectors& vectors);
+
+}  // namespace perf::recon::cpu

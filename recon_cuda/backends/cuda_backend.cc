@@ -1,0 +1,447 @@
+#include "recon_cuda/backends/cuda_backend.h"
+
+#include <cuda_runtime_api.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <vector>
+
+#include "common/errors.h"
+#include "common/stopwatch.h"
+#include "recon_cuda/backends/cuda_check.h"
+#include "recon_cuda/backends/cuda_kernels.h"
+#include "recon_cuda/backends/device_buffer.h"
+
+namespace perf::recon {
+namespace {
+
+using cuda::DeviceBuffer;
+
+static_assert(sizeof(RayPixel) == 8, "RayPixel is copied to the device as is");
+
+std::string Mib(int64_t bytes) { return StrCat((bytes + (1 << 20) - 1) >> 20, " MiB"); }
+
+// Device bytes of the level's training rays: cameras, pixels, 8-bit colours and, when the level
+// fits the alpha (UsesAlpha), 8-bit alphas.
+int64_t RayBytes(const LevelProblem& p) {
+  return static_cast<int64_t>(p.rays->cameras.size() * (sizeof(PinholeCamera<float>) + sizeof(int32_t))) +
+         p.rays->size() * static_cast<int64_t>(sizeof(RayPixel) + 3 + (UsesAlpha(p) ? 1 : 0));
+}
+
+// Values in [0, 1] as the device stores them (cuda::ColourToByte).
+std::vector<uint8_t> ToBytes(const std::vector<float>& values) {
+  std::vector<uint8_t> bytes(values.size());
+  for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = cuda::ColourToByte(values[i]);
+  return bytes;
+}
+
+// The level's rays on the device (one owner: the backend, for one level).
+struct DeviceRays {
+  DeviceBuffer<PinholeCamera<float>> cameras;
+  DeviceBuffer<RayPixel> pixels;
+  DeviceBuffer<uint8_t> colours;
+  DeviceBuffer<uint8_t> alphas;  // empty when the level has no alpha residual
+  DeviceBuffer<int32_t> exposure_slot;  // empty when the level solves no exposures
+  int64_t first_index = 0;       // RaySet::first_index
+
+  DeviceRays(const RaySet& rays, bool use_alpha, int exposures)
+      : cameras(static_cast<int64_t>(rays.cameras.size())),
+        pixels(rays.size()),
+        colours(3 * rays.size()),
+        alphas(use_alpha ? rays.size() : 0),
+        exposure_slot(exposures > 0 ? static_cast<int64_t>(rays.cameras.size()) : 0),
+        first_index(rays.first_index) {
+    PERF_CHECK(static_cast<int64_t>(rays.colours.size()) == 3 * rays.size());
+    cameras.CopyFromHost(rays.cameras);
+    pixels.CopyFromHost(rays.pixels);
+    colours.CopyFromHost(ToBytes(rays.colours));
+    if (use_alpha) alphas.CopyFromHost(ToBytes(rays.alphas));
+    if (exposures > 0) {
+      PERF_CHECK(rays.exposure_slot.size() == rays.cameras.size());
+      for (int32_t slot : rays.exposure_slot) PERF_CHECK(slot >= 0 && slot < exposures);
+      exposure_slot.CopyFromHost(rays.exposure_slot);
+    }
+  }
+  cuda::RaysView View() const {
+    return {cameras.data(),
+            pixels.data(),
+            colours.data(),
+            alphas.size() > 0 ? alphas.data() : nullptr,
+            pixels.size(),
+            first_index,
+            exposure_slot.size() > 0 ? exposure_slot.data() : nullptr};
+  }
+};
+
+// Render draws an image in bands of at most this many pixels through buffers allocated with the
+// level (16 MiB), so that its memory is part of the level's estimate whatever the image size.
+constexpr int64_t kRenderBandPixels = int64_t{1} << 20;
+
+// Pass statistics, reductions' working memory and Render's band.
+struct Scratch {
+  DeviceBuffer<cuda::RayStats> partials, total;
+  DeviceBuffer<double> result;
+  DeviceBuffer<uint8_t> temp;
+  DeviceBuffer<float> render_colour, render_opacity;  // [kRenderBandPixels, 3], [kRenderBandPixels]
+
+  static int64_t Bytes(int64_t rays, int64_t params) {
+    const int64_t blocks = cuda::PassBlocks(rays);
+    return (blocks + 1) * static_cast<int64_t>(sizeof(cuda::RayStats)) + static_cast<int64_t>(sizeof(double)) +
+           static_cast<int64_t>(std::max(cuda::StatsTempBytes(blocks), cuda::ReduceTempBytes(params))) +
+           4 * kRenderBandPixels * static_cast<int64_t>(sizeof(float));
+  }
+  Scratch(int64_t rays, int64_t params)
+      : partials(std::max<int64_t>(cuda::PassBlocks(rays), 1)),
+        total(1),
+        result(1),
+        temp(static_cast<int64_t>(std::max(cuda::StatsTempBytes(cuda::PassBlocks(rays)), cuda::ReduceTempBytes(params)))),
+        render_colour(3 * kRenderBandPixels),
+        render_opacity(kRenderBandPixels) {}
+  cuda::StatsScratch Stats() {
+    return {partials.data(), partials.size(), total.data(), temp.data(), static_cast<size_t>(temp.size())};
+  }
+  cuda::ReduceScratch Reduce() { return {result.data(), temp.data(), static_cast<size_t>(temp.size())}; }
+};
+
+class CudaBackend final : public Backend {
+ public:
+  explicit CudaBackend(const CudaBackendOptions& o) : options_(o) {
+    int count = 1;
+    PERF_CUDA_CHECK(cudaGetDeviceCount(&count));
+    options_.device = count > 0 ? o.device % count : 0;  // ranks beyond the devices share them
+    PERF_CUDA_CHECK(cudaSetDevice(options_.device));
+    cudaDeviceProp prop;
+    PERF_CUDA_CHECK(cudaGetDeviceProperties(&prop, options_.device));
+    name_ = prop.name;
+    if (const char* e = cuda::KernelImageError()) {
+      throw ResourceError(StrCat("the CUDA device ", name_, " (compute capability ", prop.major, ".", prop.minor,
+                                 ") cannot run this build's kernels (", e,
+                                 "); it is built for sm_90 and newer; use --device cpu"));
+    }
+  }
+
+  BackendKind kind() const override { return BackendKind::kCuda; }
+  std::string Describe() const override { return StrCat("cuda (", name_, ")"); }
+
+  MemoryEstimate EstimateMemory(const LevelProblem& p, int num_vectors) const override {
+    MemoryEstimate e;
+    const int64_t params = p.shape.ParamCount();
+    const int64_t rays = p.rays ? p.rays->size() : 0;
+    e.vectors = int64_t{num_vectors} * params * 4;
+    e.rays = p.rays ? RayBytes(p) : 0;
+    // Plus the local memory (stack frames) the driver backs for every thread the device can hold
+    // once the ray kernels run: ~1 KB x 132 SMs x 2048 threads = ~285 MB on an H100. It stays
+    // with the CUDA context, so after the first level it is counted twice (free memory already
+    // lacks it): a margin of a few tenths of a percent of such a device.
+    e.scratch = Scratch::Bytes(rays, params) + cuda::KernelLocalMemoryBytes();
+    e.jacobian_cache = 0;  // never cached: MultiplyJtJ recomputes (cuda_passes.cu)
+    e.available = Available();
+    return e;
+  }
+
+  MemoryEstimate SetLevel(const LevelProblem& problem, int num_vectors) override {
+    LevelProblem p = problem;
+    if (!p.rays) p.rays = &NoRays();  // render-only
+    PERF_CHECK(p.shape.num_shells == p.geometry.num_shells() && p.shape.num_shells <= kMaxShells);
+    PERF_CHECK(num_vectors >= 0);
+    Release();
+    restrict_to_ = nullptr;
+    level_ = p;
+    const MemoryEstimate e = EstimateMemory(p, num_vectors);
+    if (e.Total() > e.available) throw ResourceError(TooLarge(p, num_vectors, e));
+    for (int v = 0; v < num_vectors; ++v) {
+      vectors_.emplace_back(p.shape.ParamCount());
+      cuda::Fill(vectors_.back().data(), p.shape.ParamCount(), 0.f);
+    }
+    if (p.shape.bricks) {
+      bricks_ = DeviceBuffer<int32_t>(static_cast<int64_t>(p.shape.bricks->slot.size()));
+      bricks_.CopyFromHost(p.shape.bricks->slot);
+      brick_list_ = DeviceBuffer<int64_t>(p.shape.bricks->ActiveBricks());
+      brick_list_.CopyFromHost(p.shape.bricks->bricks);
+    }
+    rays_ = std::make_unique<DeviceRays>(*p.rays, UsesAlpha(p), p.shape.exposures);
+    scratch_ = std::make_unique<Scratch>(p.rays->size(), p.shape.ParamCount());
+    held_ = e.Total();
+    return e;
+  }
+
+  const LevelProblem& level() const override { return level_; }
+  bool CachesJacobian() const override { return false; }
+
+  void Upload(VecId v, std::span<const float> host) override { vec(v).CopyFromHost(host); }
+  void Download(VecId v, std::span<float> host) const override { vec(v).CopyToHost(host); }
+  void SumAcrossRanks(VecId v, Communicator& comm) override {
+    if (!comm.SumDeviceInPlace(ptr(v), static_cast<size_t>(n()))) Backend::SumAcrossRanks(v, comm);
+  }
+  void Fill(VecId v, float value) override { cuda::Fill(ptr(v), n(), value); }
+  void Copy(VecId dst, VecId src) override { cuda::Copy(ptr(dst), ptr(src), n()); }
+  void Axpy(VecId y, double a, VecId x) override { cuda::Axpy(ptr(y), static_cast<float>(a), ptr(x), n()); }
+  void Xpby(VecId y, VecId x, double b) override { cuda::Xpby(ptr(y), ptr(x), static_cast<float>(b), n()); }
+  void DivideClamped(VecId z, VecId r, VecId d, float floor) override {
+    cuda::DivideClamped(ptr(z), ptr(r), ptr(d), floor, n());
+  }
+  void AxpyDiag(VecId y, double a, VecId d, VecId x) override {
+    cuda::AxpyDiag(ptr(y), static_cast<float>(a), ptr(d), ptr(x), n());
+  }
+  double Dot(VecId a, VecId b) const override { return cuda::Dot(ptr(a), ptr(b), n(), scratch_->Reduce()); }
+  double MaxAbs(VecId v) const override { return cuda::MaxAbs(ptr(v), n(), scratch_->Reduce()); }
+  double MaxAbsVolume(VecId v) const override {
+    return cuda::MaxAbs(ptr(v), level_.shape.ExposureStart(), scratch_->Reduce());
+  }
+  void AddSmoothness(VecId v, const SmoothnessWeights& w, VecId out, VecId diag) override {
+    PERF_CHECK(out != v);
+    cuda::AddSmoothness(ptr(v), DeviceSmoothnessLayout(), w, out == kNoVector ? nullptr : ptr(out),
+                        diag == kNoVector ? nullptr : ptr(diag), n());
+  }
+  double SmoothnessCost(VecId v, const SmoothnessWeights& w) const override {
+    return cuda::SmoothnessCost(ptr(v), DeviceSmoothnessLayout(), w, n(), scratch_->Reduce());
+  }
+  std::array<double, kParamKinds> SumByKind(VecId v) const override {
+    return cuda::SumByKind(ptr(v), n(), level_.shape.Layout(), scratch_->Reduce());
+  }
+  void Project(VecId x) override {
+    cuda::Project(ptr(x), n(), level_.shape.Layout());
+  }
+  void HoldParameters(VecId x, VecId g, VecId free, bool bounds) override {
+    cuda::HoldParameters(ptr(x), ptr(g), ptr(free), n(), level_.shape.Layout(),
+                         level_.fixed_shells, bounds);
+  }
+  void Multiply(VecId y, VecId m) override { cuda::Multiply(ptr(y), ptr(m), n()); }
+  // Nothing is recorded: JtJpKernel skips the samples on the fly (jacobian.h SkippableSample).
+  void RestrictJacobian(VecId free) override { restrict_to_ = ptr(free); }
+  void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) override {
+    cuda::AdamStep(ptr(x), ptr(g), ptr(m), ptr(v), AdamCoefficientsAt(s, t), n(), level_.shape.Layout());
+  }
+
+  PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset) override {
+    PERF_CHECK(subset.Valid());
+    const auto t0 = WallClock::now();
+    const cuda::RayStats r = cuda::Linearize(Input(x, seed), ptr(g), diag == kNoVector ? nullptr : ptr(diag), n(),
+                                             subset.stride, subset.offset,
+                                             scratch_->Stats());
+    lin_x_ = x;
+    lin_seed_ = seed;
+    linearized_ = true;
+    restrict_to_ = nullptr;
+    return ToPassStats(r, t0);
+  }
+
+  PassStats MultiplyJtJ(VecId p, VecId out) override {
+    PERF_CHECK_MSG(linearized_, "MultiplyJtJ before Linearize");
+    const auto t0 = WallClock::now();
+    const cuda::RayStats r =
+        cuda::MultiplyJtJ(Input(lin_x_, lin_seed_), ptr(p), restrict_to_, ptr(out), n(), scratch_->Stats());
+    return ToPassStats(r, t0);
+  }
+
+  PassStats Cost(VecId x, uint32_t seed, RaySubset subset) override {
+    PERF_CHECK(subset.Valid());
+    const auto t0 = WallClock::now();
+    return ToPassStats(cuda::Cost(Input(x, seed), subset.stride, subset.offset, scratch_->Stats()), t0);
+  }
+
+  RenderOutput Render(VecId x, const PinholeCamera<float>& camera, int width, int height,
+                      float min_box_opacity) override {
+    PERF_CHECK(width >= 0 && height >= 0);
+    RenderOutput r;
+    r.width = width;
+    r.height = height;
+    const int64_t pixels = static_cast<int64_t>(width) * height;
+    r.colour.resize(3 * pixels);
+    r.opacity.resize(pixels);
+    if (pixels == 0) return r;
+    PERF_CHECK_MSG(width <= kRenderBandPixels, "a render ", width, " pixels wide");
+    const int band = static_cast<int>(std::min<int64_t>(height, kRenderBandPixels / width));
+    for (int y0 = 0; y0 < height; y0 += band) {
+      const int rows = std::min(band, height - y0);
+      const int64_t first = static_cast<int64_t>(y0) * width, count = static_cast<int64_t>(rows) * width;
+      cuda::Render(View(ptr(x)), level_.geometry.box, camera, width, y0, rows,
+                   level_.residuals.stop_transmittance, min_box_opacity, scratch_->render_colour.data(),
+                   scratch_->render_opacity.data());
+      scratch_->render_colour.CopyPrefixToHost(std::span<float>(r.colour).subspan(3 * first, 3 * count));
+      scratch_->render_opacity.CopyPrefixToHost(std::span<float>(r.opacity).subspan(first, count));
+    }
+    return r;
+  }
+
+ private:
+  void Release() {
+    vectors_.clear();
+    bricks_ = DeviceBuffer<int32_t>();
+    brick_list_ = DeviceBuffer<int64_t>();
+    rays_.reset();
+    scratch_.reset();
+    held_ = 0;
+    linearized_ = false;
+  }
+
+  // What the backend may use: free device memory plus what it holds now (SetLevel frees that
+  // first), less 5 % for the CUDA context's own growth and fragmentation.
+  int64_t Available() const {
+    if (options_.max_memory > 0) return options_.max_memory;
+    size_t free = 0, total = 0;
+    PERF_CUDA_CHECK(cudaMemGetInfo(&free, &total));
+    return (static_cast<int64_t>(free) + held_) / 20 * 19;
+  }
+
+  // The ResourceError message: what the level needs, what is free, and the largest grid that
+  // would fit with the same rays.
+  std::string TooLarge(const LevelProblem& p, int num_vectors, const MemoryEstimate& e) const {
+    std::string hint;
+    for (VolumeShape s = p.shape; s.n >= 2;) {
+      s = {s.n / 2, std::max(1, s.m / 2), s.num_shells};
+      LevelProblem q = p;
+      q.shape = s;
+      const MemoryEstimate f = EstimateMemory(q, num_vectors);
+      if (f.Total() <= e.available) {
+        hint = StrCat("the largest level that fits with these rays is ", DescribeShape(s), " (", Mib(f.Total()),
+                      "): use fewer --levels");
+        break;
+      }
+    }
+    if (hint.empty()) hint = StrCat("the rays alone need ", Mib(e.rays), ": use a larger --downscale");
+    return StrCat("level ", DescribeShape(p.shape), " needs ", Mib(e.Total()), " of GPU memory (", num_vectors,
+                  " solver vectors ", Mib(e.vectors), ", ", p.rays->size(), " rays ", Mib(e.rays),
+                  ", scratch and the kernels' local memory ", Mib(e.scratch), ") but only ", Mib(e.available), " are free on ", name_, "; ", hint,
+                  ", a larger --downscale, or --device cpu");
+  }
+
+  // The smoothness stencil's layout with a sparse grid's tables on the device.
+  SmoothnessLayout DeviceSmoothnessLayout() const {
+    SmoothnessLayout layout = MakeSmoothnessLayout(level_.shape);
+    if (level_.shape.bricks) {
+      layout.slot = bricks_.data();
+      layout.bricks = brick_list_.data();
+    }
+    return layout;
+  }
+
+  // The level's volume at x as the kernels read it: a sparse grid's brick table on the device.
+  VolumeView<float> View(const float* x) const {
+    VolumeView<float> v = MakeView(level_.shape, level_.geometry, x);
+    if (v.brick_slot) v.brick_slot = bricks_.data();
+    return v;
+  }
+
+  cuda::PassInput Input(VecId x, uint32_t seed) const {
+    return {View(ptr(x)),
+            level_.geometry.box,
+            rays_->View(),
+            OpacityResidualWeight(level_),
+            level_.residuals.stop_transmittance,
+            level_.residuals.jitter,
+            level_.residuals.pixel_jitter,
+            seed,
+            level_.residuals.robust_scale};
+  }
+
+  static PassStats ToPassStats(const cuda::RayStats& r, WallClock::time_point t0) {
+    PassStats s;
+    s.cost = r.cost;
+    s.colour_sse = r.colour_sse;
+    s.rays = r.rays;
+    s.samples = r.samples;
+    s.subset_cost = r.subset_cost;
+    s.seconds = SecondsSince(t0);  // the pass has synchronised (its statistics are on the host)
+    return s;
+  }
+
+  DeviceBuffer<float>& vec(VecId v) {
+    PERF_CHECK(v >= 0 && v < static_cast<int>(vectors_.size()));
+    return vectors_[v];
+  }
+  const DeviceBuffer<float>& vec(VecId v) const {
+    PERF_CHECK(v >= 0 && v < static_cast<int>(vectors_.size()));
+    return vectors_[v];
+  }
+  float* ptr(VecId v) { return vec(v).data(); }
+  const float* ptr(VecId v) const { return vec(v).data(); }
+  int64_t n() const { return level_.shape.ParamCount(); }
+
+  CudaBackendOptions options_;
+  std::string name_;
+  LevelProblem level_;
+  std::vector<DeviceBuffer<float>> vectors_;
+  DeviceBuffer<int32_t> bricks_;  // a sparse level's brick table (VolumeView::brick_slot)
+  DeviceBuffer<int64_t> brick_list_;  // and the brick of each slot (SmoothnessLayout::bricks)
+  std::unique_ptr<DeviceRays> rays_;
+  std::unique_ptr<Scratch> scratch_;
+  int64_t held_ = 0;  // bytes of the current level (EstimateMemory's Total)
+  bool linearized_ = false;
+  VecId lin_x_ = kNoVector;
+  uint32_t lin_seed_ = 0;
+  const float* restrict_to_ = nullptr;  // RestrictJacobian's free vector until the next Linearize
+};
+
+}  // namespace
+
+int64_t CudaMemoryInUse() {
+  size_t free = 0, total = 0;
+  PERF_CUDA_CHECK(cudaMemGetInfo(&free, &total));
+  return static_cast<int64_t>(total) - static_cast<int64_t>(free);
+}
+
+namespace {
+
+// Why cudaGetDeviceCount failed, in the three cases a user can act on: no driver (or one too old
+// for this runtime), no device visible, anything else with CUDA's own words.
+std::string NoDeviceReason(cudaError_t e) {
+  const std::string cuda = StrCat(cudaGetErrorString(e), " (", cudaGetErrorName(e), ")");
+  switch (e) {
+    case cudaErrorInsufficientDriver:
+      return StrCat("driver not found: no NVIDIA driver (libcuda.so.1) was loaded, or it is older than this CUDA "
+                    "runtime; ",
+                    cuda, "; check nvidia-smi, and that LD_LIBRARY_PATH still contains the driver's folder");
+    case cudaErrorNoDevice: {
+      const char* visible = std::getenv("CUDA_VISIBLE_DEVICES");
+      return StrCat("no device: the driver sees no CUDA device; ", cuda,
+                    visible ? StrCat("; CUDA_VISIBLE_DEVICES=\"", visible, "\"") : std::string());
+    }
+    default:
+      return StrCat("the CUDA runtime cannot use the driver: ", cuda);
+  }
+}
+
+}  // namespace
+
+bool ProbeCudaDevice(std::string* name, std::string* reason) {
+  int count = 0;
+  const cudaError_t e = cudaGetDeviceCount(&count);
+  if (e != cudaSuccess) {
+    cudaGetLastError();
+    if (reason) *reason = NoDeviceReason(e);
+    return false;
+  }
+  if (count == 0) {
+    if (reason) *reason = NoDeviceReason(cudaErrorNoDevice);
+    return false;
+  }
+  cudaDeviceProp prop;
+  const cudaError_t p = cudaGetDeviceProperties(&prop, 0);
+  if (p != cudaSuccess) {
+    cudaGetLastError();
+    if (reason) *reason = StrCat("cudaGetDeviceProperties: ", cudaGetErrorString(p));
+    return false;
+  }
+  // Device 0 is the current device unless this process chose another; the kernels' image must
+  // load on it (this build: sm_90 code + PTX, so not on GPUs before Hopper).
+  if (const char* k = cuda::KernelImageError()) {
+    if (reason) {
+      *reason = StrCat("wrong arch: ", prop.name, " (compute capability ", prop.major, ".", prop.minor,
+                       ") cannot run this build's kernels, built for sm_90 and newer (", k, ")");
+    }
+    return false;
+  }
+  if (name) *name = prop.name;
+  return true;
+}
+
+std::unique_ptr<Backend> MakeCudaBackend(const CudaBackendOptions& options) {
+  std::string reason;
+  if (!ProbeCudaDevice(nullptr, &reason)) {
+    throw ResourceError(StrCat("no CUDA device: ", reason, "; use --device cpu"));
+  }
+  return std::make_unique<CudaBackend>(options);
+}
+
+}  // namespace perf::recon

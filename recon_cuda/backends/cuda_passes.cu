@@ -1,0 +1,376 @@
+// The ray passes of the CUDA backend: one thread per ray (per pixel for Render), calling the
+// per-ray code of ray_math.h and jacobian.h, with float atomics as the scatter sink. Nothing of
+// the per-ray math is written here; this file adds launches, the sink and the statistics.
+//
+// Differences from the CPU backend, by design:
+//   - no recorded Jacobian: MultiplyJtJ recomputes each ray's partials (Forward, then Backward
+//     twice: once gathering J p, once scattering J^T (J p)). A per-sample record at 256^3 on
+//     lego would need ~24 B x ~10^10 samples; memory traffic to re-read it would also cost about
+//     what the recompute's gathers do (L2-resident cells). Unmeasured;
+//   - J^T u scatters (Adam's gradient, J^T J p) go through the per-ray cell merge (CellMerger),
+//     so each cell gets one atomic per ray instead of one per sample (the CPU measured a direct
+//     scatter faster because its adds are plain; on the GPU atomics to the same few cells from a
+//     warp's neighbouring rays serialise);
+//   - the merged scatter adds 4 consecutive floats; on sm_90 that is one vector atomic (float4),
+//     elsewhere 4 scalar ones. Every Add4 index is a multiple of 4 (GridParam / ShellParam of
+//     channel 0) and cudaMalloc aligns to 256 bytes, so the float4 is aligned.
+// Resources (ptxas -v, CUDA 13.0.88, sm_90, no spills; re-measure after changing the per-ray
+// code): Linearize with diag 253 registers + 1056 B stack frame, Linearize for Adam and JtJp
+// 167 + 736 B, Cost 64 + 280 B, Render 56 + 360 B. The stack holds the cell merge buffers and
+// the per-shell arrays (indexed at run time); the driver backs it for every thread the device
+// can hold (KernelLocalMemoryBytes: ~285 MB on an H100, part of the memory estimate). At 253
+// registers only 2 blocks of 128 threads fit an SM's 64 K registers: 12.5 % occupancy for
+// Gauss-Newton's Linearize. That is the first thing to profile on a GPU (Nsight Compute: is the
+// kernel latency-bound, what do __launch_bounds__ min-blocks or smaller merge buffers cost in
+// local memory traffic?); do not tune it blind.
+// Float atomics make the order of the additions, hence the last bits of g, diag and J^T J p,
+// vary from run to run; the cost and counts are summed per block with CUB in a fixed order.
+#include <cub/block/block_reduce.cuh>
+#include <cub/device/device_reduce.cuh>
+
+#include "common/errors.h"
+#include "recon_cuda/backends/cuda_check.h"
+#include "recon_cuda/backends/cuda_kernels.h"
+#include "recon_cuda/core/jacobian.h"
+
+namespace perf::recon::cuda {
+namespace {
+
+constexpr int kRayThreads = 128;  // threads per block of the ray kernels (register-heavy)
+
+struct AtomicSink {
+  float* a;
+  __device__ __forceinline__ void Add4(int64_t i, float x, float y, float z, float w) {
+#if __CUDA_ARCH__ >= 900
+    atomicAdd(reinterpret_cast<float4*>(a + i), make_float4(x, y, z, w));
+#else
+    atomicAdd(a + i, x);
+    atomicAdd(a + i + 1, y);
+    atomicAdd(a + i + 2, z);
+    atomicAdd(a + i + 3, w);
+#endif
+  }
+};
+
+// The ray's scatter of J^T u (u: the residuals for the gradient, J p for J^T J p) and, with
+// kDiag, its exact share of diag(J^T J), merged cell by cell along the ray (jacobian.h).
+// free: J^T J p restricted to these parameters (SkippableSample), or nullptr.
+template <bool kDiag>
+struct ScatterVisitor {
+  static constexpr int K = kDiag ? 9 : 4;  // J^T u values, then the 5 row values of diag
+  float u[4];
+  AtomicSink g, d;
+  CellMerger<float, K> merger;
+  const float* free = nullptr;
+  float g2[3] = {1, 1, 1};  // the squared gains of the ray's photo (jacobian.h GainSquared)
+  RaySh<float> sh{};        // the ray's spherical harmonics (degree 0: none)
+
+  __device__ void Shell(int, const CubeCoord<float>&, const TexelSample<float>& ts, const ShellPartials<float>& sp) {
+    ScatterJtuShell(ts, sp, u, g);
+    if constexpr (kDiag) AddDiagShell(ts, sp, g2, d);
+  }
+  __device__ void Sample(int, const MarchStep<float>&, const GridSample<float>& gs, const SamplePartials<float>& sp) {
+    if (free && SkippableSample(gs, sp, free)) return;
+    float v[K];
+    JtuValues(sp, u, v);
+    if constexpr (kDiag) RowValues(sp, v + 4);
+    merger.Sample(gs, v, *this);
+  }
+  // A cell's merged sums are complete.
+  __device__ void operator()(int64_t cell, const float* acc) {
+    g.Add4(GridParam(cell, 0), acc[0], acc[1], acc[2], acc[3]);
+    if constexpr (kDiag) AddDiagFromRow(cell, acc + 4, g2, d);
+    if (sh.degree > 0) {
+      ScatterSh(sh, cell, acc, g);
+      if constexpr (kDiag) AddDiagSh(sh, cell, acc[4], g2, d);
+    }
+  }
+  __device__ void Finish() { merger.Finish(*this); }
+};
+
+// u += J_ray p (a gather); free as in ScatterVisitor. used: the grid samples gathered.
+struct JpVisitor {
+  const float* p;
+  const float* free;
+  float u[4];
+  RaySh<float> sh{};
+  int used = 0;
+  __device__ void Shell(int, const CubeCoord<float>&, const TexelSample<float>& ts, const ShellPartials<float>& sp) {
+    AddJpShell(p, ts, sp, u);
+  }
+  __device__ void Sample(int, const MarchStep<float>&, const GridSample<float>& gs, const SamplePartials<float>& sp) {
+    if (free && SkippableSample(gs, sp, free)) return;
+    AddJpSample(p, gs, sp, u, sh);
+    ++used;
+  }
+};
+
+// A ray's exposure entries (jacobian.h ScatterJtuExposure, AddDiagExposure), kept in registers
+// until WarpAddExposure: base is the photo's first exposure parameter (-1: none).
+struct ExposureSums {
+  int64_t base = -1;
+  float v[kExposureValues] = {0, 0, 0, 0, 0, 0, 0, 0};
+  __device__ __forceinline__ void Add4(int64_t i, float x, float y, float z, float w) {
+    float* p = v + (i - base);
+    p[0] += x;
+    p[1] += y;
+    p[2] += z;
+    p[3] += w;
+  }
+};
+
+// Adds every lane's ExposureSums to dst. Every ray of a photo adds to the same 8 values, and a
+// warp's rays are usually of one photo (the rays go photo by photo, tile by tile): then the warp
+// sums them with shuffles and one lane adds, instead of 32 atomics on one address. Call from
+// every lane of the warp (lanes without a ray pass base -1).
+__device__ void WarpAddExposure(ExposureSums& e, float* dst) {
+  constexpr unsigned kAll = 0xffffffffu;
+  const long long first = __shfl_sync(kAll, static_cast<long long>(e.base), 0);
+  if (__all_sync(kAll, e.base == first)) {
+    if (first < 0) return;
+    for (int k = 0; k < kExposureValues; ++k)
+      for (int offset = 16; offset > 0; offset >>= 1) e.v[k] += __shfl_down_sync(kAll, e.v[k], offset);
+    if ((threadIdx.x & 31) != 0) return;
+  } else if (e.base < 0) {
+    return;
+  }
+  AtomicSink sink{dst};
+  sink.Add4(e.base, e.v[0], e.v[1], e.v[2], e.v[3]);
+  sink.Add4(e.base + 4, e.v[4], e.v[5], e.v[6], e.v[7]);
+}
+
+struct SumStats {
+  __device__ __forceinline__ RayStats operator()(const RayStats& a, const RayStats& b) const {
+    return {a.cost + b.cost, a.colour_sse + b.colour_sse, a.rays + b.rays, a.samples + b.samples,
+            a.subset_cost + b.subset_cost};
+  }
+};
+
+// The cost of one ray (training_ray.h CostOf, as the CPU backend sums it).
+__device__ __forceinline__ RayStats StatsOf(const RayOutput<float>& o, float robust) {
+  const RayCost c = CostOf(o, robust);
+  return {c.cost, c.colour_sse, 1, o.count, 0.0};
+}
+
+__device__ __forceinline__ void WriteBlockStats(const RayStats& mine, RayStats* partials) {
+  using BlockReduce = cub::BlockReduce<RayStats, kRayThreads>;
+  __shared__ typename BlockReduce::TempStorage temp;
+  const RayStats sum = BlockReduce(temp).Reduce(mine, SumStats{});
+  if (threadIdx.x == 0) partials[blockIdx.x] = sum;
+}
+
+// Ray i as every pass of the iteration of in.seed sees it, its targets (training_ray.h).
+__device__ __forceinline__ TrainingRay MakeRay(const PassInput& in, int64_t i) {
+  return RayOf(in.rays, in.box, in.vol.n, i, in.seed, in.jitter, in.pixel_jitter);
+}
+
+template <bool kDiag>
+__global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, float* g, float* diag, int stride,
+                                                               int offset, RayStats* partials) {
+  const int64_t i = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  RayStats mine;
+  ExposureSums eg, ed;
+  if (i < in.rays.count) {
+    const TrainingRay r = MakeRay(in, i);
+    float target[3];
+    TargetOf(in.rays, i, target);
+    const int slot = ExposureSlotOf(in.rays, i);
+    const ColourTransform<float> xf = TransformOfRay(in.rays, in.vol, i);
+    const RayOutput<float> fwd =
+        Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in.rays, i), xf);
+    const RayExposure<float> e =
+        ExposureOfRay(in.vol.ExposureStart(), slot, xf, fwd.h, RobustRowScale(fwd.residual, in.robust));
+    float rs[4];  // the weighted system's residuals
+    ScaledResidual(e, fwd.residual, rs);
+    ScatterVisitor<kDiag> v{{0, 0, 0, 0}, {g}, {diag}, {}};
+    VolumeU(e, rs, v.u);
+    GainSquared(e, v.g2);
+    v.sh = ShOfRay(in.vol, r.ray);
+    Backward(in.vol, r.ray, r.jit, fwd, v);
+    v.Finish();
+    eg.base = ed.base = e.param;
+    ScatterJtuExposure(e, rs, eg);
+    if constexpr (kDiag) AddDiagExposure(e, ed);
+    mine = StatsOf(fwd, in.robust);
+    if (i % stride == offset) mine.subset_cost = mine.cost;
+  }
+  WarpAddExposure(eg, g);
+  if constexpr (kDiag) WarpAddExposure(ed, diag);
+  WriteBlockStats(mine, partials);
+}
+
+__global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const float* p, const float* free,
+                                                          float* out, RayStats* partials) {
+  const int64_t i = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  RayStats mine;
+  ExposureSums eo;
+  if (i < in.rays.count) {
+    const TrainingRay r = MakeRay(in, i);
+    // The partials depend on the forward's transmittances and colours (and on whether the ray
+    // has an alpha, not on its value); the exposure's on H; the robust row scale on the residual.
+    float target[3];
+    TargetOf(in.rays, i, target);
+    const ColourTransform<float> xf = TransformOfRay(in.rays, in.vol, i);
+    const RayOutput<float> fwd =
+        Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance, nullptr, AlphaOf(in.rays, i), xf);
+    const RayExposure<float> e = ExposureOfRay(in.vol.ExposureStart(), ExposureSlotOf(in.rays, i), xf, fwd.h,
+                                               RobustRowScale(fwd.residual, in.robust));
+    JpVisitor jp{p, free, {0, 0, 0, 0}};
+    jp.sh = ShOfRay(in.vol, r.ray);
+    Backward(in.vol, r.ray, r.jit, fwd, jp);
+    FinishJp(e, p, jp.u);
+    ScatterVisitor<false> v{{0, 0, 0, 0}, {out}, {nullptr}, {}, free};
+    VolumeU(e, jp.u, v.u);
+    v.sh = jp.sh;
+    Backward(in.vol, r.ray, r.jit, fwd, v);
+    v.Finish();
+    eo.base = e.param;
+    ScatterJtuExposure(e, jp.u, eo);
+    mine.rays = 1;
+    // The samples that enter the product, as the CPU backend counts them when it records the
+    // Jacobian (after RestrictJacobian it visits only the samples it kept; recomputing, it counts
+    // every sample). The march itself visits fwd.count, so after RestrictJacobian J^T J p's
+    // samples/s is not a march rate.
+    mine.samples = jp.used;
+  }
+  WarpAddExposure(eo, out);
+  WriteBlockStats(mine, partials);
+}
+
+// Thread j evaluates ray offset + j stride of `count` such rays.
+__global__ void __launch_bounds__(kRayThreads) CostKernel(PassInput in, int64_t stride, int64_t offset,
+                                                          int64_t count, RayStats* partials) {
+  const int64_t j = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  RayStats mine;
+  if (j < count) {
+    const int64_t i = offset + j * stride;
+    const TrainingRay r = MakeRay(in, i);
+    float target[3];
+    TargetOf(in.rays, i, target);
+    mine = StatsOf(Forward(in.vol, r.ray, r.jit, target, in.lambda, in.stop_transmittance, nullptr,
+                           AlphaOf(in.rays, i), TransformOfRay(in.rays, in.vol, i)),
+                   in.robust);
+  }
+  WriteBlockStats(mine, partials);
+}
+
+// The CPU backend's Render, pixel by pixel: no jitter, the render rule (training_ray.h RulePixel).
+// Rows y0 .. y0 + rows - 1; the outputs start at row y0.
+__global__ void RenderKernel(VolumeView<float> vol, BoxFrame<float> box, PinholeCamera<float> camera, int width,
+                             int y0, int rows, float stop, float min_box_opacity, float* colour, float* opacity) {
+  const int x = blockIdx.x * blockDim.x + threadIdx.x, row = blockIdx.y * blockDim.y + threadIdx.y;
+  if (x >= width || row >= rows) return;
+  const int y = y0 + row;
+  const Jitter none{0, 0, false, false};
+  const float zero[3] = {0, 0, 0};
+  const BoxRay<float> ray = PixelBoxRay(camera, box, vol.n, x, y, none);
+  const RayOutput<float> o = Forward(vol, ray, none, zero, 0.f, stop);
+  const int64_t i = static_cast<int64_t>(row) * width + x;
+  RulePixel(o, min_box_opacity, &colour[3 * i], &opacity[i]);
+}
+
+// Sums the per-block partials in a fixed order and returns the total (synchronises).
+RayStats Total(const StatsScratch& s, int64_t blocks) {
+  RayStats total;
+  if (blocks == 0) return total;
+  PERF_CHECK(blocks <= s.capacity);
+  size_t bytes = s.temp_bytes;
+  PERF_CUDA_CHECK(cub::DeviceReduce::Reduce(s.temp, bytes, s.partials, s.total, blocks, SumStats{}, RayStats{}));
+  PERF_CUDA_CHECK(cudaMemcpy(&total, s.total, sizeof(RayStats), cudaMemcpyDeviceToHost));
+  return total;
+}
+
+unsigned GridFor(int64_t blocks) {
+  PERF_CHECK_MSG(blocks < (int64_t{1} << 31), blocks, " blocks of rays");
+  return static_cast<unsigned>(blocks);
+}
+
+}  // namespace
+
+const char* KernelImageError() {
+  cudaFuncAttributes attr;
+  const cudaError_t e = cudaFuncGetAttributes(&attr, RenderKernel);
+  if (e == cudaSuccess) return nullptr;
+  cudaGetLastError();  // not sticky: clear it
+  return cudaGetErrorString(e);
+}
+
+int64_t KernelLocalMemoryBytes() {
+  size_t per_thread = 0;
+  PERF_CUDA_CHECK(cudaDeviceGetLimit(&per_thread, cudaLimitStackSize));
+  auto at_least = [&](const void* kernel) {
+    cudaFuncAttributes attr;
+    PERF_CUDA_CHECK(cudaFuncGetAttributes(&attr, kernel));
+    per_thread = std::max(per_thread, attr.localSizeBytes);
+  };
+  at_least(reinterpret_cast<const void*>(LinearizeKernel<true>));
+  at_least(reinterpret_cast<const void*>(LinearizeKernel<false>));
+  at_least(reinterpret_cast<const void*>(JtJpKernel));
+  at_least(reinterpret_cast<const void*>(CostKernel));
+  at_least(reinterpret_cast<const void*>(RenderKernel));
+  int device = 0, sms = 0, threads = 0;
+  PERF_CUDA_CHECK(cudaGetDevice(&device));
+  PERF_CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
+  PERF_CUDA_CHECK(cudaDeviceGetAttribute(&threads, cudaDevAttrMaxThreadsPerMultiProcessor, device));
+  return static_cast<int64_t>(per_thread) * sms * threads;
+}
+
+int64_t PassBlocks(int64_t rays) { return (rays + kRayThreads - 1) / kRayThreads; }
+
+size_t StatsTempBytes(int64_t blocks) {
+  size_t bytes = 0;
+  PERF_CUDA_CHECK(cub::DeviceReduce::Reduce(nullptr, bytes, static_cast<RayStats*>(nullptr),
+                                            static_cast<RayStats*>(nullptr), std::max<int64_t>(blocks, 1), SumStats{},
+                                            RayStats{}));
+  return bytes;
+}
+
+RayStats Linearize(const PassInput& in, float* g, float* diag, int64_t params, int stride, int offset,
+                   const StatsScratch& s) {
+  PERF_CUDA_CHECK(cudaMemset(g, 0, params * sizeof(float)));
+  if (diag) PERF_CUDA_CHECK(cudaMemset(diag, 0, params * sizeof(float)));
+  const int64_t blocks = PassBlocks(in.rays.count);
+  if (blocks == 0) return {};
+  PERF_CHECK(blocks <= s.capacity);
+  if (diag) {
+    LinearizeKernel<true><<<GridFor(blocks), kRayThreads>>>(in, g, diag, stride, offset, s.partials);
+  } else {
+    LinearizeKernel<false><<<GridFor(blocks), kRayThreads>>>(in, g, nullptr, stride, offset, s.partials);
+  }
+  PERF_CUDA_CHECK_LAUNCH("LinearizeKernel");
+  return Total(s, blocks);
+}
+
+RayStats MultiplyJtJ(const PassInput& in, const float* p, const float* free, float* out, int64_t params,
+                     const StatsScratch& s) {
+  PERF_CUDA_CHECK(cudaMemset(out, 0, params * sizeof(float)));
+  const int64_t blocks = PassBlocks(in.rays.count);
+  if (blocks == 0) return {};
+  PERF_CHECK(blocks <= s.capacity);
+  JtJpKernel<<<GridFor(blocks), kRayThreads>>>(in, p, free, out, s.partials);
+  PERF_CUDA_CHECK_LAUNCH("JtJpKernel");
+  return Total(s, blocks);
+}
+
+RayStats Cost(const PassInput& in, int stride, int offset, const StatsScratch& s) {
+  PERF_CHECK(stride >= 1 && offset >= 0 && offset < stride);
+  const int64_t count = in.rays.count > offset ? (in.rays.count - offset + stride - 1) / stride : 0;
+  const int64_t blocks = PassBlocks(count);
+  if (blocks == 0) return {};
+  PERF_CHECK(blocks <= s.capacity);
+  CostKernel<<<GridFor(blocks), kRayThreads>>>(in, stride, offset, count, s.partials);
+  PERF_CUDA_CHECK_LAUNCH("CostKernel");
+  return Total(s, blocks);
+}
+
+void Render(const VolumeView<float>& vol, const BoxFrame<float>& box, const PinholeCamera<float>& camera, int width,
+            int y0, int rows, float stop_transmittance, float min_box_opacity, float* colour, float* opacity) {
+  if (width <= 0 || rows <= 0) return;
+  const dim3 block(16, 8);
+  const dim3 grid((width + block.x - 1) / block.x, (rows + block.y - 1) / block.y);
+  RenderKernel<<<grid, block>>>(vol, box, camera, width, y0, rows, stop_transmittance, min_box_opacity, colour,
+                                opacity);
+  PERF_CUDA_CHECK_LAUNCH("RenderKernel");
+}
+
+}  // namespace perf::recon::cuda

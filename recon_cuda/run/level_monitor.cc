@@ -1,0 +1,248 @@
+#include "recon_cuda/run/level_monitor.h"
+
+#include <algorithm>
+
+#include "common/atomic_file.h"
+#include "common/errors.h"
+#include "common/system_memory.h"
+#include "recon_cuda/data/checkpoint.h"
+#include "recon_cuda/run/evaluation.h"
+#include "recon_cuda/run/photo_fit.h"
+#include "workspace/image_io.h"
+
+namespace perf::recon {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+Checkpoint MakeCheckpoint(const Scene& scene, int level, const VolumeShape& shape, int iterations, SolverType type,
+                          std::vector<float> params) {
+  Checkpoint c;
+  c.level = level;
+  c.shape = shape;
+  c.iterations = iterations;
+  c.solver = type == SolverType::kAdam ? 1 : 0;
+  c.placement = VolumePlacement::FromScene(scene);
+  c.params = std::move(params);
+  return c;
+}
+
+}  // namespace
+
+LevelMonitor::LevelMonitor(ReconstructRun& run) : run_(run), o_(run.options) {}
+
+HierarchyCallbacks LevelMonitor::Callbacks() {
+  HierarchyCallbacks cb;
+  cb.level_started = [this](const HierarchyLevel& h) { LevelStarted(h); };
+  cb.iteration = [this](const HierarchyLevel& h, const IterationSummary& s) { return Iteration(h, s); };
+  cb.level_done = [this](const HierarchyLevel& h, const SolverSummary& summary, const std::vector<float>& x) {
+    LevelDone(h, summary, x);
+  };
+  cb.before_level = [this](int) { return grow_faces_.empty(); };
+  cb.out_of_memory = [this](const HierarchyLevel& h) { OutOfMemory(h); };
+  return cb;
+}
+
+void LevelMonitor::LevelStarted(const HierarchyLevel& h) {
+  Communicator& comm = run_.comm;
+  lr_ = LevelReport{};
+  lr_.level = h.level;
+  lr_.shape = h.shape;
+  lr_.image_downscale = h.image_downscale;
+  lr_.rays = comm.size() > 1 ? comm.ShareOf(h.rays).total : h.rays;  // every rank's
+  held_out_iteration_ = -1;
+  level_start_elapsed_ = elapsed_ + SecondsSince(t_level_);  // setup (rays, SetLevel) counts
+  iter_time_ = 0;
+  summed_at_level_ = summed_at_iteration_ = SummedBytes();
+  if (run_.ranks != nullptr) {
+    pass_at_level_ = run_.ranks->pass_seconds();
+    sum_at_level_ = run_.ranks->sum_seconds();
+  }
+  const MemoryEstimate& mem = h.memory;
+  run_.Say(StrCat("level ", h.level + 1, "/", run_.levels, ": ", DescribeShape(h.shape), ", ", lr_.rays, " rays",
+                  lr_.image_downscale > 1 ? StrCat(" (images / ", lr_.image_downscale, ")") : std::string(),
+                  comm.size() > 1 ? "; memory per rank: vectors " : "; memory: vectors ", FormatByteCount(mem.vectors),
+                  ", per-thread sums ", FormatByteCount(mem.scratch), ", Jacobian cache ",
+                  run_.backend->CachesJacobian() ? FormatByteCount(mem.jacobian_cache) : std::string("off (recomputing)"),
+                  mem.available > 0 ? StrCat(" of ", FormatByteCount(mem.available), " available") : std::string()));
+}
+
+bool LevelMonitor::Iteration(const HierarchyLevel& h, const IterationSummary& s) {
+  iter_time_ += s.seconds_total;
+  json line{{"event", "iteration"}, {"level", lr_.level}, {"n", lr_.shape.n}, {"solver", SolverName(h.solver.type)}};
+  line.update(s.ToJson());
+  line["rays"] = lr_.rays;
+  line["elapsed"] = level_start_elapsed_ + iter_time_;
+  if (run_.ranks != nullptr) {
+    line["ranks"] = run_.comm.size();
+    line["summed_bytes"] = SummedBytes() - summed_at_iteration_;
+    summed_at_iteration_ = SummedBytes();
+  }
+  const bool last_it = s.iteration + 1 == h.solver.max_iterations;
+  const bool score = run_.test_views > 0 && o_.eval_every > 0 && ((s.iteration + 1) % o_.eval_every == 0 || last_it);
+  const bool preview = run_.root && o_.preview_every > 0 && ((s.iteration + 1) % o_.preview_every == 0 || last_it);
+  const PhotoExposures exposures = score || preview ? ExposuresAt(h) : PhotoExposures();
+  if (score) {
+    held_out_psnr_ = HeldOutPsnr(h.params, exposures);
+    held_out_iteration_ = s.iteration;
+    line["test_psnr"] = held_out_psnr_;
+  }
+  if (preview) WritePreview(h, s.iteration, exposures);
+  run_.log.Write(line);
+  ReconstructOptions::Event e;
+  e.level = h.level;
+  e.levels = run_.levels;
+  e.iteration = s.iteration + 1;
+  e.iterations = h.solver.max_iterations;
+  e.cost = s.cost_after;
+  e.train_psnr = s.train_psnr;
+  run_.Emit(e);
+  return true;
+}
+
+void LevelMonitor::LevelDone(const HierarchyLevel& h, const SolverSummary& summary, const std::vector<float>& x) {
+  ReconstructResult& result = run_.result;
+  if (run_.ranks != nullptr) run_.ranks->CheckInStep(h.params);
+  if (h.level == 0) CheckBox(h, x);
+  if (!grow_faces_.empty()) {  // this fit is discarded (before_level ends the hierarchy here)
+    result.solve_seconds += EndLevelClock();
+    return;
+  }
+  lr_.iterations = summary.iterations;
+  lr_.cost = summary.final_cost;
+  lr_.train_psnr = summary.per_iteration.empty() ? 0 : summary.per_iteration.back().train_psnr;
+  lr_.status = StatusName(summary.status);
+  const PhotoExposures fitted(h.shape, x, run_.train_views);  // none when the level solves none
+  if (h.level == 0) {
+    const auto t0 = WallClock::now();
+    const PhotoFits fits =
+        CheckPhotoFits(run_.backend.get(), h.params, run_.train, run_.train_names, fitted, run_.comm, o_.photo_fit);
+    eval_seconds_ += SecondsSince(t0);
+    result.photo_fits = fits.ToJson(o_.photo_fit);
+    run_.log.Write({{"event", "photo_fits"}, {"photo_fits", result.photo_fits}});
+    if (!fits.poor.empty()) run_.Say("warning: " + fits.Warning(o_.photo_fit));
+  }
+  if (run_.test_views > 0) {
+    // The last iteration's, when the log has it; else now (the backend still holds x).
+    lr_.test_psnr = held_out_iteration_ == summary.iterations - 1 ? held_out_psnr_ : HeldOutPsnr(h.params, fitted);
+  }
+  if (!fitted.empty()) {
+    result.gain_range[0] = 2, result.gain_range[1] = 0;
+    for (const ColourTransform<float>& xf : fitted.transforms()) {
+      for (float g : xf.gain) {
+        result.gain_range[0] = std::min(result.gain_range[0], g);
+        result.gain_range[1] = std::max(result.gain_range[1], g);
+      }
+    }
+  }
+  if (run_.root) {
+    WriteCheckpoint(CheckpointPath(o_.workspace, h.level),
+                    MakeCheckpoint(run_.scene, h.level, h.shape, summary.iterations, o_.solver.type, x));
+  }
+  if (run_.previous) run_.previous->Discard();
+  lr_.seconds = EndLevelClock();
+  run_.log.Write(LevelLine(summary));
+  run_.Say(StrCat("level ", h.level + 1, "/", run_.levels, " done in ", lr_.seconds, " s: ", summary.BriefReport(),
+                  run_.test_views == 0 ? std::string() : StrCat("; held-out PSNR ", lr_.test_psnr, " dB")));
+  result.levels.push_back(lr_);
+  result.solve_seconds += lr_.seconds;
+  result.final_checkpoint = CheckpointPath(o_.workspace, h.level);
+  result.test_psnr = lr_.test_psnr;
+}
+
+void LevelMonitor::OutOfMemory(const HierarchyLevel& h) {
+  ReconstructResult& result = run_.result;
+  result.memory_stop = StrCat("level ", h.level + 1, " (", DescribeShape(h.shape), ") would need ",
+                              FormatByteCount(h.memory.Needed()), " but ", FormatByteCount(h.memory.available),
+                              " are available");
+  run_.Say(StrCat(result.memory_stop, ": the reconstruction ends at level ", h.level, " (--levels ", h.level,
+                  " next time, or a smaller --max-size)"));
+  if (result.final_checkpoint.empty()) {  // a resumed run whose first level did not fit
+    result.final_checkpoint = CheckpointPath(o_.workspace, h.level - 1);
+    result.already_complete = true;
+  }
+}
+
+void LevelMonitor::CheckBox(const HierarchyLevel& h, const std::vector<float>& x) {
+  ReconstructResult& result = run_.result;
+  box_faces_ = BoxFaces(h.shape, run_.geometry, x);
+  result.box_faces = json::array();  // the last fit's (level 0 is fitted again after a growth)
+  for (const BoxFace& f : box_faces_) result.box_faces.push_back({{"face", f.name}, {"opaque_fraction", f.opaque_fraction}});
+  result.box_warning = CutOffWarning(box_faces_);
+  if (o_.grow_box && result.box_growths.size() < static_cast<size_t>(kMaxBoxGrowths) &&
+      !FogCanLookOpaque(o_.init.box_opacity, run_.geometry, h.shape.n)) {
+    grow_faces_ = FacesToGrow(box_faces_);
+  }
+  if (!result.box_warning.empty() && grow_faces_.empty()) run_.Say("warning: " + result.box_warning);
+}
+
+PhotoExposures LevelMonitor::ExposuresAt(const HierarchyLevel& h) {
+  if (h.shape.exposures == 0) return PhotoExposures();
+  const auto t0 = WallClock::now();
+  std::vector<float> x(static_cast<size_t>(h.shape.ParamCount()));
+  run_.backend->Download(h.params, x);
+  eval_seconds_ += SecondsSince(t0);
+  return PhotoExposures(h.shape, x, run_.train_views);
+}
+
+double LevelMonitor::HeldOutPsnr(VecId params, const PhotoExposures& exposures) {
+  const auto t0 = WallClock::now();
+  double sum[2] = {0, 0};  // PSNR, views
+  for (const ViewScore& s : ScoreViews(run_.backend.get(), params, run_.test, o_.min_box_opacity, exposures)) {
+    sum[0] += s.psnr;
+    sum[1] += 1;
+  }
+  run_.comm.SumInPlace(sum);
+  eval_seconds_ += SecondsSince(t0);
+  return sum[1] > 0 ? sum[0] / sum[1] : 0.0;
+}
+
+void LevelMonitor::WritePreview(const HierarchyLevel& h, int iteration, const PhotoExposures& exposures) {
+  const auto t0 = WallClock::now();
+  // Rank 0's first held-out view (its share starts with the split's first image), else training view.
+  const PosedImage& view = run_.test.empty() ? run_.train.front() : run_.test.front();
+  const RenderOutput r = RenderAsShot(run_.backend.get(), h.params, view, o_.min_box_opacity, exposures);
+  const fs::path p = o_.workspace / "preview" / StrCat("recon_l", h.level, "_i", iteration + 1, ".png");
+  EnsureWritableDirectory(p.parent_path());
+  WriteImage(p, ToImage(r), PixelFormat::kUInt8);
+  eval_seconds_ += SecondsSince(t0);
+}
+
+json LevelMonitor::LevelLine(const SolverSummary& summary) {
+  json line{{"event", "level"}, {"level", lr_.level}, {"n", lr_.shape.n}};
+  line.update(summary.ToJson());
+  line.update({{"iterations", lr_.iterations},
+               {"seconds", lr_.seconds},
+               {"elapsed", elapsed_},
+               {"cost", lr_.cost},
+               {"train_psnr", lr_.train_psnr},
+               {"test_psnr", lr_.test_psnr},
+               {"status", lr_.status}});
+  if (run_.ranks != nullptr) {
+    // Every rank's seconds in its own passes and in the sums (waiting for the slowest included).
+    Communicator& comm = run_.comm;
+    const size_t n = static_cast<size_t>(comm.size()), me = static_cast<size_t>(comm.rank());
+    std::vector<double> seconds(2 * n, 0.0);
+    seconds[me] = run_.ranks->pass_seconds() - pass_at_level_;
+    seconds[n + me] = run_.ranks->sum_seconds() - sum_at_level_;
+    comm.SumInPlace(seconds);
+    line["rank_pass_seconds"] = std::vector<double>(seconds.begin(), seconds.begin() + static_cast<ptrdiff_t>(n));
+    line["rank_sum_seconds"] = std::vector<double>(seconds.begin() + static_cast<ptrdiff_t>(n), seconds.end());
+    line["ranks"] = comm.size();
+    line["summed_bytes"] = SummedBytes() - summed_at_level_;
+    line["summed_bytes_per_iteration"] =
+        summary.iterations > 0 ? (SummedBytes() - summed_at_level_) / summary.iterations : 0;
+  }
+  return line;
+}
+
+double LevelMonitor::EndLevelClock() {
+  const double seconds = SecondsSince(t_level_) - eval_seconds_;
+  elapsed_ += seconds;
+  t_level_ = WallClock::now();
+  eval_seconds_ = 0;
+  return seconds;
+}
+
+}  // namespace perf::recon

@@ -1,0 +1,99 @@
+#include "recon_cuda/run/previous_run.h"
+
+#include <string>
+#include <vector>
+
+#include "common/atomic_file.h"
+#include "common/errors.h"
+#include "recon_cuda/data/checkpoint.h"
+
+namespace fs = std::filesystem;
+
+namespace perf::recon {
+namespace {
+
+// The files of a run in recon/: checkpoints (checkpoint.h's names), recon.json, log.jsonl.
+bool IsRunFile(const fs::path& p) {
+  const std::string name = p.filename().string();
+  return name == "recon.json" || name == "log.jsonl" ||
+         (name.rfind("level_", 0) == 0 && p.extension() == ".perfvol");
+}
+
+std::vector<fs::path> RunFiles(const fs::path& dir) {
+  std::vector<fs::path> files;
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    if (it->is_regular_file(ec) && IsRunFile(it->path())) files.push_back(it->path());
+  }
+  return files;
+}
+
+bool HasCheckpoint(const fs::path& dir) {
+  for (const fs::path& p : RunFiles(dir)) {
+    if (p.extension() == ".perfvol") return true;
+  }
+  return false;
+}
+
+// Moves every run file of `from` into `to`, replacing what is there.
+void MoveRunFiles(const fs::path& from, const fs::path& to) {
+  for (const fs::path& p : RunFiles(from)) {
+    std::error_code ec;
+    fs::rename(p, to / p.filename(), ec);
+    if (ec) {
+      throw IoError(p.string(), "cannot move the previous run's file: " + ec.message(),
+                    "check that the workspace is writable");
+    }
+  }
+}
+
+// This run's own files, before the previous run's come back.
+void RemoveRunFiles(const fs::path& dir) {
+  for (const fs::path& p : RunFiles(dir)) {
+    std::error_code ec;
+    fs::remove(p, ec);
+  }
+}
+
+}  // namespace
+
+PreviousRun::PreviousRun(const fs::path& workspace) : recon_(workspace / "recon"), aside_(recon_ / "previous") {
+  if (RunFiles(recon_).empty()) return;
+  std::error_code ec;
+  fs::remove_all(aside_, ec);
+  EnsureWritableDirectory(aside_);
+  MoveRunFiles(recon_, aside_);
+  active_ = true;
+}
+
+PreviousRun::~PreviousRun() {
+  if (!active_) return;
+  try {
+    RemoveRunFiles(recon_);
+    MoveRunFiles(aside_, recon_);
+    std::error_code ec;
+    fs::remove_all(aside_, ec);
+  } catch (const Error&) {
+    // Left in recon/previous/: the next reconstruct puts them back (RecoverPreviousRun).
+  }
+}
+
+void PreviousRun::Discard() {
+  if (!active_) return;
+  active_ = false;
+  std::error_code ec;
+  fs::remove_all(aside_, ec);
+}
+
+void RecoverPreviousRun(const fs::path& workspace) {
+  const fs::path recon = workspace / "recon", aside = recon / "previous";
+  std::error_code ec;
+  if (!fs::is_directory(aside, ec)) return;
+  if (!HasCheckpoint(recon)) {
+    RemoveRunFiles(recon);
+    MoveRunFiles(aside, recon);
+  }
+  fs::remove_all(aside, ec);
+}
+
+}  // namespace perf::recon

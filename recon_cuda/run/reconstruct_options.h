@@ -1,0 +1,111 @@
+// What `perf reconstruct` is asked to do (ReconstructOptions, filled by the CLI) and the
+// hierarchy's options derived from it for a scene (ReconstructOptions::Hierarchy).
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "common/comm.h"
+#include "recon_cuda/backends/make_backend.h"
+#include "recon_cuda/core/render_rule.h"
+#include "recon_cuda/run/level_choice.h"
+#include "recon_cuda/run/photo_fit.h"
+#include "recon_cuda/solve/hierarchy.h"
+
+namespace perf {
+struct Scene;
+}
+
+namespace perf::recon {
+
+// The shells (--background): learn them (the paper), or keep them fixed at scene.json's
+// background, the colour RGBA photos were composited over on import; kAuto is fixed when every
+// photo had an alpha channel (e.g. NeRF synthetic), learned otherwise.
+enum class BackgroundChoice { kAuto, kFixed, kLearn };
+
+// Per-photo exposure (--exposure): solve each training photo's gain and offset per channel with
+// the volume, or not; kAuto solves them for photos from COLMAP (real captures) and not for NeRF
+// json scenes (synthetic renders share one exposure).
+enum class ExposureChoice { kAuto, kOn, kOff };
+
+// The grid's smoothness weight chosen where the background is learned (--smooth-grid's default
+// there; 0 where it is fixed).
+inline constexpr double kAutoSmoothGrid = 0.3;
+
+struct ReconstructOptions {
+  std::filesystem::path workspace;
+  // The ranks of the job (comm.h; nullptr: one process). Each rank loads and fits its share of
+  // the photos; rank 0 alone writes the workspace and reports progress.
+  Communicator* comm = nullptr;
+  // With several ranks on the CUDA backend: makes the communicator that sums device memory where
+  // it lies (NCCL, nccl_comm.h) over `comm`; empty: the sums go through host copies.
+  std::function<std::unique_ptr<Communicator>(Communicator& host)> device_comm;
+  DeviceChoice device = DeviceChoice::kAuto;
+  int threads = 0;              // CPU worker threads, 0: all cores
+  int levels = 0;               // 0: chosen from the photos (level_choice.h)
+  int max_resolution = 0;       // automatic levels: the finest grid at most this (0: DefaultMaxResolution)
+  int start_resolution = 32;
+  int iterations = 30;          // solver iterations per level (paper: 30)
+  std::vector<int> level_iterations;  // per level, overriding `iterations` for the levels given
+  // The solver of every level (max_iterations and seed are set per level). Its smoothness
+  // weights: smooth_shells 0.1; smooth_grid < 0 (the default) is chosen for the scene,
+  // kAutoSmoothGrid where the background is learned and 0 where it is fixed. Adam runs none.
+  SolverOptions solver = DefaultSolver();
+  InitOptions init;
+  bool init_shells_from_photos = false;  // shells start at the training photos' mean colour
+  BackgroundChoice background = BackgroundChoice::kAuto;
+  // Per-photo exposure; solver.exposure_prior weighs its prior.
+  ExposureChoice exposure = ExposureChoice::kAuto;
+  // View-dependent colour: spherical harmonics of this degree (0, 1 or 2) beyond each cell's
+  // colour (ray_types.h ShParam); 0: none.
+  int sh_degree = 0;
+  ResidualSettings residuals;
+  // Coarse levels fit downscaled photos: the largest power-of-two downscale that keeps a voxel
+  // at least one pixel wide in the median view (fewer rays, same information at that level).
+  bool pyramid = true;
+  bool dense = false;  // every level's grid dense (else levels after the first keep the occupied bricks)
+  // Where the first level's density reaches a side or top face of the box, grow the box there and
+  // fit that level again (box_check.h; at most kMaxBoxGrowths times); false: only warn.
+  bool grow_box = true;
+  // After the first level, the training photos that fit far worse than the median are named
+  // (photo_fit.h; output, log and recon.json) and kept.
+  PhotoFitOptions photo_fit;
+  OccupancyOptions occupancy;  // which bricks a sparse level keeps
+  bool resume = false;          // continue after the last checkpoint instead of starting over
+  int preview_every = 0;        // write a held-out preview every K iterations (0: never)
+  int eval_every = 0;           // held-out PSNR every K iterations (0: at the end of each level)
+  float min_box_opacity = kDefaultMinBoxOpacity; // the render rule (render_rule.h), for previews and held-out PSNR
+
+  // Progress: called after each iteration and at level boundaries.
+  struct Event {
+    int level = 0, levels = 0, iteration = 0, iterations = 0;
+    double cost = 0, train_psnr = 0;
+    std::string message;  // non-empty: a line to print
+  };
+  std::function<void(const Event&)> on_event;
+
+  // Throws InputError naming the bad option.
+  void Check() const;
+
+  // The hierarchy these options ask for on `scene` with `levels` levels: the background fixed or
+  // learned, the smoothness weights, the photos whose exposures are solved; stops early for
+  // memory only where the levels were chosen automatically.
+  HierarchyOptions Hierarchy(const Scene& scene, const LevelChoice& levels) const;
+
+  static SolverOptions DefaultSolver();
+};
+
+// Whether `background` fixes the shells for this scene.
+bool FixedBackground(BackgroundChoice background, const Scene& scene);
+
+// Whether `exposure` solves the photos' exposures for this scene (kAuto: COLMAP photos).
+bool SolvesExposures(ExposureChoice exposure, const Scene& scene);
+
+// The hierarchy's background as perf reconstruct sets it: fixed or not (FixedBackground), and
+// the colour fixed shells hold (scene.json's background).
+void SetHierarchyBackground(BackgroundChoice background, const Scene& scene, HierarchyOptions* options);
+
+}  // namespace perf::recon

@@ -1,0 +1,90 @@
+#include "recon_cuda/run/render_views.h"
+
+#include "common/atomic_file.h"
+#include "common/errors.h"
+#include "recon_cuda/data/checkpoint.h"
+#include "workspace/image_io.h"
+
+namespace perf::recon {
+
+namespace fs = std::filesystem;
+
+LoadedCheckpoint LoadForRendering(const fs::path& workspace, const fs::path& checkpoint, DeviceChoice device,
+                                  int threads) {
+  LoadedCheckpoint l;
+  l.path = checkpoint;
+  if (l.path.empty()) {
+    const int last = LastCheckpointLevel(workspace);
+    if (last < 0) {
+      throw IoError((workspace / "recon").string(), "no checkpoint found", "run perf reconstruct on this workspace first");
+    }
+    l.path = CheckpointPath(workspace, last);
+  }
+  l.checkpoint = ReadCheckpoint(l.path);
+  l.backend = MakeBackend(device, threads);
+  l.backend->SetLevel(LevelProblem{l.checkpoint.shape, GeometryOf(l.checkpoint), nullptr, {}}, 1);  // render-only
+  l.backend->Upload(LoadedCheckpoint::kParams, l.checkpoint.params);
+  return l;
+}
+
+PhotoExposures ExposuresOf(const LoadedCheckpoint& l, const Scene& scene) {
+  const Checkpoint& c = l.checkpoint;
+  if (c.shape.exposures == 0) return {};
+  const std::vector<ViewFrustum> train = SplitViews(scene, Split::kTrain);
+  if (static_cast<int>(train.size()) != c.shape.exposures) {
+    throw InputError(l.path.string(), "exposures", StrCat(c.shape.exposures, " photos"),
+                     StrCat("scene.json has ", train.size(), " training photos: the workspace was imported again"),
+                     "run perf reconstruct again");
+  }
+  return PhotoExposures(c.shape, c.params, train);
+}
+
+RenderViewsResult RenderViews(const RenderViewsOptions& o) {
+  const Scene scene = ReadScene(o.workspace / "scene.json");
+  LoadedCheckpoint loaded = LoadForRendering(o.workspace, o.checkpoint, o.device, o.threads);
+  const PhotoExposures exposures = ExposuresOf(loaded, scene);
+  RenderViewsResult result;
+  result.checkpoint = loaded.path;
+
+  std::vector<PosedImage> views;
+  for (Split s : {Split::kTrain, Split::kTest, Split::kExcluded}) {  // kAll: the excluded ones too
+    if ((s != Split::kTest && o.split == ViewSplit::kTest) || (s != Split::kTrain && o.split == ViewSplit::kTrain)) {
+      continue;
+    }
+    std::vector<PosedImage> part = LoadImages(scene, o.workspace, s);
+    for (PosedImage& v : part) {
+      if (o.names.empty() || std::find(o.names.begin(), o.names.end(), v.name) != o.names.end()) {
+        views.push_back(std::move(v));
+      }
+    }
+  }
+  for (const std::string& name : o.names) {
+    if (std::none_of(views.begin(), views.end(), [&](const PosedImage& v) { return v.name == name; })) {
+      throw InputError("command line", "--view", name, o.split == ViewSplit::kAll ? "no image of that name" : StrCat("no image of that name in the ", o.split == ViewSplit::kTest ? "test" : "train", " split"),
+                       "use a name from scene.json's images");
+    }
+  }
+
+  Backend* backend = loaded.backend.get();
+  const fs::path out_dir = o.out_dir.empty() ? o.workspace / "renders" : o.out_dir;
+  EnsureWritableDirectory(out_dir);
+  int done = 0;
+  for (const PosedImage& v : views) {
+    const RenderOutput render = RenderAsShot(backend, LoadedCheckpoint::kParams, v, o.min_box_opacity, exposures);
+    result.scores.push_back({v.name, Psnr(render, v.image)});
+    const std::string stem = fs::path(v.name).filename().replace_extension().string();
+    const fs::path file = out_dir / (stem + ".png");
+    WriteImage(file, ToImage(render), PixelFormat::kUInt8);
+    result.files.push_back(file);
+    if (o.write_opacity) {
+      const fs::path op = out_dir / (stem + "_opacity.png");
+      WriteImage(op, OpacityImage(render), PixelFormat::kUInt16);
+      result.files.push_back(op);
+    }
+    if (o.progress) o.progress(++done, static_cast<int>(views.size()));
+  }
+  result.mean_psnr = MeanPsnr(result.scores);
+  return result;
+}
+
+}  // namespace perf::recon
