@@ -8,8 +8,6 @@
 #include <cerrno>
 #include <cstring>
 #include <fstream>
-#include <mutex>
-#include <map>
 #include <sstream>
 
 #include "common/errors.h"
@@ -63,17 +61,6 @@ void RemovingOnFailure(const fs::path& tmp, Body&& body) {
     fs::remove(tmp, ignored);
     throw;
   }
-}
-
-// Inputs by device and inode, with the path they were registered under: a registered file that
-// is gone (its inode may be reused by a new file) no longer protects anything.
-struct Protected {
-  std::mutex mutex;
-  std::map<std::pair<dev_t, ino_t>, fs::path> files;
-};
-Protected& ProtectedInputs() {
-  static Protected p;
-  return p;
 }
 
 }  // namespace
@@ -135,37 +122,37 @@ void EnsureWritableDirectory(const fs::path& dir) {
   }
 }
 
-std::string ReadFileToString(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw IoError(path.string(), StrCat("cannot open for reading: ", std::strerror(errno)));
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  if (in.bad()) throw IoError(path.string(), "reading failed");
-  return ss.str();
-}
-
-void ProtectInput(const fs::path& path) {
+void CheckRegularFile(const fs::path& path) {
   struct stat st {};
-  if (::stat(path.c_str(), &st) != 0) return;
-  Protected& p = ProtectedInputs();
-  std::lock_guard lock(p.mutex);
-  p.files[{st.st_dev, st.st_ino}] = path;
-}
-
-void CheckNotInput(const fs::path& target, std::string_view what) {
-  struct stat st {};
-  if (::stat(target.c_str(), &st) != 0) return;  // nothing there yet: cannot be an input
-  Protected& p = ProtectedInputs();
-  std::lock_guard lock(p.mutex);
-  const auto it = p.files.find({st.st_dev, st.st_ino});
-  struct stat input {};
-  if (it != p.files.end() && ::stat(it->second.c_str(), &input) == 0 && input.st_dev == st.st_dev &&
-      input.st_ino == st.st_ino) {
-    throw InputError(target.string(), "", "",
-                     StrCat(what, " would be written over an input file (a photo or model PERF reads)"),
-                     "inputs are never modified: choose a workspace folder that does not hold the photos, "
-                     "e.g. a new folder beside them");
+  if (::stat(path.c_str(), &st) != 0) throw IoError(path.string(), StrCat("cannot open for reading: ", Errno()));
+  if (!S_ISREG(st.st_mode)) {
+    throw InputError(path.string(), "", "", "not a regular file (a device, FIFO or folder)",
+                     "pass the path of the file itself");
   }
+}
+
+std::string ReadFileToString(const fs::path& path) {
+  // Opened without blocking (a FIFO would wait for a writer) and read only if it is a regular
+  // file, at most its size at open (a device such as /dev/zero never ends).
+  UniqueFd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK));
+  if (!fd.valid()) throw IoError(path.string(), StrCat("cannot open for reading: ", Errno()));
+  struct stat st {};
+  if (::fstat(fd.get(), &st) != 0) throw IoError(path.string(), "cannot read its size: " + Errno());
+  if (!S_ISREG(st.st_mode)) {
+    throw InputError(path.string(), "", "", "not a regular file (a device, FIFO or folder)",
+                     "pass the path of the file itself");
+  }
+  std::string data(static_cast<size_t>(st.st_size), '\0');
+  size_t done = 0;
+  while (done < data.size()) {
+    const ssize_t n = ::read(fd.get(), data.data() + done, data.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) throw IoError(path.string(), "reading failed: " + Errno());
+    if (n == 0) break;  // shrank while being read
+    done += static_cast<size_t>(n);
+  }
+  data.resize(done);
+  return data;
 }
 
 }  // namespace perf

@@ -4,8 +4,8 @@
 // (rename(2) within one directory is atomic on POSIX file systems). A failure removes the
 // temporary and throws IoError naming the final path.
 //
-// A user's inputs are read-only (DESIGN.md "Safety"): the readers of photos and models register
-// them with ProtectInput, and no atomic write may replace a registered file.
+// A user's inputs are read-only (DESIGN.md "Safety"): no atomic write may replace a file
+// registered with ProtectInput (inputs.h).
 #pragma once
 
 #include <filesystem>
@@ -13,6 +13,8 @@
 #include <iosfwd>
 #include <string>
 #include <string_view>
+
+#include "common/inputs.h"
 
 namespace perf {
 
@@ -44,15 +46,12 @@ void WriteAtomically(const std::filesystem::path& target,
 // IoError naming the directory and what to do otherwise.
 void EnsureWritableDirectory(const std::filesystem::path& dir);
 
-// Reads a whole file; throws IoError if it cannot.
+// Throws InputError naming `path` unless it is a regular file (or a link to one): a reader given
+// a FIFO would wait forever and one given a device would read without end. IoError if missing.
+void CheckRegularFile(const std::filesystem::path& path);
+
+// Reads a whole regular file (never blocks on a FIFO nor reads a device without end); throws
+// InputError for what is not a regular file and IoError if it cannot read it.
 std::string ReadFileToString(const std::filesystem::path& path);
-
-// Registers an input file (a photo, a model file, a json) for this process: from now on an
-// atomic write whose target is that same file (same device and inode, however it is named)
-// throws InputError instead. Paths that do not exist are ignored.
-void ProtectInput(const std::filesystem::path& path);
-
-// Throws InputError if `target` is a registered input; `what` says which output it would be.
-void CheckNotInput(const std::filesystem::path& target, std::string_view what = "an output");
 
 }  // namespace perf

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "common/errors.h"
+#include "common/inputs.h"
 
 namespace perf {
 
@@ -16,6 +17,7 @@ class JsonLog {
   JsonLog() = default;  // writes nothing
   // Appends to `path`, or starts it afresh (append false). `what` names the log in errors.
   JsonLog(const std::filesystem::path& path, bool append, std::string what) : path_(path), what_(std::move(what)) {
+    CheckNotInput(path, "the " + what_);
     out_.open(path, append ? std::ios::app : std::ios::trunc);
     if (!out_) throw IoError(path.string(), "cannot write the " + what_, "check that the folder is writable");
   }

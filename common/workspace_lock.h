@@ -1,6 +1,7 @@
 // One writer per workspace (DESIGN.md "Safety"): every command that writes a workspace holds an
-// advisory flock(2) on WORKSPACE/.perf.lock while it runs. The kernel drops the lock when the
-// process ends, however it ends, so a killed run never leaves a stale lock behind.
+// advisory flock(2) on the workspace folder while it runs (WORKSPACE/.perf.lock names the holder
+// and is removed when it is done). The kernel drops the lock when the process ends, however it
+// ends, so a killed run never leaves a stale lock behind.
 #pragma once
 
 #include <filesystem>
@@ -15,6 +16,7 @@ class WorkspaceLock {
   // Creates the workspace folder when it does not exist and takes the lock without waiting.
   // Throws InputError naming the holder's pid and command when another process holds it.
   WorkspaceLock(const std::filesystem::path& workspace, std::string_view command);
+  ~WorkspaceLock();
   WorkspaceLock(const WorkspaceLock&) = delete;
   WorkspaceLock& operator=(const WorkspaceLock&) = delete;
 
@@ -23,13 +25,15 @@ class WorkspaceLock {
   static std::filesystem::path PathIn(const std::filesystem::path& workspace);
 
  private:
-  UniqueFd fd_;  // closing it releases the flock
+  UniqueFd fd_;  // the workspace folder; closing it releases the flock
+  std::filesystem::path info_;  // .perf.lock
   bool created_ = false;
 };
 
 // Removes what atomic writes of processes that no longer run left behind (temporaries named
 // <stem>.tmp<pid>-<n><ext>, files or folders; atomic_file.h) in the workspace's top level and
-// in the folders PERF owns there. Returns the number removed.
+// in the folders PERF owns there, never a registered input (inputs.h) that happens to be named
+// so. Returns the number removed.
 int SweepStaleTemporaries(const std::filesystem::path& workspace);
 
 }  // namespace perf

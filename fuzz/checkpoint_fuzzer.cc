@@ -7,6 +7,7 @@
 // Built with -DPERF_FUZZ_MAKE_SEEDS instead, this file is a small program that writes seed
 // checkpoints (the smallest shape, a small one with two shells, one with every shell, a sparse
 // one).
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -37,6 +38,24 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     c = perf::recon::ReadCheckpoint(in, "fuzz");
   } catch (const perf::Error&) {
     return 0;
+  }
+  // What reads must be placeable as the ray math and the exports take it (in float): sides
+  // positive and finite, the rotation a rotation. (A header with sides of 1e300 or 1e-300, or a
+  // zero rotation, once read and failed later in OpenVDB.)
+  const perf::recon::VolumePlacement& p = c.placement;
+  for (double side : p.box_size) {
+    const float f = static_cast<float>(side);
+    if (!(f > 0 && std::isfinite(f))) {
+      std::fprintf(stderr, "checkpoint read with a box side of %g\n", side);
+      std::abort();
+    }
+  }
+  const double* r = p.box_rotation;
+  const double det = r[0] * (r[4] * r[8] - r[5] * r[7]) - r[1] * (r[3] * r[8] - r[5] * r[6]) +
+                     r[2] * (r[3] * r[7] - r[4] * r[6]);
+  if (!(std::abs(det - 1) < 1e-3)) {
+    std::fprintf(stderr, "checkpoint read with a box rotation of determinant %g\n", det);
+    std::abort();
   }
   // What reads must be writable, and rewriting it must be stable (the unused shell radii are
   // written as 0, so compare the rewritten bytes, not the input). No try: any exception is a

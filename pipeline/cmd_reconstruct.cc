@@ -172,7 +172,13 @@ void AddReconstructCommand(CLI::App& app) {
     std::unique_ptr<WorkspaceLock> lock;
     if (root) lock = LockWorkspace(o.workspace, "reconstruct");
     Progress progress("reconstruct", args->quiet || !root);
-    o.on_event = [&](const recon::ReconstructOptions::Event& e) { ShowReconstructEvent(progress, e); };
+    o.on_event = [&](const recon::ReconstructOptions::Event& e) {
+      if (StopRequested().load()) {
+        throw Interrupted("the workspace is consistent; run the same command with --resume to go on");
+      }
+      ShowReconstructEvent(progress, e);
+    };
+    const StopOnCtrlC ctrl_c;
     const recon::ReconstructResult r = recon::Reconstruct(o);
     progress.Finish();
     if (!args->quiet && root) std::cout << recon::ReconstructSummary(r);

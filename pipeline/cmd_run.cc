@@ -12,18 +12,6 @@
 
 namespace perf {
 
-namespace {
-
-std::atomic<bool> g_stop{false};
-
-// First Ctrl-C: stop at the next safe point; the second one kills as usual.
-extern "C" void OnInterrupt(int) {
-  g_stop.store(true);
-  std::signal(SIGINT, SIG_DFL);
-}
-
-}  // namespace
-
 void AddRunCommand(CLI::App& app) {
   struct Args {
     RunOptions o;
@@ -68,16 +56,15 @@ void AddRunCommand(CLI::App& app) {
       throw InputError("command line", "--log-level", args->log_level, "unknown level", "use info or quiet");
     }
     o.quiet = args->log_level == "quiet";
-    o.stop = &g_stop;
+    o.stop = &StopRequested();
     // Under mpirun rank 0 runs the stages and holds the lock; the others join the reconstruction.
     o.comm = &World();
     const bool root = o.comm->IsRoot();
     if (!root) o.quiet = true;
     std::unique_ptr<WorkspaceLock> lock;
     if (root) lock = LockWorkspace(o.workspace, "run", true);
-    std::signal(SIGINT, OnInterrupt);
+    const StopOnCtrlC ctrl_c;
     const RunResult r = RunPipeline(o);
-    std::signal(SIGINT, SIG_DFL);
     if (!o.quiet) std::cout << RunSummary(o, r);  // rank 0's (the others are quiet)
   });
 }

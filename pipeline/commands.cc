@@ -2,7 +2,9 @@
 #include "pipeline/commands.h"
 
 #include <CLI/CLI.hpp>
+#include <csignal>
 #include "common/errors.h"
+#include "common/inputs.h"
 #include "common/system_memory.h"
 #include "pipeline/cli_choice.h"
 #include "recon_cuda/core/render_rule.h"
@@ -30,9 +32,25 @@ std::unique_ptr<WorkspaceLock> LockWorkspace(const std::filesystem::path& worksp
   std::error_code ec;
   if (!create && !std::filesystem::is_directory(workspace, ec)) return nullptr;
   auto lock = std::make_unique<WorkspaceLock>(workspace, command);
+  ProtectRecordedInputs(workspace);  // before anything is swept, written, moved or removed
   SweepStaleTemporaries(workspace);
   return lock;
 }
+
+namespace {
+
+std::atomic<bool> g_stop{false};
+
+extern "C" void OnInterrupt(int) {
+  g_stop.store(true);
+  std::signal(SIGINT, SIG_DFL);
+}
+
+}  // namespace
+
+StopOnCtrlC::StopOnCtrlC() { std::signal(SIGINT, OnInterrupt); }
+StopOnCtrlC::~StopOnCtrlC() { std::signal(SIGINT, SIG_DFL); }
+const std::atomic<bool>& StopRequested() { return g_stop; }
 
 void AddDeviceOptions(CLI::App* cmd, recon::DeviceChoice* device, int* threads) {
   using recon::DeviceChoice;

@@ -2,6 +2,7 @@
 // errors propagate as perf::Error and are turned into messages and exit codes by main().
 #pragma once
 
+#include <atomic>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -33,6 +34,17 @@ void AddThreadsOption(CLI::App* cmd, int* threads, int all_cores);
 // and the stage's own message ("no scene.json here").
 std::unique_ptr<WorkspaceLock> LockWorkspace(const std::filesystem::path& workspace, std::string_view command,
                                              bool create = false);
+
+// Ctrl-C while one lives: the first sets StopRequested() (the command stops at its next safe
+// point and says how to resume, exit 130); the second kills as usual.
+class StopOnCtrlC {
+ public:
+  StopOnCtrlC();
+  ~StopOnCtrlC();
+  StopOnCtrlC(const StopOnCtrlC&) = delete;
+  StopOnCtrlC& operator=(const StopOnCtrlC&) = delete;
+};
+const std::atomic<bool>& StopRequested();
 
 // --device and -j,--threads: the same for every command that runs a backend.
 void AddDeviceOptions(CLI::App* cmd, recon::DeviceChoice* device, int* threads);

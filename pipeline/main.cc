@@ -1,5 +1,6 @@
 // The `perf` command line: one executable, one subcommand per stage (DESIGN.md "Stages").
 #include <CLI/CLI.hpp>
+#include <csignal>
 #include <iostream>
 #include <new>
 #include <string_view>
@@ -56,6 +57,9 @@ int main(int argc, char** argv) {
     const std::string_view command = argv[1];
     if (command != "reconstruct" && command != "run" && !perf::World().IsRoot()) return 0;
   }
+  // A file size limit (ulimit -f) makes a too-large write fail (EFBIG, exit 3 naming the file)
+  // instead of killing perf without a word.
+  std::signal(SIGXFSZ, SIG_IGN);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

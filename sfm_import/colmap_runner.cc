@@ -383,6 +383,7 @@ SfmResult RunSfm(const SfmOptions& options) {
     return result;
   }
 
+  CheckPhotosReadable(options.images, inputs);
   SfmRun run = StartRun(options, inputs);
   const PhotoTags tags = ReadTagsIfNeeded(run);
   ExtractFeatures(run, tags);

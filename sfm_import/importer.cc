@@ -363,7 +363,7 @@ void ImportNerf(const ImportOptions& o, ImportResult* r) {
   sc.cy = cy * sy;
   r->scene.cameras.push_back(sc);
 
-  const fs::path base = o.nerf_json.parent_path();
+  const fs::path base = fs::absolute(o.nerf_json).parent_path();  // as the frames: a relative json too
   const std::string ext = OutputExtension(fmt);
   std::vector<ImageJob> jobs;
   std::set<std::string> names, taken, taken_alpha;
@@ -371,7 +371,7 @@ void ImportNerf(const ImportOptions& o, ImportResult* r) {
     SceneImage si;
     // Lexically: fs::relative would resolve symlinks. A path outside the json's folder keeps
     // its ".." here; WorkspaceSafeName keeps the workspace file inside the workspace.
-    si.name = f.image_path.lexically_normal().lexically_relative(base.lexically_normal()).generic_string();
+    si.name = fs::absolute(f.image_path).lexically_normal().lexically_relative(base.lexically_normal()).generic_string();
     if (si.name.empty()) si.name = f.image_path.filename().generic_string();
     if (!names.insert(si.name).second) {
       throw InputError(source, "frames.file_path", f.file_path, "listed twice");
@@ -465,6 +465,7 @@ ImportResult RunImport(const ImportOptions& o) {
     ImportNerf(o, &r);
   }
   AssignSplit(&r.scene.images, o.holdout);
+  WriteInputRecord(o.workspace);  // later commands protect the inputs too (common/inputs.h)
   // scene.json last: a workspace with a scene.json has all of its images.
   WriteScene(o.workspace / "scene.json", r.scene);
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -9,6 +9,7 @@
 #include "common/errors.h"
 #include "sfm_import/camera_models.h"
 #include "sfm_import/colmap_runner.h"
+#include "workspace/image_io.h"
 
 namespace fs = std::filesystem;
 
@@ -65,6 +66,27 @@ std::vector<std::string> ListInputImages(const fs::path& images) {
   }
   std::sort(names.begin(), names.end());
   return names;
+}
+
+void CheckPhotosReadable(const fs::path& images, const std::vector<std::string>& names) {
+  std::vector<std::string> bad;
+  std::string first_problem;
+  for (const std::string& name : names) {
+    try {
+      ReadImageInfo(images / name);
+    } catch (const Error& e) {
+      if (bad.empty()) first_problem = e.what();
+      bad.push_back(name);
+    }
+  }
+  if (bad.empty()) return;
+  std::string listed;
+  for (size_t i = 0; i < bad.size() && i < 5; ++i) listed += StrCat(i ? ", " : "", bad[i]);
+  if (bad.size() > 5) listed += StrCat(" and ", bad.size() - 5, " more");
+  throw InputError(images.string(), "", "",
+                   StrCat(bad.size(), " of the ", names.size(), " photos cannot be read: ", listed, " (the first: ",
+                          first_problem, ")"),
+                   "remove them from the folder (or replace them with the photos), then run again");
 }
 
 }  // namespace sfm_detail

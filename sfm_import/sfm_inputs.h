@@ -12,4 +12,8 @@ namespace perf::sfm_detail {
 // '/'-separated paths relative to `images`, sorted. Throws InputError when there are none.
 std::vector<std::string> ListInputImages(const std::filesystem::path& images);
 
+// Throws InputError naming the photos among `names` (under `images`) whose header cannot be read
+// (empty, damaged, not an image, not a regular file), before COLMAP is given any of them.
+void CheckPhotosReadable(const std::filesystem::path& images, const std::vector<std::string>& names);
+
 }  // namespace perf::sfm_detail

@@ -65,6 +65,7 @@ void CheckDimensions(const fs::path& path, const OIIO::ImageSpec& spec) {
 }  // namespace
 
 ImageInfo ReadImageInfo(const fs::path& path) {
+  CheckRegularFile(path);
   auto in = OpenInput(path);
   const OIIO::ImageSpec& spec = in->spec();
   CheckDimensions(path, spec);
@@ -74,6 +75,7 @@ ImageInfo ReadImageInfo(const fs::path& path) {
 }
 
 CameraTags ReadCameraTags(const fs::path& path) {
+  CheckRegularFile(path);
   auto in = OpenInput(path);
   const OIIO::ImageSpec& spec = in->spec();
   CameraTags t;
@@ -92,6 +94,7 @@ int64_t DecodedBytes(const ImageInfo& info) {
 }
 
 Image ReadImage(const fs::path& path, ImageInfo* info) {
+  CheckRegularFile(path);
   auto in = OpenInput(path);
   const OIIO::ImageSpec spec = in->spec();
   CheckDimensions(path, spec);

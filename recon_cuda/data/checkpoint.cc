@@ -22,6 +22,23 @@ static_assert(kHeaderBytesV1 == 264);
 constexpr uint32_t kHeaderBytesV2 = kHeaderBytesV1 + 8;  // + the brick count
 constexpr uint32_t kHeaderBytes = kHeaderBytesV2 + 8;    // + the exposure count and SH degree (version 3)
 constexpr int64_t kMaxExposures = 1 << 20;
+// The placement's sane range: a box side from a micrometre in metres to a million km, the shells
+// within it; beyond it the exports' transforms overflow or vanish.
+constexpr double kMinBoxSide = 1e-6, kMaxWorldSpan = 1e9;
+
+// Whether the row-major 3x3 `r` is a rotation: R^T R = I and det R = 1, within float rounding.
+bool IsRotation(const double (&r)[9]) {
+  for (int a = 0; a < 3; ++a) {
+    for (int b = 0; b < 3; ++b) {
+      double dot = 0;
+      for (int k = 0; k < 3; ++k) dot += r[3 * k + a] * r[3 * k + b];
+      if (std::abs(dot - (a == b ? 1.0 : 0.0)) > 1e-5) return false;
+    }
+  }
+  const double det = r[0] * (r[4] * r[8] - r[5] * r[7]) - r[1] * (r[3] * r[8] - r[5] * r[6]) +
+                     r[2] * (r[3] * r[7] - r[4] * r[6]);
+  return det > 0;
+}
 
 constexpr uint64_t kFnvBasis = 0xcbf29ce484222325ull;
 uint64_t Fnv1a(const void* data, size_t n, uint64_t h = kFnvBasis) {
@@ -50,12 +67,15 @@ class Reader {
   [[noreturn]] void Truncated(const char* field, const std::string& value = "",
                               const std::string& problem = "the checkpoint is truncated") {
     throw InputError(name_, field, value, problem,
-                     "it was not written completely; delete it and run perf reconstruct again (--resume restarts "
-                     "from the previous level)");
+                     "it was not written completely, or is not a PERF checkpoint: a workspace's is rewritten by "
+                     "running perf reconstruct again (--resume restarts from the previous level); otherwise pass a "
+                     "checkpoint perf reconstruct wrote (WORKSPACE/recon/level_<k>.perfvol)");
   }
   [[noreturn]] void Bad(const char* field, const std::string& value, const std::string& problem) {
     throw InputError(name_, field, value, problem,
-                     "the checkpoint is damaged or not a PERF checkpoint; delete it and run perf reconstruct again");
+                     "the checkpoint is damaged or not a PERF checkpoint: a workspace's is rewritten by running perf "
+                     "reconstruct again; otherwise pass a checkpoint perf reconstruct wrote "
+                     "(WORKSPACE/recon/level_<k>.perfvol)");
   }
   std::istream& in() { return in_; }
 
@@ -192,13 +212,19 @@ Checkpoint ReadCheckpoint(std::istream& in, const std::string& name) {
   VolumePlacement& p = c.placement;
   for (double& v : p.box_center) v = get_finite("box.center");
   for (double& v : p.box_rotation) v = get_finite("box.rotation");
+  if (!IsRotation(p.box_rotation)) r.Bad("box.rotation", "", "not a rotation (orthonormal, determinant 1)");
   for (double& v : p.box_size) {
     v = get_finite("box.size");
-    if (!(v > 0)) r.Bad("box.size", StrCat(v), "must be positive");
+    if (!(v >= kMinBoxSide && v <= kMaxWorldSpan)) {
+      r.Bad("box.size", StrCat(v), StrCat("must be ", kMinBoxSide, " to ", kMaxWorldSpan, " world units"));
+    }
   }
   for (double& v : p.shell_center) v = get_finite("shells.center");
   for (int k = 0; k < kMaxShells; ++k) {
     const double radius = get_finite("shells.radii");
+    if (k < c.shape.num_shells && !(radius <= kMaxWorldSpan)) {
+      r.Bad("shells.radii", StrCat(radius), StrCat("must be at most ", kMaxWorldSpan, " world units"));
+    }
     if (k < c.shape.num_shells) {
       if (!(radius > 0) || (k > 0 && !(radius > p.shell_radii.back()))) {
         r.Bad("shells.radii", StrCat(radius), "radii must be positive and increasing");
@@ -250,6 +276,10 @@ void WriteCheckpoint(const std::filesystem::path& path, const Checkpoint& c) {
 }
 
 Checkpoint ReadCheckpoint(const std::filesystem::path& path) {
+  if (std::error_code ec; !std::filesystem::exists(path, ec)) {
+    throw IoError(path.string(), "cannot open the checkpoint", "run perf reconstruct on the workspace first");
+  }
+  CheckRegularFile(path);
   std::ifstream in(path, std::ios::binary);
   if (!in) throw IoError(path.string(), "cannot open the checkpoint", "run perf reconstruct on the workspace first");
   return ReadCheckpoint(in, path.string());

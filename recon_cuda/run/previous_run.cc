@@ -35,6 +35,12 @@ bool HasCheckpoint(const fs::path& dir) {
   return false;
 }
 
+// Throws InputError if a run file of `dir` is a user's input (inputs.h): it is neither moved nor
+// removed (e.g. a NeRF json that lies at recon/recon.json).
+void CheckNoInputs(const fs::path& dir) {
+  for (const fs::path& p : RunFiles(dir)) CheckNotInput(p, "moving the previous run's files aside");
+}
+
 // Moves every run file of `from` into `to`, replacing what is there.
 void MoveRunFiles(const fs::path& from, const fs::path& to) {
   for (const fs::path& p : RunFiles(from)) {
@@ -59,6 +65,7 @@ void RemoveRunFiles(const fs::path& dir) {
 
 PreviousRun::PreviousRun(const fs::path& workspace) : recon_(workspace / "recon"), aside_(recon_ / "previous") {
   if (RunFiles(recon_).empty()) return;
+  CheckNoInputs(recon_);
   std::error_code ec;
   fs::remove_all(aside_, ec);
   EnsureWritableDirectory(aside_);
@@ -89,6 +96,8 @@ void RecoverPreviousRun(const fs::path& workspace) {
   const fs::path recon = workspace / "recon", aside = recon / "previous";
   std::error_code ec;
   if (!fs::is_directory(aside, ec)) return;
+  CheckNoInputs(recon);
+  CheckNoInputs(aside);
   if (!HasCheckpoint(recon)) {
     RemoveRunFiles(recon);
     MoveRunFiles(aside, recon);

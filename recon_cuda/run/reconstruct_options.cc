@@ -39,8 +39,12 @@ void ReconstructOptions::Check() const {
   }
   if (preview_every < 0) Fail("--preview-every", std::to_string(preview_every), "must be >= 0");
   if (eval_every < 0) Fail("--eval-every", std::to_string(eval_every), "must be >= 0");
-  if (!(residuals.lambda >= 0)) Fail("--lambda", StrCat(residuals.lambda), "must be >= 0");
-  if (!(residuals.alpha_weight >= 0)) Fail("--alpha-weight", StrCat(residuals.alpha_weight), "must be >= 0");
+  if (!(residuals.lambda >= 0 && std::isfinite(residuals.lambda))) {
+    Fail("--lambda", StrCat(residuals.lambda), "must be finite and >= 0 (0: off)");
+  }
+  if (!(residuals.alpha_weight >= 0 && std::isfinite(residuals.alpha_weight))) {
+    Fail("--alpha-weight", StrCat(residuals.alpha_weight), "must be finite and >= 0 (0: off)");
+  }
   if (!(residuals.robust_scale >= 0 && std::isfinite(residuals.robust_scale))) {
     Fail("--robust", StrCat(residuals.robust_scale), "must be >= 0 (0: least squares)");
   }

@@ -67,17 +67,25 @@ RenderViewsResult RenderViews(const RenderViewsOptions& o) {
 
   Backend* backend = loaded.backend.get();
   const fs::path out_dir = o.out_dir.empty() ? o.workspace / "renders" : o.out_dir;
+  const auto file_of = [&](const PosedImage& v, const char* suffix) {
+    return out_dir / (fs::path(v.name).filename().replace_extension().string() + suffix + ".png");
+  };
+  // The workspace's inputs (its record) are never written over: refused before the first render.
+  ProtectRecordedInputs(o.workspace);
+  for (const PosedImage& v : views) {
+    CheckNotInput(file_of(v, ""), "a render");
+    if (o.write_opacity) CheckNotInput(file_of(v, "_opacity"), "a render");
+  }
   EnsureWritableDirectory(out_dir);
   int done = 0;
   for (const PosedImage& v : views) {
     const RenderOutput render = RenderAsShot(backend, LoadedCheckpoint::kParams, v, o.min_box_opacity, exposures);
     result.scores.push_back({v.name, Psnr(render, v.image)});
-    const std::string stem = fs::path(v.name).filename().replace_extension().string();
-    const fs::path file = out_dir / (stem + ".png");
+    const fs::path file = file_of(v, "");
     WriteImage(file, ToImage(render), PixelFormat::kUInt8);
     result.files.push_back(file);
     if (o.write_opacity) {
-      const fs::path op = out_dir / (stem + "_opacity.png");
+      const fs::path op = file_of(v, "_opacity");
       WriteImage(op, OpacityImage(render), PixelFormat::kUInt16);
       result.files.push_back(op);
     }

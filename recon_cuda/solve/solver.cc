@@ -74,8 +74,10 @@ void SolverOptions::Check() const {
     Fail("smooth_shells (--smooth-shells)", StrCat(smooth_shells), "must be finite and >= 0");
   }
   if (psnr_ray_stride < 0) Fail("psnr_ray_stride", std::to_string(psnr_ray_stride), "must be >= 0");
-  if (!(adam.lr_colour > 0 && adam.lr_density > 0 && adam.lr_opacity > 0)) {
-    Fail("adam learning rates", StrCat(adam.lr_colour, ", ", adam.lr_density, ", ", adam.lr_opacity), "must be > 0");
+  const auto finite_positive = [](float v) { return v > 0 && std::isfinite(v); };
+  if (!(finite_positive(adam.lr_colour) && finite_positive(adam.lr_density) && finite_positive(adam.lr_opacity))) {
+    Fail("adam learning rates (--lr-colour, --lr-density)",
+         StrCat(adam.lr_colour, ", ", adam.lr_density, ", ", adam.lr_opacity), "must be finite and > 0");
   }
 }
 

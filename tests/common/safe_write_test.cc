@@ -3,6 +3,7 @@
 // and no temporary, and its error names the final path; inputs cannot be replaced whatever path
 // names them; one writer per workspace; temporaries of dead processes are swept.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -130,14 +131,67 @@ TEST(WorkspaceLock, SweepsOnlyDeadProcessesTemporaries) {
   const fs::path live = ws / "masks" / "soft" / StrCat("b.tmp", ::getpid(), "-1.png");
   const fs::path mine = ws / "notes.tmp.txt";  // not a temporary's name
   const fs::path user = ws / "photos" / "c.tmp999999999-1.png";  // not a folder PERF owns
+  // The workspace laid over the photos: a photo in its top level named like a temporary is not
+  // one of PERF's outputs; a registered input in a folder PERF owns is never removed either.
+  const fs::path laid_over = ws / "X.tmp999999999-1.JPG";
+  const fs::path stale_scene = ws / "scene.tmp999999999-2.json";
+  const fs::path input = ws / "masks" / "soft" / "d.tmp999999999-4.png";
   fs::create_directories(user.parent_path());
-  for (const fs::path& p : {dead, live, mine, user}) std::ofstream(p) << "x";
-  EXPECT_EQ(SweepStaleTemporaries(ws), 2);
+  for (const fs::path& p : {dead, live, mine, user, laid_over, stale_scene, input}) std::ofstream(p) << "x";
+  ProtectInput(input);
+  EXPECT_EQ(SweepStaleTemporaries(ws), 3);
   EXPECT_FALSE(fs::exists(dead));
   EXPECT_FALSE(fs::exists(ws / "sparse" / "0.tmp999999999-3"));
+  EXPECT_FALSE(fs::exists(stale_scene));
   EXPECT_TRUE(fs::exists(live));
   EXPECT_TRUE(fs::exists(mine));
   EXPECT_TRUE(fs::exists(user));
+  EXPECT_TRUE(fs::exists(laid_over));
+  EXPECT_TRUE(fs::exists(input));
+}
+
+// The lock is on the folder: deleting .perf.lock lets no second writer in, and the note goes
+// with the lock (a refused command leaves nothing in the folder it was given).
+TEST(WorkspaceLock, HoldsWithoutItsNoteAndLeavesNothing) {
+  test::TempDir dir;
+  const fs::path ws = dir / "ws";
+  {
+    WorkspaceLock first(ws, "run");
+    ASSERT_TRUE(fs::exists(WorkspaceLock::PathIn(ws)));
+    fs::remove(WorkspaceLock::PathIn(ws));
+    EXPECT_THROW(WorkspaceLock(ws, "export"), InputError);
+  }
+  EXPECT_FALSE(fs::exists(WorkspaceLock::PathIn(ws)));
+  EXPECT_TRUE(fs::is_empty(ws));
+}
+
+// Inputs stay protected in later processes: the workspace's record registers them again.
+TEST(InputRecord, ProtectsTheRecordedInputsInALaterCommand) {
+  test::TempDir dir;
+  const fs::path photo = dir / "photos" / "a.png", ws = dir / "ws";
+  fs::create_directories(photo.parent_path());
+  fs::create_directories(ws);
+  std::ofstream(photo) << "original";
+  ProtectInput(photo);
+  WriteInputRecord(ws);
+  const std::string record = ReadFileToString(InputRecordPath(ws));
+  EXPECT_NE(record.find(fs::absolute(photo).string()), std::string::npos) << record;
+  EXPECT_GE(ProtectRecordedInputs(ws), 1);
+  EXPECT_EQ(ProtectRecordedInputs(dir / "no_workspace"), 0);
+  std::ofstream(InputRecordPath(ws)) << "{ not json";
+  EXPECT_THROW(ProtectRecordedInputs(ws), InputError);
+}
+
+// A FIFO or a device is refused, not read forever (ReadFileToString).
+TEST(SafeRead, OnlyRegularFilesAreRead) {
+  test::TempDir dir;
+  const fs::path fifo = dir / "frame.png";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0);
+  EXPECT_THROW(ReadFileToString(fifo), InputError);
+  EXPECT_THROW(ReadFileToString("/dev/zero"), InputError);
+  EXPECT_THROW(ReadFileToString(dir.path()), InputError);
+  std::ofstream(dir / "a.txt") << "abc";
+  EXPECT_EQ(ReadFileToString(dir / "a.txt"), "abc");
 }
 
 }  // namespace

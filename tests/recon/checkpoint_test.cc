@@ -2,6 +2,7 @@
 #include "recon_cuda/data/checkpoint.h"
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <chrono>
 #include <cstring>
@@ -303,6 +304,32 @@ TEST(CheckpointTest, FuzzRegressionsReadOrAreRefused) {
 TEST(CheckpointTest, MissingFileIsAnIoError) {
   test::TempDir dir;
   EXPECT_THROW(ReadCheckpoint(dir / "none.perfvol"), IoError);
+}
+
+// A crafted header whose placement no export could use is refused by field, not by OpenVDB later.
+TEST(CheckpointTest, PlacementsOutOfRangeAreNamed) {
+  for (const double size : {1e300, 1e-300, 0.0}) {
+    Checkpoint c = Sample();
+    c.placement.box_size[1] = size;
+    EXPECT_EQ(FieldOfError(Bytes(c)), "box.size") << size;
+  }
+  Checkpoint zero = Sample();
+  for (double& v : zero.placement.box_rotation) v = 0;
+  EXPECT_EQ(FieldOfError(Bytes(zero)), "box.rotation");
+  Checkpoint mirrored = Sample();
+  for (int k = 0; k < 3; ++k) mirrored.placement.box_rotation[3 * k] *= -1;  // det -1
+  EXPECT_EQ(FieldOfError(Bytes(mirrored)), "box.rotation");
+  Checkpoint far = Sample();
+  far.placement.shell_radii.back() = 1e300;
+  EXPECT_EQ(FieldOfError(Bytes(far)), "shells.radii");
+}
+
+// A FIFO in the checkpoint's place is refused at once instead of blocking the reader.
+TEST(CheckpointTest, AFifoIsRefused) {
+  test::TempDir dir;
+  const auto fifo = dir / "level_0.perfvol";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0);
+  EXPECT_THROW(ReadCheckpoint(fifo), InputError);
 }
 
 }  // namespace
