@@ -204,8 +204,8 @@ nlohmann::json Manifest(const ExportOptions& o, const ExportResult& r, const fs:
                  {"triangles", r.mesh_triangles},
                  {"components_found", r.mesh_components_found},
                  {"components_kept", r.mesh_components_kept},
-                 {"iso_opacity", o.mesh_options.iso_opacity},
                  {"min_component_fraction", o.mesh_options.min_component_fraction}};
+    j["mesh"].update(r.iso.ToJson());
   }
   j["renders"] = {{"test", r.renders}, {"orbit", r.orbit_frames}, {"min_box_opacity", o.min_box_opacity}};
   j["seconds"] = r.seconds;
@@ -229,7 +229,7 @@ ExportResult RunExport(const ExportOptions& o) {
   if (!(o.mask.render_scale > 0 && o.mask.render_scale <= 8)) {
     throw InputError("command line", "--mask-render-scale", StrCat(o.mask.render_scale), "must be in (0, 8]");
   }
-  if (!(o.mesh_options.iso_opacity > 0 && o.mesh_options.iso_opacity < 1)) {
+  if (!o.auto_iso && !(o.mesh_options.iso_opacity > 0 && o.mesh_options.iso_opacity < 1)) {
     throw InputError("command line", "--iso", StrCat(o.mesh_options.iso_opacity), "must be in (0, 1)",
                      "an opacity across one voxel; 0.5 is a common choice");
   }
@@ -268,7 +268,9 @@ ExportResult RunExport(const ExportOptions& o) {
   }
   if (o.mesh) {
     Progress(o, "mesh", 0, 4);
-    const Mesh mesh = ExtractMesh(l.checkpoint, o.mesh_options);
+    Mesh mesh;
+    r.iso = ChooseIsoAndMesh(l.checkpoint, o.mesh_options, o.auto_iso, RenderSilhouettes(l, scene, o.mask_threshold),
+                             &mesh);
     r.mesh_vertices = static_cast<int64_t>(mesh.positions.size());
     r.mesh_triangles = static_cast<int64_t>(mesh.triangles.size());
     r.mesh_components_found = mesh.components_found;

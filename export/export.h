@@ -19,6 +19,7 @@
 
 #include "export/masks.h"
 #include "export/mesh_export.h"
+#include "export/mesh_iso.h"
 #include "export/orbit.h"
 #include "export/vdb_export.h"
 #include "recon_cuda/backends/make_backend.h"
@@ -37,6 +38,9 @@ struct ExportOptions {
   MaskOptions mask;
   VdbOptions vdb;
   MeshOptions mesh_options;
+  // The mesh's iso level chosen by its silhouettes against the masks (mesh_iso.h); false: at
+  // mesh_options.iso_opacity (--iso 0.3). Default: chosen (--iso auto).
+  bool auto_iso = true;
   OrbitOptions orbit;           // frames = 0: no orbit
   float min_box_opacity = recon::kDefaultMinBoxOpacity; // renders: the render rule (render_rule.h)
   recon::DeviceChoice device = recon::DeviceChoice::kAuto;
@@ -53,6 +57,7 @@ struct ExportResult {
   VdbStats vdb;
   int64_t mesh_vertices = 0, mesh_triangles = 0;
   int mesh_components_found = 0, mesh_components_kept = 0;
+  IsoChoice iso;  // the mesh's level, its silhouettes' IoU, and a warning when it is empty
   std::vector<std::filesystem::path> files;  // relative to the workspace
   double seconds = 0;
 };

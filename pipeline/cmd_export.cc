@@ -3,6 +3,7 @@
 #include <iomanip>
 #include <iostream>
 
+#include "common/errors.h"
 #include "export/evaluate.h"
 #include "export/export.h"
 #include "pipeline/commands.h"
@@ -13,7 +14,7 @@ namespace perf {
 void AddExportCommand(CLI::App& app) {
   struct Args {
     exporter::ExportOptions o;
-    std::string workspace, checkpoint;
+    std::string workspace, checkpoint, iso = "auto";
     bool no_masks = false, no_foreground = false, no_volume = false, no_mesh = false, no_renders = false;
     bool quiet = false;
   };
@@ -36,7 +37,9 @@ void AddExportCommand(CLI::App& app) {
                   "Volume: write cells whose opacity across one voxel reaches this")->capture_default_str();
   cmd->add_flag("--houdini", o.vdb.houdini_names, "Volume: name the colour grid Cd (Houdini) instead of color (Blender)");
   cmd->add_flag("--half", o.vdb.half_float, "Volume: store the grids as 16-bit floats");
-  cmd->add_option("--iso", o.mesh_options.iso_opacity, "Mesh: iso-surface of the opacity across one voxel")
+  cmd->add_option("--iso", args->iso,
+                  "Mesh: iso-surface of the opacity across one voxel, in (0, 1), or auto: the level whose "
+                  "silhouettes in the training views best match the masks")
       ->capture_default_str();
   cmd->add_option("--min-component", o.mesh_options.min_component_fraction,
                   "Mesh: keep parts with at least this fraction of the largest part's triangles (1: largest only, 0: all)")
@@ -61,11 +64,23 @@ void AddExportCommand(CLI::App& app) {
     o.volume = !args->no_volume;
     o.mesh = !args->no_mesh;
     o.renders = !args->no_renders;
+    o.auto_iso = args->iso == "auto";
+    if (!o.auto_iso) {
+      try {
+        size_t used = 0;
+        o.mesh_options.iso_opacity = std::stod(args->iso, &used);
+        if (used != args->iso.size()) throw std::invalid_argument("trailing characters");
+      } catch (const std::exception&) {
+        throw InputError("command line", "--iso", args->iso, "not a number nor auto",
+                         "pass an opacity in (0, 1), e.g. 0.3, or auto");
+      }
+    }
     const auto lock = LockWorkspace(o.workspace, "export");
     StepProgress progress("export", args->quiet);
     o.progress = [&](const std::string& step, int done, int total) { progress.Update(step, done, total); };
     const exporter::ExportResult r = exporter::RunExport(o);
     progress.Finish();
+    if (!r.iso.warning.empty()) std::cerr << "warning: " << r.iso.warning << "\n";
     if (args->quiet) return;
     std::cout << "exported " << r.checkpoint.string() << " into " << o.workspace.string() << " in " << std::fixed
               << std::setprecision(1) << r.seconds << " s\n";
@@ -85,7 +100,9 @@ void AddExportCommand(CLI::App& app) {
     }
     if (o.mesh) {
       std::cout << "  mesh.ply / mesh.obj / mesh.glb: " << r.mesh_vertices << " vertices, " << r.mesh_triangles
-                << " triangles, " << r.mesh_components_kept << " of " << r.mesh_components_found << " parts kept\n";
+                << " triangles, " << r.mesh_components_kept << " of " << r.mesh_components_found
+                << " parts kept; iso " << r.iso.iso << (r.iso.automatic ? " (chosen)" : "") << ", silhouette IoU "
+                << std::setprecision(3) << r.iso.silhouette_iou << std::setprecision(1) << " against the masks\n";
     }
     if (o.renders) std::cout << "  renders/test: " << r.renders << " views, renders/orbit: " << r.orbit_frames << " frames\n";
   });

@@ -216,6 +216,7 @@ class Runner {
     const exporter::ExportResult r = exporter::RunExport(eo);
     progress.Finish();
     r_->mask_coverage = r.mean_mask_coverage;
+    if (!r.iso.warning.empty()) Say("export: warning: " + r.iso.warning);
     s->reason = StrCat(r.files.size(), " files");
   }
 

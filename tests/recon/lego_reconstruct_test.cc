@@ -99,10 +99,10 @@ TEST_F(LegoTest, ExportAndMasksAgainstAlpha) {
   vo.device = DeviceChoice::kCpu;
   const exporter::EvalResult e = exporter::RunEval(vo);
   std::printf("lego 50x50: held-out PSNR %.2f dB, SSIM %.3f; masks vs alpha: IoU %.3f, precision %.3f, recall %.3f; "
-              "vdb %lld voxels, %lld KiB; mesh %lld triangles\n",
+              "vdb %lld voxels, %lld KiB; mesh %lld triangles at iso %.2f, silhouette IoU %.3f\n",
               e.mean.psnr, e.mean.ssim, e.pooled.iou, e.pooled.precision, e.pooled.recall,
               static_cast<long long>(x.vdb.active_voxels), static_cast<long long>(x.vdb.file_bytes / 1024),
-              static_cast<long long>(x.mesh_triangles));
+              static_cast<long long>(x.mesh_triangles), x.iso.iso, x.iso.silhouette_iou);
   EXPECT_EQ(e.mask_truth, "alpha");
   ASSERT_EQ(e.masks.size(), 100u);
   // Measured IoU 0.962 (precision 0.987, recall 0.975). The opacity residual fits the box
