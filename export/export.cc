@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <map>
+#include <numbers>
 #include <set>
 
 #include "common/atomic_file.h"
@@ -150,6 +151,7 @@ void ExportRenders(const ExportOptions& o, const Scene& scene, LoadedCheckpoint&
     if (im.split == Split::kTest) test.push_back(&im);
   }
   const std::vector<OrbitView> orbit = o.orbit.frames > 0 ? OrbitCameras(scene, o.orbit) : std::vector<OrbitView>{};
+  if (o.orbit.follow_capture) r->orbit_arc_degrees = CapturedArc(scene).span * 180 / std::numbers::pi;
   const int total = static_cast<int>(test.size() + orbit.size());
   int done = 0;
   for (const SceneImage* im : test) {
@@ -207,7 +209,10 @@ nlohmann::json Manifest(const ExportOptions& o, const ExportResult& r, const fs:
                  {"min_component_fraction", o.mesh_options.min_component_fraction}};
     j["mesh"].update(r.iso.ToJson());
   }
-  j["renders"] = {{"test", r.renders}, {"orbit", r.orbit_frames}, {"min_box_opacity", o.min_box_opacity}};
+  j["renders"] = {{"test", r.renders},
+                  {"orbit", r.orbit_frames},
+                  {"orbit_arc_degrees", r.orbit_arc_degrees},  // 360: a full turn; less: the captured arc and back
+                  {"min_box_opacity", o.min_box_opacity}};
   j["seconds"] = r.seconds;
   j["files"] = files;
   return j;

@@ -52,6 +52,7 @@ struct ExportOptions {
 struct ExportResult {
   std::filesystem::path checkpoint;
   int masks = 0, foreground = 0, renders = 0, orbit_frames = 0;
+  double orbit_arc_degrees = 360;  // the orbit's sweep (orbit.h CapturedArc)
   double mean_mask_coverage = 0;  // mean fraction of photo pixels in the binary mask
   std::vector<std::string> no_mask;  // photos left out on import (a pose that looks wrong): no mask
   VdbStats vdb;

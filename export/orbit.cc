@@ -18,6 +18,26 @@ double Median(std::vector<double> v) {
 
 }  // namespace
 
+Arc CapturedArc(const Scene& scene) {
+  const double two_pi = 2 * std::numbers::pi;
+  std::vector<double> azimuth;
+  for (const SceneImage& im : scene.images) {
+    if (im.split == Split::kExcluded) continue;
+    const Eigen::Vector3d d = scene.box.rotation.transpose() * (im.world_from_cam.col(3) - scene.box.center);
+    if (std::hypot(d.x(), d.y()) > 0) azimuth.push_back(std::atan2(d.y(), d.x()));
+  }
+  if (azimuth.empty()) return {0, two_pi};
+  std::sort(azimuth.begin(), azimuth.end());
+  // The largest gap between neighbours (the last one wraps round to the first).
+  double gap = azimuth.front() + two_pi - azimuth.back(), gap_end = azimuth.front();
+  for (size_t i = 1; i < azimuth.size(); ++i) {
+    if (azimuth[i] - azimuth[i - 1] > gap) gap = azimuth[i] - azimuth[i - 1], gap_end = azimuth[i];
+  }
+  if (gap <= kMaxOrbitGap) return {0, two_pi};
+  const double span = two_pi - gap, widen = std::max(0.0, kMinOrbitArc - span) / 2;
+  return {gap_end - widen, span + 2 * widen};
+}
+
 void CheckOrbitOptions(const OrbitOptions& o) {
   if (o.frames < 1 || o.frames > kMaxOrbitFrames) {
     throw InputError("command line", "--orbit-frames", StrCat(o.frames), StrCat("must be 1 to ", kMaxOrbitFrames),
@@ -46,9 +66,13 @@ std::vector<OrbitView> OrbitCameras(const Scene& scene, const OrbitOptions& o) {
   const Eigen::Matrix3d& box = scene.box.rotation;  // world_from_box
   const Eigen::Vector3d up = box.col(2);
   const double elevation = o.elevation_degrees * std::numbers::pi / 180;
+  const Arc arc = o.follow_capture ? CapturedArc(scene) : Arc{0, 2 * std::numbers::pi};
+  const bool full = arc.span >= 2 * std::numbers::pi;
   std::vector<OrbitView> views;
   for (int k = 0; k < o.frames; ++k) {
-    const double a = 2 * std::numbers::pi * k / o.frames;
+    // A full turn; or across the arc and back, so that the frames loop without a jump.
+    const double s = static_cast<double>(k) / o.frames;
+    const double a = full ? 2 * std::numbers::pi * s : arc.start + arc.span * (1 - std::abs(2 * s - 1));
     const Eigen::Vector3d dir_box(std::cos(elevation) * std::cos(a), std::cos(elevation) * std::sin(a), std::sin(elevation));
     const Eigen::Vector3d eye = scene.box.center + radius * (box * dir_box);
     // Camera frame x right, y down, z forward: right = forward x up, down = forward x right.

@@ -245,6 +245,57 @@ TEST(Orbit, CamerasCircleTheBoxAndLookAtItsCentre) {
   EXPECT_THROW(OrbitCameras(scene, o), InputError);
 }
 
+// A frontal capture's orbit sweeps the arc its photos see from (and back); a capture all round
+// gets a full turn; the photos left out do not count.
+TEST(Orbit, FollowsTheArcThePhotosCover) {
+  Scene scene;
+  scene.box.center = {1, 2, 3};
+  scene.box.rotation = Eigen::AngleAxisd(0.4, Eigen::Vector3d(0.3, -0.2, 1).normalized()).toRotationMatrix();
+  scene.cameras.push_back(SceneCamera{1, 64, 48, 50, 50, 32, 24, {}});
+  const auto add = [&](double degrees, Split split) {
+    SceneImage im = ImageAt(5, 0);
+    im.camera_id = 1;
+    im.split = split;
+    const double a = degrees * M_PI / 180;
+    im.world_from_cam.col(3) = scene.box.center + scene.box.rotation * Eigen::Vector3d(5 * std::cos(a), 5 * std::sin(a), 1);
+    scene.images.push_back(im);
+  };
+  for (double d = 10; d <= 100; d += 15) add(d, Split::kTrain);
+  add(250, Split::kExcluded);  // a wrong pose on the far side
+  const Arc arc = CapturedArc(scene);
+  EXPECT_NEAR(arc.start, 10 * M_PI / 180, 1e-9);
+  EXPECT_NEAR(arc.span, 90 * M_PI / 180, 1e-9);
+  OrbitOptions o;
+  o.frames = 20;
+  double lowest = 10, highest = -10;
+  for (const OrbitView& v : OrbitCameras(scene, o)) {
+    Eigen::Vector3d eye;
+    for (int i = 0; i < 3; ++i) eye[i] = v.camera.world_from_cam[4 * i + 3];
+    const Eigen::Vector3d d = scene.box.rotation.transpose() * (eye - scene.box.center);
+    const double a = std::atan2(d.y(), d.x());
+    lowest = std::min(lowest, a);
+    highest = std::max(highest, a);
+  }
+  EXPECT_NEAR(lowest, 10 * M_PI / 180, 1e-4);
+  EXPECT_NEAR(highest, 100 * M_PI / 180, 1e-4);
+  o.follow_capture = false;
+  double full_lowest = 10;
+  for (const OrbitView& v : OrbitCameras(scene, o)) {
+    const Eigen::Vector3d eye(v.camera.world_from_cam[3], v.camera.world_from_cam[7], v.camera.world_from_cam[11]);
+    const Eigen::Vector3d d = scene.box.rotation.transpose() * (eye - scene.box.center);
+    full_lowest = std::min(full_lowest, std::atan2(d.y(), d.x()));
+  }
+  EXPECT_LT(full_lowest, -2.5) << "without following, a full turn";
+
+  // Photos all round: a full turn. One direction alone: the narrowest arc, centred on it.
+  for (double d = 130; d < 360; d += 30) add(d, Split::kTest);
+  EXPECT_NEAR(CapturedArc(scene).span, 2 * M_PI, 1e-12);
+  Scene one = scene;
+  one.images.resize(1);
+  EXPECT_NEAR(CapturedArc(one).span, kMinOrbitArc, 1e-12);
+  EXPECT_NEAR(CapturedArc(one).start + kMinOrbitArc / 2, 10 * M_PI / 180, 1e-9);
+}
+
 TEST(Report, Base64AndPlot) {
   EXPECT_EQ(Base64({'M', 'a', 'n'}), "TWFu");
   EXPECT_EQ(Base64({'M', 'a'}), "TWE=");
