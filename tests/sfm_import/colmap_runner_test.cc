@@ -74,6 +74,28 @@ void WriteFile(const fs::path& path, const std::string& contents) {
   ASSERT_TRUE(out.good()) << path;
 }
 
+// A small JPEG (or PNG) with the given EXIF camera tags (none when make is empty) and capture
+// time (none when empty).
+void WriteTaggedPhoto(const fs::path& path, int w, int h, const std::string& make, float focal_mm,
+                      const std::string& time = {}) {
+  fs::create_directories(path.parent_path());
+  OIIO::ImageSpec spec(w, h, 3, OIIO::TypeDesc::UINT8);
+  if (!make.empty()) {
+    spec.attribute("Make", make);
+    spec.attribute("Model", "Model 1");
+    spec.attribute("Exif:FocalLength", focal_mm);
+  }
+  if (!time.empty()) spec.attribute("Exif:DateTimeOriginal", time);
+  std::vector<unsigned char> pixels(static_cast<size_t>(w) * h * 3, 128);
+  auto out = OIIO::ImageOutput::create(path.string());
+  ASSERT_TRUE(out && out->open(path.string(), spec)) << path;
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, pixels.data()));
+  out->close();
+}
+
+// A plain photo (no EXIF) that the up-front header check reads; COLMAP stand-ins never look at it.
+void WritePhoto(const fs::path& path) { WriteTaggedPhoto(path, 16, 12, "", 0.f); }
+
 std::string ReadFile(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
   return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
@@ -471,7 +493,7 @@ TEST(ColmapRunner, ColmapNotFound) {
   TempDir dir("nocolmap");
   SfmOptions options;
   options.images = dir.path() / "photos";
-  WriteFile(options.images / "a.jpg", "");  // counted by extension; colmap never reads it
+  WritePhoto(options.images / "a.jpg");
   options.workspace = dir.path() / "work";
 
   options.colmap_binary = "/nonexistent/colmap";
@@ -541,8 +563,8 @@ TEST(ColmapRunner, SkipsWhenModelExists) {
   TempDir dir("skip");
   SfmOptions options;
   options.images = dir.path() / "photos";
-  WriteFile(options.images / "a.jpg", "");
-  WriteFile(options.images / "sub" / "b.PNG", "");
+  WritePhoto(options.images / "a.jpg");
+  WritePhoto(options.images / "sub" / "b.PNG");
   options.workspace = dir.path() / "work";
   WriteFakeModel(options.workspace / "sparse" / "0", 5, 123);
   options.colmap_binary = "/nonexistent/colmap";  // proves that colmap is not run
@@ -591,8 +613,8 @@ TEST(ColmapRunner, FakeColmapPicksLargestModelAndReplacesOldOne) {
   TempDir dir("fake");
   SfmOptions options;
   options.images = dir.path() / "my photos";
-  WriteFile(options.images / "a.jpg", "");
-  WriteFile(options.images / "b.jpg", "");
+  WritePhoto(options.images / "a.jpg");
+  WritePhoto(options.images / "b.jpg");
   options.workspace = dir.path() / "work";
   options.colmap_binary = (dir.path() / "bin" / "colmap").string();
   WriteExecutable(options.colmap_binary, kFakeColmap);
@@ -703,7 +725,7 @@ exit 0
 )SH");
   SfmOptions options;
   options.images = dir.path() / "photos";
-  for (const char* name : {"a.jpg", "b.jpg", "c.jpg"}) WriteFile(options.images / name, "");
+  for (const char* name : {"a.jpg", "b.jpg", "c.jpg"}) WritePhoto(options.images / name);
   options.workspace = dir.path() / "work";
   options.colmap_binary = (dir.path() / "bin" / "colmap").string();
   WriteExecutable(options.colmap_binary, script);
@@ -756,7 +778,7 @@ exit 0
 )SH");
   SfmOptions options;
   options.images = dir.path() / "photos";
-  for (const char* name : {"a.jpg", "b.jpg", "c.jpg", "d.jpg"}) WriteFile(options.images / name, "");
+  for (const char* name : {"a.jpg", "b.jpg", "c.jpg", "d.jpg"}) WritePhoto(options.images / name);
   options.workspace = dir.path() / "work";
   options.colmap_binary = (dir.path() / "bin" / "colmap").string();
   WriteExecutable(options.colmap_binary, script);
@@ -786,25 +808,6 @@ exit 0
     EXPECT_EQ(e.value(), "1 of 4");
   }
   EXPECT_FALSE(fs::exists(marker));
-}
-
-// A small JPEG (or PNG) with the given EXIF camera tags (none when make is empty) and capture
-// time (none when empty).
-void WriteTaggedPhoto(const fs::path& path, int w, int h, const std::string& make, float focal_mm,
-                      const std::string& time = {}) {
-  fs::create_directories(path.parent_path());
-  OIIO::ImageSpec spec(w, h, 3, OIIO::TypeDesc::UINT8);
-  if (!make.empty()) {
-    spec.attribute("Make", make);
-    spec.attribute("Model", "Model 1");
-    spec.attribute("Exif:FocalLength", focal_mm);
-  }
-  if (!time.empty()) spec.attribute("Exif:DateTimeOriginal", time);
-  std::vector<unsigned char> pixels(static_cast<size_t>(w) * h * 3, 128);
-  auto out = OIIO::ImageOutput::create(path.string());
-  ASSERT_TRUE(out && out->open(path.string(), spec)) << path;
-  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, pixels.data()));
-  out->close();
 }
 
 // Photos from two zoom settings of one camera and a crop without EXIF: three cameras, each
@@ -923,7 +926,7 @@ TEST(ColmapRunner, FailingStepReportsExitCodeAndLogTail) {
   TempDir dir("failing");
   SfmOptions options;
   options.images = dir.path() / "photos";
-  WriteFile(options.images / "a.jpg", "");
+  WritePhoto(options.images / "a.jpg");
   options.workspace = dir.path() / "work";
   options.colmap_binary = (dir.path() / "colmap").string();
   WriteExecutable(options.colmap_binary,
