@@ -12,6 +12,7 @@
 #include "common/atomic_file.h"
 #include "common/errors.h"
 #include "common/stopwatch.h"
+#include "export/mesh_simplify.h"
 #include "recon_cuda/data/training_data.h"
 #include "recon_cuda/run/evaluation.h"
 #include "recon_cuda/run/render_views.h"
@@ -206,6 +207,8 @@ nlohmann::json Manifest(const ExportOptions& o, const ExportResult& r, const fs:
                  {"triangles", r.mesh_triangles},
                  {"components_found", r.mesh_components_found},
                  {"components_kept", r.mesh_components_kept},
+                 {"triangles_extracted", r.mesh_triangles_extracted},  // before simplification
+                 {"max_triangles", o.mesh_triangles},
                  {"min_component_fraction", o.mesh_options.min_component_fraction}};
     j["mesh"].update(r.iso.ToJson());
   }
@@ -245,6 +248,9 @@ ExportResult RunExport(const ExportOptions& o) {
   if (!(o.vdb.min_cell_opacity >= 0 && o.vdb.min_cell_opacity < 1)) {
     throw InputError("command line", "--vdb-min-opacity", StrCat(o.vdb.min_cell_opacity), "must be in [0, 1)");
   }
+  if (o.mesh_triangles < 0) {
+    throw InputError("command line", "--mesh-triangles", StrCat(o.mesh_triangles), "must be >= 0 (0: no limit)");
+  }
   if (o.orbit.frames < 0) throw InputError("command line", "--orbit-frames", StrCat(o.orbit.frames), "must be >= 0");
   if (o.renders && o.orbit.frames > 0) CheckOrbitOptions(o.orbit);
   const Scene scene = ReadScene(o.workspace / "scene.json");
@@ -274,8 +280,12 @@ ExportResult RunExport(const ExportOptions& o) {
   if (o.mesh) {
     Progress(o, "mesh", 0, 4);
     Mesh mesh;
-    r.iso = ChooseIsoAndMesh(l.checkpoint, o.mesh_options, o.auto_iso, RenderSilhouettes(l, scene, o.mask_threshold),
-                             &mesh);
+    const Silhouettes views = RenderSilhouettes(l, scene, o.mask_threshold);
+    r.iso = ChooseIsoAndMesh(l.checkpoint, o.mesh_options, o.auto_iso, views, &mesh);
+    r.mesh_triangles_extracted = static_cast<int64_t>(mesh.triangles.size());
+    if (SimplifyMesh(&mesh, o.mesh_triangles).triangles_after < r.mesh_triangles_extracted) {
+      r.iso.silhouette_iou = SilhouetteIou(mesh, views);  // the mesh as written
+    }
     r.mesh_vertices = static_cast<int64_t>(mesh.positions.size());
     r.mesh_triangles = static_cast<int64_t>(mesh.triangles.size());
     r.mesh_components_found = mesh.components_found;

@@ -41,6 +41,8 @@ struct ExportOptions {
   // The mesh's iso level chosen by its silhouettes against the masks (mesh_iso.h); false: at
   // mesh_options.iso_opacity (--iso 0.3). Default: chosen (--iso auto).
   bool auto_iso = true;
+  // The mesh simplified to at most this many triangles (mesh_simplify.h); 0: as extracted.
+  int64_t mesh_triangles = 200000;
   OrbitOptions orbit;           // frames = 0: no orbit
   float min_box_opacity = recon::kDefaultMinBoxOpacity; // renders: the render rule (render_rule.h)
   recon::DeviceChoice device = recon::DeviceChoice::kAuto;
@@ -59,6 +61,7 @@ struct ExportResult {
   int64_t mesh_vertices = 0, mesh_triangles = 0;
   int mesh_components_found = 0, mesh_components_kept = 0;
   IsoChoice iso;  // the mesh's level, its silhouettes' IoU, and a warning when it is empty
+  int64_t mesh_triangles_extracted = 0;  // before simplification
   std::vector<std::filesystem::path> files;  // relative to the workspace
   double seconds = 0;
 };

@@ -44,6 +44,9 @@ void AddExportCommand(CLI::App& app) {
   cmd->add_option("--min-component", o.mesh_options.min_component_fraction,
                   "Mesh: keep parts with at least this fraction of the largest part's triangles (1: largest only, 0: all)")
       ->capture_default_str();
+  cmd->add_option("--mesh-triangles", o.mesh_triangles,
+                  "Mesh: simplify to at most this many triangles where the surface allows (0: as extracted)")
+      ->capture_default_str();
   cmd->add_option("--orbit-frames", o.orbit.frames, "Orbit renders (0: none)")->capture_default_str();
   cmd->add_option("--orbit-elevation", o.orbit.elevation_degrees, "Orbit height above the box's horizon, degrees")
       ->capture_default_str();
@@ -101,7 +104,10 @@ void AddExportCommand(CLI::App& app) {
     if (o.mesh) {
       std::cout << "  mesh.ply / mesh.obj / mesh.glb: " << r.mesh_vertices << " vertices, " << r.mesh_triangles
                 << " triangles, " << r.mesh_components_kept << " of " << r.mesh_components_found
-                << " parts kept; iso " << r.iso.iso << (r.iso.automatic ? " (chosen)" : "") << ", silhouette IoU "
+                << " parts kept"
+                << (r.mesh_triangles_extracted > r.mesh_triangles ? StrCat(" (simplified from ", r.mesh_triangles_extracted, ")")
+                                                                  : std::string())
+                << "; iso " << r.iso.iso << (r.iso.automatic ? " (chosen)" : "") << ", silhouette IoU "
                 << std::setprecision(3) << r.iso.silhouette_iou << std::setprecision(1) << " against the masks\n";
     }
     if (o.renders) std::cout << "  renders/test: " << r.renders << " views, renders/orbit: " << r.orbit_frames << " frames\n";

@@ -13,6 +13,7 @@ PACKAGES=(
   nlohmann-json3-dev                     # scene.json
   libtbb-dev                             # CPU threads
   libopenvdb-dev libboost-dev libopenvdb-tools  # volume export and meshing (+ vdb_print)
+  libmeshoptimizer-dev                   # mesh simplification (--mesh-triangles)
   assimp-utils                           # the independent check of the mesh files (MeshAssimpTest)
   libgtest-dev libgmock-dev libbenchmark-dev    # tests and benchmarks
   colmap                                 # photos -> sparse model (perf sfm), model_converter in tests

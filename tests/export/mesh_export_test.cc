@@ -2,9 +2,11 @@
 // against the true sphere (closed, outward, area and volume), vertex colours, component
 // filtering, closing at the box wall, and the three writers read back byte by byte.
 #include "export/mesh_export.h"
+#include "export/mesh_simplify.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -98,6 +100,32 @@ TEST_F(MeshExportTest, SphereIsClosedOutwardWithTheTrueAreaAndVolume) {
   for (const auto& rgb : mesh.colours) {
     for (int ch = 0; ch < 3; ++ch) ASSERT_NEAR(rgb[ch], kSrgb[ch], 1e-6);
   }
+}
+
+// --mesh-triangles: the sphere simplified to a tenth stays closed, outward and the same sphere,
+// with every kept vertex's colour; within the budget nothing changes.
+TEST_F(MeshExportTest, SimplifiedSphereStaysClosedAndTheSameShape) {
+  Mesh mesh = ExtractMesh(SmoothSphere(), MeshOptions{});
+  const Mesh full = mesh;
+  const int64_t target = static_cast<int64_t>(full.triangles.size()) / 10;
+  const SimplifyResult r = SimplifyMesh(&mesh, target);
+  EXPECT_EQ(r.triangles_before, static_cast<int64_t>(full.triangles.size()));
+  EXPECT_LE(r.triangles_after, target);
+  EXPECT_GT(r.triangles_after, target / 2);
+  EXPECT_EQ(r.triangles_after, static_cast<int64_t>(mesh.triangles.size()));
+  ExpectClosedAndConsistent(mesh);
+  ASSERT_EQ(mesh.colours.size(), mesh.positions.size());
+  EXPECT_NEAR(MeshVolume(mesh), MeshVolume(full), 0.03 * MeshVolume(full));
+  EXPECT_GT(MeshVolume(mesh), 0) << "outward";
+  for (size_t v = 0; v < mesh.positions.size(); ++v) {
+    const auto at = std::find(full.positions.begin(), full.positions.end(), mesh.positions[v]);
+    ASSERT_NE(at, full.positions.end()) << "a vertex moved";
+    EXPECT_EQ(mesh.colours[v], full.colours[static_cast<size_t>(at - full.positions.begin())]);
+  }
+  Mesh same = full;
+  EXPECT_EQ(SimplifyMesh(&same, 0).triangles_after, r.triangles_before);
+  EXPECT_EQ(SimplifyMesh(&same, r.triangles_before).triangles_after, r.triangles_before);
+  EXPECT_EQ(same.positions, full.positions);
 }
 
 TEST_F(MeshExportTest, MirroringBoxRotationKeepsTheSurfaceOutward) {
