@@ -13,6 +13,7 @@
 #include "common/errors.h"
 #include "common/stopwatch.h"
 #include "export/mesh_simplify.h"
+#include "export/mesh_texture.h"
 #include "recon_cuda/data/training_data.h"
 #include "recon_cuda/run/evaluation.h"
 #include "recon_cuda/run/render_views.h"
@@ -202,7 +203,11 @@ nlohmann::json Manifest(const ExportOptions& o, const ExportResult& r, const fs:
                    {"half_float", o.vdb.half_float}};
   }
   if (o.mesh) {
-    j["mesh"] = {{"files", {"mesh.ply", "mesh.obj", "mesh.glb"}},
+    j["mesh"] = {{"files", r.texture_size[0] > 0 ? nlohmann::json{"mesh.ply", "mesh.obj", "mesh.mtl", "mesh.png", "mesh.glb"}
+                                                : nlohmann::json{"mesh.ply", "mesh.obj", "mesh.glb"}},
+                 {"texture", {{"file", r.texture_size[0] > 0 ? "mesh.png" : ""},
+                              {"width", r.texture_size[0]},
+                              {"height", r.texture_size[1]}}},
                  {"vertices", r.mesh_vertices},
                  {"triangles", r.mesh_triangles},
                  {"components_found", r.mesh_components_found},
@@ -219,6 +224,39 @@ nlohmann::json Manifest(const ExportOptions& o, const ExportResult& r, const fs:
   j["seconds"] = r.seconds;
   j["files"] = files;
   return j;
+}
+
+// The mesh at the level its silhouettes choose (mesh_iso.h), simplified to the budget, with its
+// baked texture: mesh.ply (vertex colours), mesh.obj + mesh.mtl + mesh.png (texture and vertex
+// colours), mesh.glb (vertex colours).
+void ExportMesh(const ExportOptions& o, const Scene& scene, LoadedCheckpoint& l, Outputs& out, ExportResult* r) {
+  Progress(o, "mesh", 0, 4);
+  Mesh mesh;
+  const Silhouettes views = RenderSilhouettes(l, scene, o.mask_threshold);
+  r->iso = ChooseIsoAndMesh(l.checkpoint, o.mesh_options, o.auto_iso, views, &mesh);
+  r->mesh_triangles_extracted = static_cast<int64_t>(mesh.triangles.size());
+  if (SimplifyMesh(&mesh, o.mesh_triangles).triangles_after < r->mesh_triangles_extracted) {
+    r->iso.silhouette_iou = SilhouetteIou(mesh, views);  // the mesh as written
+  }
+  r->mesh_vertices = static_cast<int64_t>(mesh.positions.size());
+  r->mesh_triangles = static_cast<int64_t>(mesh.triangles.size());
+  r->mesh_components_found = mesh.components_found;
+  r->mesh_components_kept = mesh.components_kept;
+  const TexturedMesh textured = BakeTexture(mesh, ColourSampler(l.checkpoint));
+  r->texture_size = {textured.width, textured.height};
+  Progress(o, "mesh", 1, 4);
+  WritePly(out.Prepare("mesh.ply"), mesh);
+  Progress(o, "mesh", 2, 4);
+  if (textured.width > 0) {
+    WriteStreamAtomically(out.Prepare("mesh.obj"), [&](std::ostream& s) { WriteTexturedObj(s, textured, "mesh.mtl"); });
+    WriteStreamAtomically(out.Prepare("mesh.mtl"), [&](std::ostream& s) { WriteMtl(s, "mesh.png"); });
+    WriteFileAtomically(out.Prepare("mesh.png"), TexturePng(textured));
+  } else {
+    WriteObj(out.Prepare("mesh.obj"), mesh);  // an empty mesh has no texture
+  }
+  Progress(o, "mesh", 3, 4);
+  WriteGlb(out.Prepare("mesh.glb"), mesh);
+  Progress(o, "mesh", 4, 4);
 }
 
 }  // namespace
@@ -277,27 +315,7 @@ ExportResult RunExport(const ExportOptions& o) {
     r.vdb = WriteVdb(l.checkpoint, out.Prepare("volume.vdb"), o.vdb);
     Progress(o, "volume", 1, 1);
   }
-  if (o.mesh) {
-    Progress(o, "mesh", 0, 4);
-    Mesh mesh;
-    const Silhouettes views = RenderSilhouettes(l, scene, o.mask_threshold);
-    r.iso = ChooseIsoAndMesh(l.checkpoint, o.mesh_options, o.auto_iso, views, &mesh);
-    r.mesh_triangles_extracted = static_cast<int64_t>(mesh.triangles.size());
-    if (SimplifyMesh(&mesh, o.mesh_triangles).triangles_after < r.mesh_triangles_extracted) {
-      r.iso.silhouette_iou = SilhouetteIou(mesh, views);  // the mesh as written
-    }
-    r.mesh_vertices = static_cast<int64_t>(mesh.positions.size());
-    r.mesh_triangles = static_cast<int64_t>(mesh.triangles.size());
-    r.mesh_components_found = mesh.components_found;
-    r.mesh_components_kept = mesh.components_kept;
-    Progress(o, "mesh", 1, 4);
-    WritePly(out.Prepare("mesh.ply"), mesh);
-    Progress(o, "mesh", 2, 4);
-    WriteObj(out.Prepare("mesh.obj"), mesh);
-    Progress(o, "mesh", 3, 4);
-    WriteGlb(out.Prepare("mesh.glb"), mesh);
-    Progress(o, "mesh", 4, 4);
-  }
+  if (o.mesh) ExportMesh(o, scene, l, out, &r);
   if (o.renders) ExportRenders(o, scene, l, out, &r);
   r.seconds = SecondsSince(start);
   WriteFileAtomically(o.workspace / "export.json", Manifest(o, r, o.workspace).dump(2) + "\n");

@@ -4,13 +4,15 @@
 //                             both at the photo's size on disk and in its own (distorted) frame;
 //   foreground/<name>.png     the photo with the mask as alpha (RGBA);
 //   volume.vdb                density + colour grids (vdb_export.h);
-//   mesh.ply, mesh.obj, mesh.glb   the coloured iso-surface (mesh_export.h);
+//   mesh.ply, mesh.glb        the iso-surface with vertex colours (mesh_export.h, mesh_iso.h);
+//   mesh.obj, mesh.mtl, mesh.png  the same with a baked colour texture (mesh_texture.h);
 //   renders/test/<name>.png   held-out views, renders/orbit/frame_<k>.png an orbit of the box;
 //   export.json               what was written, with sizes and settings.
 // <name> is the workspace image's path under images/ without its extension (the photo's name).
 // Every file is written atomically; the output folders are checked to be writable first.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -62,6 +64,7 @@ struct ExportResult {
   int mesh_components_found = 0, mesh_components_kept = 0;
   IsoChoice iso;  // the mesh's level, its silhouettes' IoU, and a warning when it is empty
   int64_t mesh_triangles_extracted = 0;  // before simplification
+  std::array<int, 2> texture_size{0, 0};  // mesh.png (0: no texture, an empty mesh)
   std::vector<std::filesystem::path> files;  // relative to the workspace
   double seconds = 0;
 };

@@ -1,5 +1,6 @@
 #include "export/mesh_export.h"
 
+#include <Eigen/Dense>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/VolumeToMesh.h>
 
@@ -47,7 +48,9 @@ double CellOpacity(const recon::Checkpoint& c, int64_t cell, double length) {
 // The colour at index-space point p (cell centres at integers): trilinear over the 8 nearest
 // cell centres (clamped at the border, as the renderer's LinearCoord), each weight multiplied by
 // the cell's opacity; plain trilinear where all 8 are empty.
-std::array<float, 3> SampleColour(const recon::Checkpoint& c, const openvdb::Vec3s& p, double length) {
+// near_opaque: set to whether any of the 8 cells has opacity (else the colour is the plain one).
+std::array<float, 3> SampleColour(const recon::Checkpoint& c, const openvdb::Vec3s& p, double length,
+                                  bool* near_opaque = nullptr) {
   const int n = c.shape.n;
   int lo[3], hi[3];
   double f[3];
@@ -71,6 +74,7 @@ std::array<float, 3> SampleColour(const recon::Checkpoint& c, const openvdb::Vec
     weight_sum += wa;
   }
   std::array<float, 3> rgb;
+  if (near_opaque != nullptr) *near_opaque = weight_sum > 1e-12;
   for (int ch = 0; ch < 3; ++ch) {
     rgb[ch] = static_cast<float>(weight_sum > 1e-12 ? weighted[ch] / weight_sum : plain[ch]);
   }
@@ -190,6 +194,30 @@ Mesh ExtractMesh(const recon::Checkpoint& c, const MeshOptions& options) {
     mesh.triangles.push_back(out);
   }
   return mesh;
+}
+
+ColourSampler::ColourSampler(const recon::Checkpoint& checkpoint)
+    : checkpoint_(checkpoint), length_(CellLength(checkpoint)) {
+  const std::array<double, 12> a = WorldFromIndex(checkpoint);
+  Eigen::Matrix3d m;
+  Eigen::Vector3d t;
+  for (int r = 0; r < 3; ++r) {
+    for (int k = 0; k < 3; ++k) m(r, k) = a[4 * r + k];
+    t[r] = a[4 * r + 3];
+  }
+  const Eigen::Matrix3d inv = m.inverse();
+  const Eigen::Vector3d shift = -inv * t;
+  for (int r = 0; r < 3; ++r) {
+    for (int k = 0; k < 3; ++k) index_from_world_[4 * r + k] = inv(r, k);
+    index_from_world_[4 * r + 3] = shift[r];
+  }
+}
+
+std::array<float, 3> ColourSampler::At(const std::array<double, 3>& w, bool* near_opaque) const {
+  const std::array<double, 12>& a = index_from_world_;
+  openvdb::Vec3s p;
+  for (int r = 0; r < 3; ++r) p[r] = static_cast<float>(a[4 * r] * w[0] + a[4 * r + 1] * w[1] + a[4 * r + 2] * w[2] + a[4 * r + 3]);
+  return SampleColour(checkpoint_, p, length_, near_opaque);
 }
 
 double MeshArea(const Mesh& mesh) {

@@ -37,6 +37,22 @@ struct Mesh {
   int components_found = 0, components_kept = 0;
 };
 
+// The sRGB colour at world points by the vertex colours' rule (opacity-weighted trilinear over the
+// cells), for textures baked at a finer spacing than the vertices (mesh_texture.h). `checkpoint`
+// must outlive it.
+class ColourSampler {
+ public:
+  explicit ColourSampler(const recon::Checkpoint& checkpoint);
+  // near_opaque (optional): whether a cell around the point has opacity; where none has, the
+  // colour is the cells' unweighted one, which no photo constrained.
+  std::array<float, 3> At(const std::array<double, 3>& world, bool* near_opaque = nullptr) const;
+
+ private:
+  const recon::Checkpoint& checkpoint_;
+  std::array<double, 12> index_from_world_;  // row-major 3x4
+  double length_;
+};
+
 // Empty mesh (no error) when nothing reaches the iso value. Throws InputError when the
 // checkpoint's grid is unusable (CheckExportable).
 Mesh ExtractMesh(const recon::Checkpoint& checkpoint, const MeshOptions& options);

@@ -3,6 +3,7 @@
 // filtering, closing at the box wall, and the three writers read back byte by byte.
 #include "export/mesh_export.h"
 #include "export/mesh_simplify.h"
+#include "export/mesh_texture.h"
 
 #include <gtest/gtest.h>
 
@@ -14,6 +15,7 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <numbers>
+#include <set>
 #include <sstream>
 
 #include "common/atomic_file.h"
@@ -126,6 +128,77 @@ TEST_F(MeshExportTest, SimplifiedSphereStaysClosedAndTheSameShape) {
   EXPECT_EQ(SimplifyMesh(&same, 0).triangles_after, r.triangles_before);
   EXPECT_EQ(SimplifyMesh(&same, r.triangles_before).triangles_after, r.triangles_before);
   EXPECT_EQ(same.positions, full.positions);
+}
+
+// The baked texture: every texel takes the colour grid's colour at its point on the surface (the
+// sphere's, not the different colour of the empty cells around it), each triangle has a cell of
+// its own, and the OBJ points at it through its material.
+TEST_F(MeshExportTest, BakedTextureHoldsTheSurfaceColourInACellPerTriangle) {
+  // A hard sphere: its cells alone have its colour; the empty cells around it another.
+  recon::Checkpoint c = test::EmptyCheckpoint(kN);
+  test::FillColours(&c, {0.1f, 0.9f, 0.5f});
+  test::Paint(&c, test::HardSphere(test::LocalToWorld(c, kSphereLocal), kRadius), kSrgb);
+  const Mesh mesh = ExtractMesh(c, MeshOptions{});
+  const TexturedMesh t = BakeTexture(mesh, ColourSampler(c));
+  const size_t n = mesh.triangles.size();
+  ASSERT_EQ(t.uvs.size(), 3 * n);
+  ASSERT_EQ(t.rgb.size(), static_cast<size_t>(3 * t.width * t.height));
+  EXPECT_GE(t.cell, 4);
+  EXPECT_LE(std::max(t.width, t.height), 2048);
+  std::set<std::pair<int, int>> cells;
+  for (size_t k = 0; k < n; ++k) {
+    float lo[2] = {1, 1}, hi[2] = {0, 0};
+    for (int corner = 0; corner < 3; ++corner) {
+      for (int a = 0; a < 2; ++a) {
+        const float v = t.uvs[3 * k + corner][a];
+        ASSERT_TRUE(v >= 0 && v <= 1) << v;
+        lo[a] = std::min(lo[a], v), hi[a] = std::max(hi[a], v);
+      }
+    }
+    const int cx = static_cast<int>(lo[0] * t.width) / t.cell, cy = static_cast<int>(lo[1] * t.height) / t.cell;
+    EXPECT_EQ(static_cast<int>(hi[0] * t.width - 1e-3) / t.cell, cx) << "a triangle leaves its cell";
+    EXPECT_EQ(static_cast<int>(hi[1] * t.height - 1e-3) / t.cell, cy);
+    EXPECT_TRUE(cells.insert({cx, cy}).second) << "two triangles share a cell";
+  }
+  int64_t off = 0;
+  for (size_t k = 0; k < n; ++k) {  // every texel of every triangle's cell
+    const int x0 = static_cast<int>(k % (t.width / t.cell)) * t.cell, y0 = static_cast<int>(k / (t.width / t.cell)) * t.cell;
+    for (int j = 0; j < t.cell; ++j) {
+      for (int i = 0; i < t.cell; ++i) {
+        const uint8_t* p = &t.rgb[3 * ((y0 + j) * static_cast<size_t>(t.width) + x0 + i)];
+        for (int ch = 0; ch < 3; ++ch) off += std::abs(p[ch] - std::lround(255 * kSrgb[ch])) > 6;
+      }
+    }
+  }
+  EXPECT_EQ(off, 0) << "texels away from the sphere's colour";
+  EXPECT_EQ(TexturePng(t).substr(1, 3), "PNG");
+  std::ostringstream obj, mtl;
+  WriteTexturedObj(obj, t, "mesh.mtl");
+  WriteMtl(mtl, "mesh.png");
+  const std::string text = obj.str();
+  EXPECT_NE(text.find("mtllib mesh.mtl\nusemtl "), std::string::npos);
+  size_t vt = 0, faces = 0;
+  std::istringstream lines(text);
+  for (std::string line; std::getline(lines, line);) {
+    vt += line.rfind("vt ", 0) == 0;
+    faces += line.rfind("f ", 0) == 0 && line.find('/') != std::string::npos;
+  }
+  EXPECT_EQ(vt, 3 * n);
+  EXPECT_EQ(faces, n);
+  EXPECT_NE(mtl.str().find("map_Kd mesh.png"), std::string::npos);
+  EXPECT_TRUE(BakeTexture(Mesh{}, ColourSampler(c)).rgb.empty());
+  // Simplified, a large triangle of the stair-stepped surface crosses empty cells: those texels
+  // take the triangle's vertex colours, not the empty cells' colour.
+  Mesh small = mesh;
+  SimplifyMesh(&small, 500);
+  const TexturedMesh s = BakeTexture(small, ColourSampler(c));
+  int64_t far = 0;
+  const size_t used_rows = (small.triangles.size() + s.width / s.cell - 1) / (s.width / s.cell);
+  for (size_t i = 0; i < 3 * s.width * used_rows * s.cell; ++i) {
+    const size_t cell = (i / 3 % s.width) / s.cell + (i / 3 / s.width) / s.cell * (s.width / s.cell);
+    if (cell < small.triangles.size()) far += std::abs(s.rgb[i] - std::lround(255 * kSrgb[i % 3])) > 6;
+  }
+  EXPECT_EQ(far, 0);
 }
 
 TEST_F(MeshExportTest, MirroringBoxRotationKeepsTheSurfaceOutward) {

@@ -95,13 +95,16 @@ TEST_F(ExportCli, WritesEveryOutputAndEvaluates) {
   for (const auto& g : *grids) names.insert(g->getName());
   EXPECT_EQ(names, (std::set<std::string>{"density", "color"}));
   file.close();
-  for (const char* mesh : {"mesh.ply", "mesh.obj", "mesh.glb"}) EXPECT_GT(fs::file_size(ws_ / mesh), 0u) << mesh;
+  for (const char* mesh : {"mesh.ply", "mesh.obj", "mesh.mtl", "mesh.png", "mesh.glb"}) {
+    EXPECT_GT(fs::file_size(ws_ / mesh), 0u) << mesh;
+  }
   EXPECT_EQ(CountFiles(ws_ / "renders" / "test"), 3);
   EXPECT_EQ(CountFiles(ws_ / "renders" / "orbit"), 3);
 
   const nlohmann::json manifest = nlohmann::json::parse(ReadFileToString(ws_ / "export.json"));
   EXPECT_EQ(manifest["masks"]["count"], 18);
-  EXPECT_EQ(manifest["files"].size(), 18u * 3 + 1 + 3 + 3 + 3);
+  EXPECT_EQ(manifest["files"].size(), 18u * 3 + 1 + 5 + 3 + 3);  // masks x 3, volume, mesh, renders
+  EXPECT_EQ(manifest["mesh"]["texture"]["file"], "mesh.png");
   for (const auto& f : manifest["files"]) EXPECT_TRUE(fs::exists(ws_ / f.get<std::string>())) << f;
 
   // eval: held-out scores; no true masks in this capture.
