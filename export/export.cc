@@ -228,7 +228,7 @@ nlohmann::json Manifest(const ExportOptions& o, const ExportResult& r, const fs:
 
 // The mesh at the level its silhouettes choose (mesh_iso.h), simplified to the budget, with its
 // baked texture: mesh.ply (vertex colours), mesh.obj + mesh.mtl + mesh.png (texture and vertex
-// colours), mesh.glb (vertex colours).
+// colours), mesh.glb (the texture embedded).
 void ExportMesh(const ExportOptions& o, const Scene& scene, LoadedCheckpoint& l, Outputs& out, ExportResult* r) {
   Progress(o, "mesh", 0, 4);
   Mesh mesh;
@@ -247,15 +247,16 @@ void ExportMesh(const ExportOptions& o, const Scene& scene, LoadedCheckpoint& l,
   Progress(o, "mesh", 1, 4);
   WritePly(out.Prepare("mesh.ply"), mesh);
   Progress(o, "mesh", 2, 4);
+  const std::string png = TexturePng(textured);
   if (textured.width > 0) {
     WriteStreamAtomically(out.Prepare("mesh.obj"), [&](std::ostream& s) { WriteTexturedObj(s, textured, "mesh.mtl"); });
     WriteStreamAtomically(out.Prepare("mesh.mtl"), [&](std::ostream& s) { WriteMtl(s, "mesh.png"); });
-    WriteFileAtomically(out.Prepare("mesh.png"), TexturePng(textured));
+    WriteFileAtomically(out.Prepare("mesh.png"), png);
   } else {
     WriteObj(out.Prepare("mesh.obj"), mesh);  // an empty mesh has no texture
   }
   Progress(o, "mesh", 3, 4);
-  WriteGlb(out.Prepare("mesh.glb"), mesh);
+  WriteStreamAtomically(out.Prepare("mesh.glb"), [&](std::ostream& s) { WriteGlb(s, mesh, textured.uvs, png); });
   Progress(o, "mesh", 4, 4);
 }
 

@@ -4,8 +4,9 @@
 //                             both at the photo's size on disk and in its own (distorted) frame;
 //   foreground/<name>.png     the photo with the mask as alpha (RGBA);
 //   volume.vdb                density + colour grids (vdb_export.h);
-//   mesh.ply, mesh.glb        the iso-surface with vertex colours (mesh_export.h, mesh_iso.h);
-//   mesh.obj, mesh.mtl, mesh.png  the same with a baked colour texture (mesh_texture.h);
+//   mesh.ply                  the iso-surface with vertex colours (mesh_export.h, mesh_iso.h);
+//   mesh.obj, mesh.mtl, mesh.png, mesh.glb  the same with a baked colour texture (mesh_texture.h;
+//                             the GLB embeds it);
 //   renders/test/<name>.png   held-out views, renders/orbit/frame_<k>.png an orbit of the box;
 //   export.json               what was written, with sizes and settings.
 // <name> is the workspace image's path under images/ without its extension (the photo's name).

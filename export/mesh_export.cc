@@ -302,6 +302,9 @@ void WriteObj(std::ostream& out, const Mesh& mesh) {
   for (const auto& t : mesh.triangles) out << "f " << t[0] + 1 << ' ' << t[1] + 1 << ' ' << t[2] + 1 << '\n';
 }
 
+// The GLB container: the JSON chunk, then the binary one (nv, nt: for the message when too large).
+static void WriteGlbChunks(std::ostream& out, const nlohmann::json& doc, std::string bin, size_t nv, size_t nt);
+
 void WriteGlb(std::ostream& out, const Mesh& mesh) {
   using nlohmann::json;
   CheckMesh(mesh);
@@ -355,7 +358,10 @@ void WriteGlb(std::ostream& out, const Mesh& mesh) {
                                                  {"mode", 4}}})}}});
   }
   doc["nodes"] = json::array({node});
+  WriteGlbChunks(out, doc, std::move(bin), nv, nt);
+}
 
+static void WriteGlbChunks(std::ostream& out, const nlohmann::json& doc, std::string bin, size_t nv, size_t nt) {
   std::string json_text = doc.dump();
   json_text.resize((json_text.size() + 3) / 4 * 4, ' ');  // JSON chunk padded with spaces
   bin.resize((bin.size() + 3) / 4 * 4, '\0');               // BIN chunk padded with zeros
@@ -380,6 +386,63 @@ void WriteGlb(std::ostream& out, const Mesh& mesh) {
     out.write(bin_head.data(), static_cast<std::streamsize>(bin_head.size()));
     out.write(bin.data(), static_cast<std::streamsize>(bin.size()));
   }
+}
+
+void WriteGlb(std::ostream& out, const Mesh& mesh, const std::vector<std::array<float, 2>>& uvs,
+              const std::string& png) {
+  using nlohmann::json;
+  CheckMesh(mesh);
+  const size_t nt = mesh.triangles.size(), nv = 3 * nt;  // a vertex per triangle corner
+  PERF_CHECK(uvs.size() == nv);
+  if (nt == 0 || png.empty()) return WriteGlb(out, mesh);
+  // Binary chunk: positions, texture coordinates, the PNG; each a multiple of 4 bytes.
+  std::string bin;
+  bin.reserve(20 * nv + png.size() + 4);
+  std::array<float, 3> lo{INFINITY, INFINITY, INFINITY}, hi{-INFINITY, -INFINITY, -INFINITY};
+  for (const auto& t : mesh.triangles) {
+    for (uint32_t v : t) {
+      for (int a = 0; a < 3; ++a) {
+        Put(&bin, mesh.positions[v][a]);
+        lo[a] = std::min(lo[a], mesh.positions[v][a]);
+        hi[a] = std::max(hi[a], mesh.positions[v][a]);
+      }
+    }
+  }
+  for (const auto& uv : uvs) {
+    Put(&bin, uv[0]);
+    Put(&bin, uv[1]);
+  }
+  const size_t png_at = bin.size();
+  bin += png;
+  constexpr int kFloat = 5126, kArrayBuffer = 34962;
+  json doc;
+  doc["asset"] = {{"version", "2.0"}, {"generator", "PERF"}};
+  doc["scene"] = 0;
+  doc["scenes"] = json::array({{{"nodes", {0}}}});
+  doc["nodes"] = json::array({{{"name", "perf_mesh"}, {"mesh", 0}}});
+  doc["buffers"] = json::array({{{"byteLength", (bin.size() + 3) / 4 * 4}}});
+  doc["bufferViews"] = json::array({
+      {{"buffer", 0}, {"byteOffset", 0}, {"byteLength", 12 * nv}, {"target", kArrayBuffer}},
+      {{"buffer", 0}, {"byteOffset", 12 * nv}, {"byteLength", 8 * nv}, {"target", kArrayBuffer}},
+      {{"buffer", 0}, {"byteOffset", png_at}, {"byteLength", png.size()}},
+  });
+  doc["accessors"] = json::array({
+      {{"bufferView", 0}, {"componentType", kFloat}, {"count", nv}, {"type", "VEC3"}, {"min", lo}, {"max", hi}},
+      {{"bufferView", 1}, {"componentType", kFloat}, {"count", nv}, {"type", "VEC2"}},
+  });
+  doc["images"] = json::array({{{"bufferView", 2}, {"mimeType", "image/png"}, {"name", "perf_texture"}}});
+  constexpr int kLinear = 9729, kClampToEdge = 33071;
+  doc["samplers"] = json::array({{{"magFilter", kLinear}, {"minFilter", kLinear}, {"wrapS", kClampToEdge},
+                                  {"wrapT", kClampToEdge}}});
+  doc["textures"] = json::array({{{"source", 0}, {"sampler", 0}}});
+  doc["materials"] = json::array({{{"name", "perf_texture"},
+                                   {"pbrMetallicRoughness",
+                                    {{"baseColorTexture", {{"index", 0}}}, {"metallicFactor", 0}, {"roughnessFactor", 1}}}}});
+  doc["meshes"] = json::array({{{"name", "perf_mesh"},
+                                {"primitives", json::array({{{"attributes", {{"POSITION", 0}, {"TEXCOORD_0", 1}}},
+                                                             {"material", 0},
+                                                             {"mode", 4}}})}}});
+  WriteGlbChunks(out, doc, std::move(bin), nv, nt);
 }
 
 void WritePly(const fs::path& path, const Mesh& mesh) {

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <iosfwd>
+#include <string>
 #include <vector>
 
 #include "recon_cuda/data/checkpoint.h"
@@ -69,6 +70,11 @@ void WriteObj(const std::filesystem::path& path, const Mesh& mesh);
 // non-metallic material (glTF's default material is fully metallic), one node, one scene.
 void WriteGlb(std::ostream& out, const Mesh& mesh);
 void WriteGlb(const std::filesystem::path& path, const Mesh& mesh);
+// glTF binary with a baked texture embedded (mesh_texture.h): a vertex per triangle corner with
+// its TEXCOORD_0 (uvs: 3 per triangle, glTF's v down), the PNG as baseColorTexture, no COLOR_0
+// (glTF would multiply the two). An empty mesh or texture: the vertex-colour GLB.
+void WriteGlb(std::ostream& out, const Mesh& mesh, const std::vector<std::array<float, 2>>& uvs,
+              const std::string& png);
 
 // For tests and reports: surface area and enclosed volume (divergence theorem), world units.
 double MeshArea(const Mesh& mesh);

@@ -372,7 +372,7 @@ std::string RunSummary(const RunOptions& o, const RunResult& r) {
     << "  masks/binary/, masks/soft/   foreground masks of every photo\n"
     << "  foreground/                  the photos cut out (RGBA PNG)\n"
     << "  volume.vdb                   OpenVDB density + color grids (Blender, Houdini)\n"
-    << "  mesh.obj (+ .mtl, .png)      textured mesh; mesh.ply, mesh.glb with vertex colours\n"
+    << "  mesh.glb, mesh.obj (+ .mtl, .png)  textured mesh; mesh.ply with vertex colours\n"
     << "  renders/test/, renders/orbit/  held-out views and an orbit\n"
     << "  report.html, report.json     scores, PSNR-vs-time plot, renders next to photos\n";
   return s.str();

@@ -57,9 +57,10 @@ TEST(MeshAssimpTest, AssimpImportsEveryFormatWithItsCountsAndColours) {
   }
 }
 
-// The textured OBJ (+ MTL + PNG) as assimp reads it: our triangles, one material whose diffuse
-// texture is the PNG beside it, and a texture coordinate in [0, 1] at every corner.
-TEST(MeshAssimpTest, AssimpImportsTheTexturedObjWithItsMaterialAndUvs) {
+// The textured OBJ (+ MTL + PNG) and GLB as assimp reads them: our triangles, one material with
+// the texture (the PNG beside the OBJ, the one embedded in the GLB), and a texture coordinate in
+// [0, 1] at every corner.
+TEST(MeshAssimpTest, AssimpImportsTheTexturedObjAndGlbWithTheirTextureAndUvs) {
   if (perf::test::RunCommand("command -v assimp").exit_code != 0) {
     GTEST_SKIP() << "assimp not found (Debian package assimp-utils); skipping the independent check";
   }
@@ -70,26 +71,37 @@ TEST(MeshAssimpTest, AssimpImportsTheTexturedObjWithItsMaterialAndUvs) {
   perf::test::TempDir dir;
   WriteStreamAtomically(dir / "mesh.obj", [&](std::ostream& s) { WriteTexturedObj(s, t, "mesh.mtl"); });
   WriteStreamAtomically(dir / "mesh.mtl", [&](std::ostream& s) { WriteMtl(s, "mesh.png"); });
-  WriteFileAtomically(dir / "mesh.png", TexturePng(t));
-  const std::string file = (dir / "mesh.obj").string();
-  const perf::test::CommandResult info = perf::test::RunCommand("assimp info '" + file + "'");
-  ASSERT_EQ(info.exit_code, 0) << info.output;
-  EXPECT_EQ(Count(info.output, "Faces:"), static_cast<long long>(t.mesh.triangles.size())) << info.output;
-  EXPECT_EQ(Count(info.output, "Materials:"), 1) << info.output;
-  const std::string xml = (dir / "mesh.xml").string();
-  ASSERT_EQ(perf::test::RunCommand("assimp dump '" + file + "' '" + xml + "' -x").exit_code, 0);
-  const std::string text = ReadFileToString(xml);
-  EXPECT_NE(text.find("mesh.png"), std::string::npos) << "the material names no texture";
-  const size_t at = text.find("<TextureCoords");
-  ASSERT_NE(at, std::string::npos) << "no texture coordinates read";
-  // The coordinates: pairs "u v" (num_components="2") up to the closing tag, each in [0, 1].
-  const size_t begin = text.find('>', at) + 1, end = text.find("</TextureCoords>", begin);
-  EXPECT_NE(text.substr(at, begin - at).find("num_components=\"2\""), std::string::npos);
-  std::istringstream values(text.substr(begin, end - begin));
-  int64_t count = 0, outside = 0;
-  for (double u, v; values >> u >> v; ++count) outside += u < 0 || u > 1 || v < 0 || v > 1;
-  EXPECT_EQ(count, 3 * static_cast<int64_t>(t.mesh.triangles.size()));
-  EXPECT_EQ(outside, 0);
+  const std::string png = TexturePng(t);
+  WriteFileAtomically(dir / "mesh.png", png);
+  WriteStreamAtomically(dir / "mesh.glb", [&](std::ostream& s) { WriteGlb(s, t.mesh, t.uvs, png); });
+  for (const char* name : {"mesh.obj", "mesh.glb"}) {
+    SCOPED_TRACE(name);
+    const std::string file = (dir / name).string();
+    const perf::test::CommandResult info = perf::test::RunCommand("assimp info '" + file + "'");
+    ASSERT_EQ(info.exit_code, 0) << info.output;
+    EXPECT_EQ(Count(info.output, "Faces:"), static_cast<long long>(t.mesh.triangles.size())) << info.output;
+    EXPECT_EQ(Count(info.output, "Materials:"), 1) << info.output;
+    const bool glb = std::string(name) == "mesh.glb";
+    if (glb) {
+      EXPECT_EQ(Count(info.output, "Textures \\(embed.\\):"), 1) << info.output;
+    }
+    const std::string xml = (dir / (std::string(name) + ".xml")).string();
+    ASSERT_EQ(perf::test::RunCommand("assimp dump '" + file + "' '" + xml + "' -x").exit_code, 0);
+    const std::string text = ReadFileToString(xml);
+    if (!glb) {
+      EXPECT_NE(text.find("mesh.png"), std::string::npos) << "the material names no texture";
+    }
+    const size_t at = text.find("<TextureCoords");
+    ASSERT_NE(at, std::string::npos) << "no texture coordinates read";
+    // The coordinates: pairs "u v" (num_components="2") up to the closing tag, each in [0, 1].
+    const size_t begin = text.find('>', at) + 1, end = text.find("</TextureCoords>", begin);
+    EXPECT_NE(text.substr(at, begin - at).find("num_components=\"2\""), std::string::npos);
+    std::istringstream values(text.substr(begin, end - begin));
+    int64_t count = 0, outside = 0;
+    for (double u, v; values >> u >> v; ++count) outside += u < 0 || u > 1 || v < 0 || v > 1;
+    EXPECT_EQ(count, 3 * static_cast<int64_t>(t.mesh.triangles.size()));
+    EXPECT_EQ(outside, 0);
+  }
 }
 
 }  // namespace
