@@ -18,15 +18,17 @@ INCLUDE = re.compile(r'^\s*#\s*include\s+"recon_cuda/([a-z_]+)/')
 CONTROL = re.compile(r"^\s*(if|for|while|switch|catch|do|else|return|namespace|struct|class|enum|union)\b")
 
 
+FOLDERS = ["common", "workspace", "sfm_import", "recon_cuda", "export", "pipeline", "bench", "fuzz", "tests"]
+
+
 def tracked_sources():
-    """The sources git tracks (and those added but not committed); every source under the
-    project's own folders where git is not there."""
+    """The sources in the project's own folders that git tracks (and those added but not yet
+    committed); every source there where git is not available."""
     try:
-        out = subprocess.run(["git", "ls-files", "--cached", "--others", "--exclude-standard"], cwd=ROOT,
-                             capture_output=True, text=True, check=True).stdout.split()
+        out = subprocess.run(["git", "ls-files", "--cached", "--others", "--exclude-standard", "--", *FOLDERS],
+                             cwd=ROOT, capture_output=True, text=True, check=True).stdout.split()
     except (OSError, subprocess.CalledProcessError):
-        folders = ["common", "workspace", "sfm_import", "recon_cuda", "export", "pipeline", "bench", "fuzz", "tests"]
-        out = [str(p.relative_to(ROOT)) for f in folders for p in (ROOT / f).rglob("*")]
+        out = [str(p.relative_to(ROOT)) for f in FOLDERS for p in (ROOT / f).rglob("*")]
     return sorted(p for p in out if SOURCE.search(p) and (ROOT / p).is_file())
 
 
