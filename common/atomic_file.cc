@@ -122,13 +122,18 @@ void EnsureWritableDirectory(const fs::path& dir) {
   }
 }
 
-void CheckRegularFile(const fs::path& path) {
-  struct stat st {};
-  if (::stat(path.c_str(), &st) != 0) throw IoError(path.string(), StrCat("cannot open for reading: ", Errno()));
+// Throws InputError naming `path` unless `st` (its status) is a regular file's.
+static void RequireRegular(const fs::path& path, const struct stat& st) {
   if (!S_ISREG(st.st_mode)) {
     throw InputError(path.string(), "", "", "not a regular file (a device, FIFO or folder)",
                      "pass the path of the file itself");
   }
+}
+
+void CheckRegularFile(const fs::path& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) throw IoError(path.string(), StrCat("cannot open for reading: ", Errno()));
+  RequireRegular(path, st);
 }
 
 std::string ReadFileToString(const fs::path& path) {
@@ -138,10 +143,7 @@ std::string ReadFileToString(const fs::path& path) {
   if (!fd.valid()) throw IoError(path.string(), StrCat("cannot open for reading: ", Errno()));
   struct stat st {};
   if (::fstat(fd.get(), &st) != 0) throw IoError(path.string(), "cannot read its size: " + Errno());
-  if (!S_ISREG(st.st_mode)) {
-    throw InputError(path.string(), "", "", "not a regular file (a device, FIFO or folder)",
-                     "pass the path of the file itself");
-  }
+  RequireRegular(path, st);
   std::string data(static_cast<size_t>(st.st_size), '\0');
   size_t done = 0;
   while (done < data.size()) {

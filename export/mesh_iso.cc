@@ -117,17 +117,20 @@ IsoChoice ChooseIsoAndMesh(const recon::Checkpoint& checkpoint, const MeshOption
   IsoChoice choice;
   choice.automatic = automatic;
   MeshOptions o = options;
+  // An empty mesh scores 0 against views, without drawing it.
+  const auto score = [&](const Mesh& m) {
+    return m.triangles.empty() ? (views.masks.empty() ? -1.0 : 0.0) : SilhouetteIou(m, views);
+  };
   if (!automatic) {
     *mesh = ExtractMesh(checkpoint, o);
     choice.iso = o.iso_opacity;
-    choice.silhouette_iou = mesh->triangles.empty() ? (views.masks.empty() ? -1.0 : 0.0) : SilhouetteIou(*mesh, views);
+    choice.silhouette_iou = score(*mesh);
   } else {
     double best = -2;
     for (double iso : IsoLadder()) {
       o.iso_opacity = iso;
       Mesh candidate = ExtractMesh(checkpoint, o);
-      const double iou = candidate.triangles.empty() ? (views.masks.empty() ? -1.0 : 0.0)
-                                                     : SilhouetteIou(candidate, views);
+      const double iou = score(candidate);
       choice.tried.push_back({iso, iou, static_cast<int64_t>(candidate.triangles.size())});
       // Without views to judge by, the first level that gives a surface; with them, a surface
       // rather than none where both score alike.

@@ -109,13 +109,18 @@ StepResult RunColmapStep(const fs::path& colmap, const std::vector<std::string>&
 // --------------------------------------------------------------------------------------------
 // Progress parsers for the three steps (COLMAP 3.8 output).
 
-ProgressParser ExtractionParser() {
-  static const std::regex re(R"(Processed file \[(\d+)/(\d+)\])");
-  return [](const std::string& line) -> std::optional<std::string> {
+// "<done>/<total> images" from the two numbers `re` captures.
+static ProgressParser ImageCountParser(const std::regex& re) {
+  return [&re](const std::string& line) -> std::optional<std::string> {
     std::smatch m;
     if (!std::regex_search(line, m, re)) return std::nullopt;
     return StrCat(m[1].str(), "/", m[2].str(), " images");
   };
+}
+
+ProgressParser ExtractionParser() {
+  static const std::regex re(R"(Processed file \[(\d+)/(\d+)\])");
+  return ImageCountParser(re);
 }
 
 ProgressParser ExhaustiveParser() {
@@ -130,11 +135,7 @@ ProgressParser ExhaustiveParser() {
 
 ProgressParser SequentialParser() {
   static const std::regex re(R"(Matching image \[(\d+)/(\d+)\])");
-  return [](const std::string& line) -> std::optional<std::string> {
-    std::smatch m;
-    if (!std::regex_search(line, m, re)) return std::nullopt;
-    return StrCat(m[1].str(), "/", m[2].str(), " images");
-  };
+  return ImageCountParser(re);
 }
 
 ProgressParser MapperParser(int num_images) {

@@ -3,13 +3,17 @@
 #pragma once
 
 #include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <array>
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <random>
 #include <string>
+#include <thread>
 
 namespace perf::test {
 
@@ -64,5 +68,25 @@ inline CommandResult RunCommand(const std::string& cmd) {
 }
 
 inline std::string PerfBinary() { return std::string(PERF_BINARY_DIR) + "/perf"; }
+
+// Starts `command` (a shell command line, its output discarded) in the background; stops it with
+// `sig` `delay_ms` after `sign` exists (or after 5 minutes without it), and returns its wait status.
+inline int StopWhenExists(const std::string& command, const std::filesystem::path& sign, int sig,
+                          int delay_ms = 300) {
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::execl("/bin/sh", "sh", "-c", ("exec " + command + " > /dev/null 2>&1").c_str(), static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::minutes(5);
+  while (!std::filesystem::exists(sign) && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(delay_ms));
+  ::kill(pid, sig);
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  return status;
+}
 
 }  // namespace perf::test

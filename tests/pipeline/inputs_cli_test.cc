@@ -156,21 +156,9 @@ TEST(InputsCliPlain, UnreadablePhotosAreNamedBeforeSfm) {
 // Ctrl-C stops a stand-alone perf reconstruct at a safe point (exit 130); the checkpoints are
 // the last good ones.
 TEST_F(InputsCli, CtrlCStopsAStandAloneReconstruct) {
-  const pid_t pid = ::fork();
-  if (pid == 0) {
-    const std::string cmd = test::PerfBinary() + " reconstruct -q " + ws_.string() +
-                            " --levels 1 --start-resolution 16 --iterations 400 > /dev/null 2>&1";
-    ::execl("/bin/sh", "sh", "-c", ("exec " + cmd).c_str(), static_cast<char*>(nullptr));
-    ::_exit(127);
-  }
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::minutes(2);
-  while (!fs::exists(ws_ / "recon" / "log.jsonl") && std::chrono::steady_clock::now() < deadline) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  }
-  std::this_thread::sleep_for(std::chrono::milliseconds(500));
-  ::kill(pid, SIGINT);
-  int status = 0;
-  ::waitpid(pid, &status, 0);
+  const int status = test::StopWhenExists(test::PerfBinary() + " reconstruct -q " + ws_.string() +
+                                              " --levels 1 --start-resolution 16 --iterations 400",
+                                          ws_ / "recon" / "log.jsonl", SIGINT, 500);
   ASSERT_TRUE(WIFEXITED(status)) << "Ctrl-C should stop perf reconstruct at a safe point, not kill it";
   EXPECT_EQ(WEXITSTATUS(status), 130);
   EXPECT_FALSE(fs::exists(ws_ / "recon" / "level_0.perfvol")) << "stopped too late to test anything";

@@ -87,28 +87,9 @@ TEST_F(RunCli, RunsEveryStageThenSkipsWhatIsUpToDate) {
   EXPECT_NE(r.output.find("--preset"), std::string::npos) << r.output;
 }
 
-// Starts `command` in the background; stops it with `sig` 300 ms after `sign` exists, and returns
-// its exit status.
-int StopWhenExists(const std::string& command, const fs::path& sign, int sig) {
-  const pid_t pid = ::fork();
-  if (pid == 0) {
-    ::execl("/bin/sh", "sh", "-c", ("exec " + command + " > /dev/null 2>&1").c_str(), static_cast<char*>(nullptr));
-    ::_exit(127);
-  }
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::minutes(5);
-  while (!fs::exists(sign) && std::chrono::steady_clock::now() < deadline) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  }
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));
-  ::kill(pid, sig);
-  int status = 0;
-  ::waitpid(pid, &status, 0);
-  return status;
-}
-
 // Stops `perf run` with `sig` once level 0's checkpoint is written (the solve is then inside level 1).
 int StopDuringLevel1(const std::string& command, const fs::path& ws, int sig) {
-  return StopWhenExists(command, recon::CheckpointPath(ws, 0), sig);
+  return test::StopWhenExists(command, recon::CheckpointPath(ws, 0), sig);
 }
 
 TEST_F(RunCli, CtrlCStopsCleanlyAndTheNextRunResumes) {
@@ -145,7 +126,8 @@ TEST_F(RunCli, ForcedRunStoppedBeforeItsFirstLevelLeavesThePreviousResult) {
   const fs::path level0 = recon::CheckpointPath(ws_, 0), summary = ws_ / "recon" / "recon.json";
   const std::string checkpoint = ReadFileToString(level0), recon_json = ReadFileToString(summary);
 
-  const int status = StopWhenExists(Run("--force --levels 1 --iterations 400"), ws_ / "recon" / "previous", SIGINT);
+  const int status =
+      test::StopWhenExists(Run("--force --levels 1 --iterations 400"), ws_ / "recon" / "previous", SIGINT);
   ASSERT_TRUE(WIFEXITED(status)) << "Ctrl-C should stop perf at a safe point, not kill it";
   EXPECT_EQ(WEXITSTATUS(status), 130);
   ASSERT_TRUE(fs::exists(level0)) << "the forced run destroyed the last good result";
