@@ -100,7 +100,7 @@ class CpuBackend final : public Backend {
   std::array<double, kParamKinds> SumByKind(VecId v) const override { return vectors_.SumByKind(v, level_.shape); }
   void Project(VecId x) override { vectors_.Project(x, level_.shape); }
   void HoldParameters(VecId x, VecId g, VecId free, bool bounds) override {
-    vectors_.HoldParameters(x, g, free, level_.shape, level_.fixed_shells, bounds);
+    vectors_.HoldParameters(x, g, free, level_.shape, level_.fixed_shells, level_.fixed_poses, bounds);
   }
   void Multiply(VecId y, VecId m) override { vectors_.Multiply(y, m); }
   // Drops the recorded samples that reach no free parameter with a non-zero value (jacobian.h

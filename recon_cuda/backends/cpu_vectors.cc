@@ -136,13 +136,14 @@ void CpuVectors::Project(VecId x, const VolumeShape& shape) {
 }
 
 void CpuVectors::HoldParameters(VecId x, VecId g, VecId free, const VolumeShape& shape, bool fixed_shells,
+                                bool fixed_poses,
                                 bool bounds) {
   const float* px = (*this)[x].data();
   float* pg = (*this)[g].data();
   float* pf = (*this)[free].data();
   ForChunks([&](int64_t b, int64_t e) {
     for (int64_t i = b; i < e; ++i) {
-      const bool held = HeldParameter(KindOf(shape, i), px[i], pg[i], fixed_shells, bounds);
+      const bool held = HeldParameter(KindOf(shape, i), px[i], pg[i], fixed_shells, bounds, fixed_poses);
       pf[i] = held ? 0.f : 1.f;
       if (held) pg[i] = 0.f;
     }

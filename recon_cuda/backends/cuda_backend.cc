@@ -204,7 +204,7 @@ class CudaBackend final : public Backend {
   }
   void HoldParameters(VecId x, VecId g, VecId free, bool bounds) override {
     cuda::HoldParameters(ptr(x), ptr(g), ptr(free), n(), level_.shape.Layout(),
-                         level_.fixed_shells, bounds);
+                         level_.fixed_shells, bounds, level_.fixed_poses);
   }
   void Multiply(VecId y, VecId m) override { cuda::Multiply(ptr(y), ptr(m), n()); }
   // Nothing is recorded: JtJpKernel skips the samples on the fly (jacobian.h SkippableSample).

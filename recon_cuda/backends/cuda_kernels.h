@@ -88,7 +88,7 @@ void AxpyDiag(float* y, float a, const float* d, const float* x, int64_t n);  //
 void Project(float* x, int64_t n, const ParamLayout& layout);
 // backend.h HoldParameters and Multiply.
 void HoldParameters(const float* x, float* g, float* free, int64_t n, const ParamLayout& layout,
-                    bool fixed_shells, bool bounds);
+                    bool fixed_shells, bool bounds, bool fixed_poses);
 void Multiply(float* y, const float* m, int64_t n);
 void AdamStep(float* x, const float* g, float* m, float* v, const AdamCoefficients& c, int64_t n,
               const ParamLayout& layout);

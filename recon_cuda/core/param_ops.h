@@ -17,19 +17,25 @@ enum class ParamKind {
   kShellOpacity,
   kExposureGain,
   kExposureOffset,
-  kGridSh
+  kGridSh,
+  kPoseRotation,
+  kPoseCentre
 };
-inline constexpr int kParamKinds = 7;
+inline constexpr int kParamKinds = 9;
 
 // Where each part of the parameter vector starts (layout in ray_types.h; VolumeShape::Layout).
 struct ParamLayout {
   int64_t grid_params = 0;     // the shells' texels (GridParamCount(n), or the sparse grid's)
   int64_t sh_start = 0;        // the grid's spherical harmonics (== exposure_start without them)
-  int64_t exposure_start = 0;  // the photos' exposures (== the parameter count without them)
+  int64_t exposure_start = 0;  // the photos' exposures (== pose_start without them)
+  int64_t pose_start = 0;      // the photos' pose corrections (== the parameter count without them)
 };
 
 // What parameter i is. Padding zeros count with their group (they never move).
 PERF_HD_INLINE ParamKind KindOfParam(const ParamLayout& l, int64_t i) {
+  if (i >= l.pose_start) {
+    return (i - l.pose_start) % kPoseValues < 4 ? ParamKind::kPoseRotation : ParamKind::kPoseCentre;
+  }
   if (i >= l.exposure_start) {
     return (i - l.exposure_start) % kExposureValues < 4 ? ParamKind::kExposureGain : ParamKind::kExposureOffset;
   }
@@ -42,17 +48,25 @@ PERF_HD_INLINE ParamKind KindOfParam(const ParamLayout& l, int64_t i) {
 
 // The valid range of a kind: sigma >= 0, colours and opacities in [0, 1], a photo's gain 1 + gamma
 // in [0.5, 2] and its offset in [-0.5, 0.5] (wider would mean a badly exposed or wrong photo), a
-// spherical-harmonic coefficient in [-1, 1] (a band then moves the colour by up to 0.49 or 1.09).
+// spherical-harmonic coefficient in [-1, 1] (a band then moves the colour by up to 0.49 or 1.09),
+// a pose's rotation within 0.1 rad (5.7 degrees) per axis and its centre within a quarter of the
+// box's shortest side per axis (larger corrections mean a wrong registration, not a refinement).
+inline constexpr float kMaxPoseRotation = 0.1f;
+inline constexpr float kMaxPoseCentre = 0.25f;
 PERF_HD_INLINE float LowerBound(ParamKind kind) {
   return kind == ParamKind::kExposureGain || kind == ParamKind::kExposureOffset ? -0.5f
          : kind == ParamKind::kGridSh                                            ? -1.f
+         : kind == ParamKind::kPoseRotation                                      ? -kMaxPoseRotation
+         : kind == ParamKind::kPoseCentre                                        ? -kMaxPoseCentre
                                                                                  : 0.f;
 }
 PERF_HD_INLINE float UpperBound(ParamKind kind) {
   return kind == ParamKind::kGridDensity ? 3.0e38f
          : kind == ParamKind::kExposureGain ? 1.f
          : kind == ParamKind::kExposureOffset ? 0.5f
-                                              : 1.f;
+         : kind == ParamKind::kPoseRotation ? kMaxPoseRotation
+         : kind == ParamKind::kPoseCentre ? kMaxPoseCentre
+                                          : 1.f;
 }
 PERF_HD_INLINE float ProjectToValid(ParamKind kind, float v) { return Clamp(v, LowerBound(kind), UpperBound(kind)); }
 
@@ -63,8 +77,11 @@ PERF_HD_INLINE float ProjectToValid(ParamKind kind, float v) { return Clamp(v, L
 // gradient points out of the range would only be moved out by a descent step and projected
 // back; leaving it in the system lets CG spend the step on that move and shape every other
 // parameter's step around it. Held parameters are left out of that iteration's system.
-PERF_HD_INLINE bool HeldParameter(ParamKind kind, float x, float g, bool fixed_shells, bool bounds) {
+// fixed_poses: the photos' pose corrections are held too (a level that does not refine them).
+PERF_HD_INLINE bool HeldParameter(ParamKind kind, float x, float g, bool fixed_shells, bool bounds,
+                                  bool fixed_poses = false) {
   if (fixed_shells && (kind == ParamKind::kShellColour || kind == ParamKind::kShellOpacity)) return true;
+  if (fixed_poses && (kind == ParamKind::kPoseRotation || kind == ParamKind::kPoseCentre)) return true;
   if (!bounds) return false;
   if (x <= LowerBound(kind) && g > 0) return true;
   return x >= UpperBound(kind) && g < 0;
@@ -81,7 +98,10 @@ struct AdamCoefficients {
 PERF_HD_INLINE void AdamUpdate(const AdamCoefficients& a, ParamKind kind, float g, float* x, float* m, float* v) {
   *m = a.beta1 * *m + (1 - a.beta1) * g;
   *v = a.beta2 * *v + (1 - a.beta2) * g * g;
-  const float lr = kind == ParamKind::kGridDensity ? a.lr_density
+  // Adam does not refine poses (--refine-poses is a Gauss-Newton option): their rate is 0.
+  const bool pose = kind == ParamKind::kPoseRotation || kind == ParamKind::kPoseCentre;
+  const float lr = pose                                ? 0.f
+                   : kind == ParamKind::kGridDensity  ? a.lr_density
                    : kind == ParamKind::kShellOpacity ? a.lr_opacity
                                                        : a.lr_colour;
   *x -= lr * (*m * a.c1) / (Sqrt(*v * a.c2) + a.epsilon);

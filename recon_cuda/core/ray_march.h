@@ -47,6 +47,8 @@ struct VolumeView {
   const int32_t* brick_slot = nullptr;
   int64_t active_bricks = 0;
   int sh_degree = 0;  // spherical harmonics of the grid's colour (ray_types.h ShParam); 0: none
+  int exposures = 0;  // photos whose exposures follow the spherical harmonics (ExposureParam)
+  int poses = 0;      // photos whose pose corrections follow the exposures (PoseParam); 0: none
 
   // Where the shells start in params.
   PERF_HD_INLINE int64_t GridParams() const {
@@ -58,6 +60,10 @@ struct VolumeView {
   PERF_HD_INLINE int64_t ExposureStart() const {
     return ShStart() + (sh_degree > 0 ? ShStride(sh_degree) * (GridParams() / 4) : 0);
   }
+  // Where the photos' pose corrections start in params (ray_types.h PoseParam).
+  PERF_HD_INLINE int64_t PoseStart() const { return ExposureStart() + static_cast<int64_t>(kExposureValues) * exposures; }
+  // World units per unit of a pose's centre offset: the box's shortest side.
+  PERF_HD_INLINE T PoseScale() const { return Min(size.x, Min(size.y, size.z)); }
 };
 
 // A ray in two coordinate systems sharing one parameter t, which is world distance from the
@@ -84,14 +90,20 @@ PERF_HD_INLINE void PixelRay(const PinholeCamera<T>& cam, int px, int py, T jx, 
                             m[8] * dc.x + m[9] * dc.y + m[10] * dc.z});
 }
 
+// Sets the ray's grid-unit copy from its box-local origin and direction (box size `size`).
+template <class T>
+PERF_HD_INLINE void SetGridRay(Vec3<T> size, int n, BoxRay<T>* r) {
+  const Vec3<T> scale = Div(Vec3<T>{T(n), T(n), T(n)}, size);
+  r->grid_origin = Mul(r->origin + size * T(0.5), scale);
+  r->grid_dir = Mul(r->dir, scale);
+}
+
 template <class T>
 PERF_HD_INLINE BoxRay<T> ToBoxRay(const BoxFrame<T>& box, int n, Vec3<T> world_origin, Vec3<T> world_dir) {
   BoxRay<T> r;
   r.origin = MulMatTransposed(box.world_from_box, world_origin - box.center);
   r.dir = MulMatTransposed(box.world_from_box, Normalized(world_dir));
-  const Vec3<T> scale = Div(Vec3<T>{T(n), T(n), T(n)}, box.size);
-  r.grid_origin = Mul(r.origin + box.size * T(0.5), scale);
-  r.grid_dir = Mul(r.dir, scale);
+  SetGridRay(box.size, n, &r);
   return r;
 }
 

@@ -112,6 +112,7 @@ struct SampleRecord {
   T v[4];   // (r, g, b, sigma) interpolated at t
   T trans;  // T_i, the transmittance in front of the sample
   T keep;   // exp(-sigma_i delta_i) = 1 - alpha_i
+  int k;    // the sample's march index (its jitter's id)
 };
 
 template <class T>
@@ -186,7 +187,7 @@ PERF_HD RayOutput<T> Forward(const VolumeView<T>& vol, const BoxRay<T>& ray, con
     const T keep = Exp(-od);
     const T weight = trans * (1 - keep);
     for (int c = 0; c < 3; ++c) out.h[c] += weight * v[c];
-    if (record) record[taken] = {gs, st.t, st.delta, {v[0], v[1], v[2], v[3]}, trans, keep};
+    if (record) record[taken] = {gs, st.t, st.delta, {v[0], v[1], v[2], v[3]}, trans, keep, k};
     ++taken;
     depth += od;
     trans *= keep;
@@ -234,7 +235,8 @@ struct ShellPartials {
 //   visit.Shell(k, const CubeCoord<T>&, const TexelSample<T>&, const ShellPartials<T>&)
 //                                                                    for each shell hit, outermost first;
 //   visit.Sample(k, const MarchStep<T>&, const GridSample<T>&, const SamplePartials<T>&)
-//                                                                    for each sample, last first.
+//                                                                    for each sample, last first
+//                                                                    (k: its march index).
 // A parameter can be reached several times per ray (neighbouring samples share cells; border
 // cells repeat within one sample); the row of J is the SUM of those contributions.
 // record: what Forward recorded for this ray (same vol, ray and jit), or nullptr to recompute.
@@ -305,7 +307,7 @@ PERF_HD void Backward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitt
     sp.dc = ti * (1 - keep);
     for (int c = 0; c < 3; ++c) sp.ds[c] = st.delta * (ti * keep * v[c] - g[c]);
     sp.dl = dl_per_delta * st.delta;
-    visit.Sample(k, st, gs, sp);
+    visit.Sample(record ? record[k].k : k, st, gs, sp);
     for (int c = 0; c < 3; ++c) g[c] += sp.dc * v[c];
   }
 }

@@ -20,6 +20,10 @@ PERF_HD_INLINE double Floor(double x) { return floor(x); }
 PERF_HD_INLINE float Ceil(float x) { return ceilf(x); }
 PERF_HD_INLINE double Ceil(double x) { return ceil(x); }
 PERF_HD_INLINE float Abs(float x) { return fabsf(x); }
+PERF_HD_INLINE float Sin(float x) { return sinf(x); }
+PERF_HD_INLINE double Sin(double x) { return sin(x); }
+PERF_HD_INLINE float Cos(float x) { return cosf(x); }
+PERF_HD_INLINE double Cos(double x) { return cos(x); }
 PERF_HD_INLINE double Abs(double x) { return fabs(x); }
 template <class T>
 PERF_HD_INLINE T Min(T a, T b) { return b < a ? b : a; }
@@ -108,7 +112,8 @@ PERF_HD_INLINE T Uniform01(uint32_t seed, uint32_t ray, uint32_t sample) {
 //   after the grid, shell s (0 innermost), face f (see shells.h), texel (u, v) holds (r, g, b, a)
 //   at 4 N^3 + 4 ((s 6 + f) M^2 + v M + u) + ch;
 //   after the shells, the grid's spherical harmonics beyond the constant when solved (ShParam),
-//   then the photos' exposures when solved (ExposureParam).
+//   then the photos' exposures when solved (ExposureParam), then their poses when refined
+//   (PoseParam).
 // 64-bit indices: 4 N^3 overflows 32 bits from N = 1024.
 PERF_HD_INLINE int64_t GridCell(int n, int i, int j, int k) {
   return (static_cast<int64_t>(k) * n + j) * n + i;
@@ -166,6 +171,17 @@ PERF_HD_INLINE int ShBasis(int degree, Vec3<T> d, T* y) {
 inline constexpr int kExposureValues = 8;
 PERF_HD_INLINE int64_t ExposureParam(int64_t exposure_start, int slot) {
   return exposure_start + static_cast<int64_t>(kExposureValues) * slot;
+}
+
+// Per-photo pose correction (--refine-poses), after the exposures: training photo `slot` holds
+// kPoseValues values at pose_start + 8 slot: a rotation vector omega (3), 0, then the camera
+// centre's offset (3), 0, both in the box frame. The photo's rays leave from o + s c (s: the
+// box's shortest side, VolumeView::PoseScale, so that c is in box units) in the direction
+// exp([omega]x) d, (o, d) the imported camera's box-frame ray (pose.h ApplyPose). The zeros keep
+// each group of 4 aligned, as the exposures' do.
+inline constexpr int kPoseValues = 8;
+PERF_HD_INLINE int64_t PoseParam(int64_t pose_start, int slot) {
+  return pose_start + static_cast<int64_t>(kPoseValues) * slot;
 }
 
 // Brick-sparse grids (DESIGN.md "Representation"): the N^3 cells are grouped in bricks

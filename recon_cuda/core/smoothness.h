@@ -19,11 +19,16 @@ namespace perf::recon {
 // The weight w of each kind's pairs (0: no smoothness for that kind). The photos' exposures have
 // no neighbours: their weight is a prior's, the residual sqrt(w) x_i (gain 1, offset 0), which
 // fixes the gauge (all gains against all colours) and keeps the transforms near the identity.
+// The photos' pose corrections have a prior of the same form toward the imported pose, one
+// weight for the rotations and one for the centres: it holds the set of cameras where the photos
+// do not say otherwise, and fixes the gauge (all cameras moving together against the volume).
 struct SmoothnessWeights {
   float grid_colour = 0, grid_density = 0, shell_colour = 0, shell_opacity = 0, exposure = 0;
+  float pose_rotation = 0, pose_centre = 0;
 
   PERF_HD_INLINE bool Any() const {
-    return grid_colour > 0 || grid_density > 0 || shell_colour > 0 || shell_opacity > 0 || exposure > 0;
+    return grid_colour > 0 || grid_density > 0 || shell_colour > 0 || shell_opacity > 0 || exposure > 0 ||
+           pose_rotation > 0 || pose_centre > 0;
   }
   PERF_HD_INLINE float Of(ParamKind k) const {
     switch (k) {
@@ -32,6 +37,8 @@ struct SmoothnessWeights {
       case ParamKind::kGridDensity: return grid_density;
       case ParamKind::kShellColour: return shell_colour;
       case ParamKind::kShellOpacity: return shell_opacity;
+      case ParamKind::kPoseRotation: return pose_rotation;
+      case ParamKind::kPoseCentre: return pose_centre;
       default: return exposure;
     }
   }
@@ -130,8 +137,8 @@ PERF_HD_INLINE int ParamNeighbours(const SmoothnessLayout& l, int64_t i, int64_t
 
 // Parameter i's row of the term at v: *lap = w sum_j (v_i - v_j) (row i of L v), *degree = w
 // times the number of neighbours (L's diagonal), and the return value is i's share of
-// v^T L v / 2 (each pair's w (v_a - v_b)^2 / 2 split between its two ends). An exposure's row is
-// its prior's: w v_i, w and w v_i^2 / 2.
+// v^T L v / 2 (each pair's w (v_a - v_b)^2 / 2 split between its two ends). An exposure's or a
+// pose's row is its prior's: w v_i, w and w v_i^2 / 2.
 PERF_HD_INLINE double SmoothnessRow(const SmoothnessLayout& l, const SmoothnessWeights& weights, const float* v,
                                     int64_t i, float* lap, float* degree) {
   *lap = 0;

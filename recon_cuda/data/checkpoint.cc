@@ -20,7 +20,8 @@ constexpr char kMagic[8] = {'P', 'E', 'R', 'F', 'V', 'O', 'L', '\0'};
 constexpr uint32_t kHeaderBytesV1 = 8 + 4 + 4 + 6 * 4 + (3 + 9 + 3 + 3 + kMaxShells) * 8 + 8 + 8;
 static_assert(kHeaderBytesV1 == 264);
 constexpr uint32_t kHeaderBytesV2 = kHeaderBytesV1 + 8;  // + the brick count
-constexpr uint32_t kHeaderBytes = kHeaderBytesV2 + 8;    // + the exposure count and SH degree (version 3)
+constexpr uint32_t kHeaderBytesV3 = kHeaderBytesV2 + 8;  // + the exposure count and SH degree
+constexpr uint32_t kHeaderBytes = kHeaderBytesV3 + 8;    // + the refined poses' count and 4 zero bytes (version 4)
 constexpr int64_t kMaxExposures = 1 << 20;
 // The placement's sane range: a box side from a micrometre in metres to a million km, the shells
 // within it; beyond it the exports' transforms overflow or vanish.
@@ -170,6 +171,8 @@ void WriteCheckpoint(std::ostream& out, const Checkpoint& c) {
   Put(&h, static_cast<int64_t>(c.shape.bricks ? static_cast<int64_t>(bricks.size()) : -1));
   Put(&h, static_cast<int32_t>(c.shape.exposures));
   Put(&h, static_cast<int32_t>(c.shape.sh_degree));
+  Put(&h, static_cast<int32_t>(c.shape.poses));
+  Put(&h, int32_t{0});
   PERF_CHECK(h.size() == kHeaderBytes);
   out.write(h.data(), static_cast<std::streamsize>(h.size()));
   out.write(reinterpret_cast<const char*>(bricks.data()), static_cast<std::streamsize>(bricks.size() * sizeof(uint32_t)));
@@ -188,7 +191,10 @@ Checkpoint ReadCheckpoint(std::istream& in, const std::string& name) {
                      "re-run perf reconstruct with this version of perf");
   }
   const uint32_t header = r.Get<uint32_t>("header bytes");
-  const uint32_t expected_header = version == 1 ? kHeaderBytesV1 : version == 2 ? kHeaderBytesV2 : kHeaderBytes;
+  const uint32_t expected_header = version == 1   ? kHeaderBytesV1
+                                   : version == 2 ? kHeaderBytesV2
+                                   : version == 3 ? kHeaderBytesV3
+                                                  : kHeaderBytes;
   if (header != expected_header) r.Bad("header bytes", std::to_string(header), StrCat("expected ", expected_header));
   Checkpoint c;
   c.level = r.Get<int32_t>("level");
@@ -252,6 +258,10 @@ Checkpoint ReadCheckpoint(std::istream& in, const std::string& name) {
   const int32_t sh_degree = version < 3 ? 0 : r.Get<int32_t>("sh_degree");
   if (sh_degree < 0 || sh_degree > 2) r.Bad("sh_degree", StrCat(sh_degree), "must be 0, 1 or 2");
   c.shape.sh_degree = sh_degree;
+  const int32_t poses = version < 4 ? 0 : r.Get<int32_t>("poses");
+  if (poses < 0 || poses > kMaxExposures) r.Bad("poses", StrCat(poses), StrCat("must be 0 to ", kMaxExposures, " photos"));
+  c.shape.poses = poses;
+  if (version >= 4 && r.Get<int32_t>("reserved") != 0) r.Bad("reserved", "", "must be 0");
   // The parameter count the shape implies, before the brick list is read (it needs only B).
   const int64_t grid_params = num_bricks >= 0 ? SparseGridParams(num_bricks) : GridParamCount(c.shape.n);
   const int64_t expected = c.shape.ParamCountFor(grid_params);

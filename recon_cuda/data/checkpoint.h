@@ -2,10 +2,11 @@
 // self-describing so that export and render need nothing else (the box and shells in world
 // units travel with the values).
 //
-// Format (version 3, little-endian):
+// Format (version 4, little-endian):
 //   char[8]  magic "PERFVOL\0"
-//   u32      version (3; versions 1, always dense, and 2, without exposures, are still read)
-//   u32      header bytes (this fixed header: 280; version 2: 272; version 1: 264)
+//   u32      version (4; versions 1, always dense, 2, without exposures, and 3, without poses, are
+//            still read)
+//   u32      header bytes (this fixed header: 288; version 3: 280; version 2: 272; version 1: 264)
 //   i32      level, n, m, num_shells, iterations (GN iterations or Adam steps run at the level)
 //   i32      solver (0 Gauss-Newton, 1 Adam)
 //   f64[3]   box centre, f64[9] box rotation (world_from_box, row-major), f64[3] box size
@@ -15,6 +16,8 @@
 //   i64      B: -1 for a dense grid, else the number of active bricks (not in version 1)
 //   i32      photos whose exposures end the parameters (VolumeShape::exposures; from version 3)
 //   i32      degree of the grid's spherical harmonics after the shells (0 to 2; from version 3)
+//   i32      photos whose pose corrections follow the exposures (VolumeShape::poses; from version 4)
+//   i32      0 (reserved; from version 4)
 //   u32[B]   the active bricks' indices (ray_types.h BrickOf), ascending: their slot order
 //   f32[count] parameters, layout of ray_types.h
 // The reader checks every field and names the file and field on any mismatch, and checks the
@@ -30,7 +33,7 @@
 
 namespace perf::recon {
 
-inline constexpr uint32_t kCheckpointVersion = 3;
+inline constexpr uint32_t kCheckpointVersion = 4;
 
 struct Checkpoint {
   int level = 0;

@@ -46,6 +46,8 @@ VolumeView<float> MakeView(const VolumeShape& shape, const VolumeGeometry& geome
   v.m = shape.m;
   v.shell_center = geometry.shell_center;
   v.sh_degree = shape.sh_degree;
+  v.exposures = shape.exposures;
+  v.poses = shape.poses;
   for (int k = 0; k < kMaxShells; ++k) v.shell_radii[k] = k < shape.num_shells ? geometry.shell_radii[k] : 0.f;
   if (shape.bricks) {
     PERF_CHECK(shape.bricks->n == shape.n);
@@ -128,8 +130,8 @@ std::vector<float> Resample(const VolumeShape& from, std::span<const float> para
   PERF_CHECK(static_cast<int64_t>(params.size()) == from.ParamCount());
   PERF_CHECK(from.num_shells == to.num_shells);
   std::vector<float> out(static_cast<size_t>(to.ParamCount()));
-  // The photos' exposures carry over as they are (the same photos at every level).
-  if (from.exposures == to.exposures) {
+  // The photos' exposures and poses carry over as they are (the same photos at every level).
+  if (from.exposures == to.exposures && from.poses == to.poses) {
     std::copy(params.begin() + from.ExposureStart(), params.end(), out.begin() + to.ExposureStart());
   }
   const std::vector<Axis> g = AxisWeights(from.n, to.n);
@@ -194,6 +196,7 @@ std::string DescribeShape(const VolumeShape& shape) {
   }
   if (shape.sh_degree > 0) s << ", spherical harmonics of degree " << shape.sh_degree;
   if (shape.exposures > 0) s << ", exposures of " << shape.exposures << " photos";
+  if (shape.poses > 0) s << ", poses of " << shape.poses << " photos";
   return s.str();
 }
 

@@ -30,11 +30,18 @@ struct VolumeShape {
   std::shared_ptr<const BrickGrid> bricks;  // a brick-sparse grid (brick_grid.h); nullptr: dense
   int exposures = 0;   // training photos whose exposure is solved (ray_types.h ExposureParam); 0: none
   int sh_degree = 0;   // spherical harmonics of the grid's colour beyond the constant (ShParam); 0: none
+  int poses = 0;       // training photos whose pose is refined (ray_types.h PoseParam); 0: none
 
   VolumeShape() = default;
   VolumeShape(int n_, int m_, int num_shells_, std::shared_ptr<const BrickGrid> bricks_ = nullptr, int exposures_ = 0,
-              int sh_degree_ = 0)
-      : n(n_), m(m_), num_shells(num_shells_), bricks(std::move(bricks_)), exposures(exposures_), sh_degree(sh_degree_) {}
+              int sh_degree_ = 0, int poses_ = 0)
+      : n(n_),
+        m(m_),
+        num_shells(num_shells_),
+        bricks(std::move(bricks_)),
+        exposures(exposures_),
+        sh_degree(sh_degree_),
+        poses(poses_) {}
 
   bool sparse() const { return bricks != nullptr; }
   // Where the shells start: 4 n^3, or 4 values per cell of the active bricks.
@@ -46,29 +53,36 @@ struct VolumeShape {
   int64_t ShStart() const { return GridParamCount() + ShellParams(); }
   // Where the exposures start: after the spherical harmonics.
   int64_t ExposureStart() const { return ShStart() + ShParams(GridParamCount()); }
+  // Where the pose corrections start: after the exposures.
+  int64_t PoseStart() const { return ExposureStart() + static_cast<int64_t>(kExposureValues) * exposures; }
   // The parameter count with a grid of grid_params values (a checkpoint checks its count before
   // it has read its bricks).
   int64_t ParamCountFor(int64_t grid_params) const {
-    return grid_params + ShellParams() + ShParams(grid_params) + static_cast<int64_t>(kExposureValues) * exposures;
+    return grid_params + ShellParams() + ShParams(grid_params) + static_cast<int64_t>(kExposureValues) * exposures +
+           static_cast<int64_t>(kPoseValues) * poses;
   }
   int64_t ParamCount() const { return ParamCountFor(GridParamCount()); }
-  ParamLayout Layout() const { return {GridParamCount(), ShStart(), ExposureStart()}; }
+  ParamLayout Layout() const { return {GridParamCount(), ShStart(), ExposureStart(), PoseStart()}; }
   int64_t StoredCells() const { return GridParamCount() / 4; }
   int64_t ShellTexels() const { return ShellParams() / 4; }
   // The bricks holding parameters: the active ones, or every brick of a dense grid.
   int64_t StoredBricks() const { return bricks ? bricks->ActiveBricks() : BrickCount(n); }
   // The next level of the hierarchy: every resolution doubled, the grid dense, the same photos.
-  VolumeShape Doubled() const { return {2 * n, 2 * m, num_shells, nullptr, exposures, sh_degree}; }
+  VolumeShape Doubled() const { return {2 * n, 2 * m, num_shells, nullptr, exposures, sh_degree, poses}; }
   // The same resolutions with these bricks active (nullptr: dense).
   VolumeShape WithBricks(std::shared_ptr<const BrickGrid> b) const {
-    return {n, m, num_shells, std::move(b), exposures, sh_degree};
+    return {n, m, num_shells, std::move(b), exposures, sh_degree, poses};
   }
-  VolumeShape WithExposures(int photos) const { return {n, m, num_shells, bricks, photos, sh_degree}; }
-  VolumeShape WithShDegree(int degree) const { return {n, m, num_shells, bricks, exposures, degree}; }
-  VolumeShape WithShellResolution(int texels) const { return {n, texels, num_shells, bricks, exposures, sh_degree}; }
+  VolumeShape WithExposures(int photos) const { return {n, m, num_shells, bricks, photos, sh_degree, poses}; }
+  VolumeShape WithShDegree(int degree) const { return {n, m, num_shells, bricks, exposures, degree, poses}; }
+  VolumeShape WithPoses(int photos) const { return {n, m, num_shells, bricks, exposures, sh_degree, photos}; }
+  VolumeShape WithShellResolution(int texels) const {
+    return {n, texels, num_shells, bricks, exposures, sh_degree, poses};
+  }
   bool operator==(const VolumeShape& o) const {
     return n == o.n && m == o.m && num_shells == o.num_shells && exposures == o.exposures &&
-           sh_degree == o.sh_degree && (bricks == o.bricks || (bricks && o.bricks && *bricks == *o.bricks));
+           sh_degree == o.sh_degree && poses == o.poses &&
+           (bricks == o.bricks || (bricks && o.bricks && *bricks == *o.bricks));
   }
 };
 

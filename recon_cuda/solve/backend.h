@@ -60,6 +60,9 @@ struct LevelProblem {
   // The shells are constants, not variables: a known background (scene.json's background
   // colour, which RGBA photos were composited over). Solvers leave them where they start.
   bool fixed_shells = false;
+  // The photos' pose corrections (VolumeShape::poses) are held where they are at this level:
+  // they shape the rays but are not solved (HierarchyOptions::refine_poses_from).
+  bool fixed_poses = false;
 };
 
 // Whether the level's fourth residual is the alpha one (ResidualSettings::use_alpha).

@@ -9,7 +9,7 @@ namespace perf::recon {
 
 VolumeShape LevelShape(const HierarchyOptions& o, int num_shells, int level) {
   return VolumeShape{o.start_resolution << level, o.start_resolution << level, num_shells, nullptr, o.exposures,
-                     o.sh_degree};
+                     o.sh_degree, o.poses};
 }
 
 int ShellResolution(int ladder, int64_t rays, int num_shells, double min_rays_per_texel) {
@@ -21,7 +21,7 @@ int ShellResolution(int ladder, int64_t rays, int num_shells, double min_rays_pe
 
 VolumeShape NextLevelShape(const HierarchyOptions& o, const VolumeGeometry& geometry, const VolumeShape& shape,
                            std::span<const float> x, std::span<const ViewFrustum> views) {
-  const VolumeShape next = shape.Doubled().WithExposures(o.exposures).WithShDegree(o.sh_degree);
+  const VolumeShape next = shape.Doubled().WithExposures(o.exposures).WithShDegree(o.sh_degree).WithPoses(o.poses);
   if (!o.sparse || next.n % kBrickSide != 0) return next;
   return next.WithBricks(OccupiedBricks(shape, geometry, x, next.n, o.occupancy, views));
 }
@@ -54,7 +54,8 @@ std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geomet
     }
     ResidualSettings residuals = o.residuals;
     if (level < o.robust_from_level) residuals.robust_scale = 0.f;
-    const LevelProblem problem{h.shape, geometry, &rays, residuals, o.fixed_background};
+    LevelProblem problem{h.shape, geometry, &rays, residuals, o.fixed_background};
+    problem.fixed_poses = level < o.refine_poses_from;
     if (o.stop_when_out_of_memory && level > 0) {
       h.memory = backend->EstimateMemory(problem, RequiredVectors(o.solver.type));
       if (!h.memory.Fits()) {

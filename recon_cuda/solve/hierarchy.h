@@ -39,6 +39,10 @@ struct HierarchyOptions {
   int exposures = 0;
   // Spherical harmonics of the grid's colour at every level (VolumeShape::sh_degree); 0: none.
   int sh_degree = 0;
+  // Training photos whose poses the levels from refine_poses_from on refine (VolumeShape::poses);
+  // 0: none. The corrections carry over from level to level.
+  int poses = 0;
+  int refine_poses_from = 0;
   bool fixed_background = false;              // the shells are constants in `background`
   std::array<float, 3> background{1, 1, 1};  // (scene.json's background)
   bool pyramid = true;  // coarse levels fit downscaled photos (PyramidFactor)

@@ -71,7 +71,7 @@ std::string FieldOfError(const std::string& bytes) {
 TEST(CheckpointTest, RoundTripsThroughStreamAndFile) {
   const Checkpoint c = Sample();
   const std::string bytes = Bytes(c);
-  EXPECT_EQ(bytes.size(), 280 + 4 * c.params.size());
+  EXPECT_EQ(bytes.size(), 288 + 4 * c.params.size());
   std::istringstream in(bytes);
   ExpectEqual(ReadCheckpoint(in, "mem"), c);
   test::TempDir dir;
@@ -127,7 +127,7 @@ TEST(CheckpointTest, ExposuresTravelAndVersionTwoFilesReadWithout) {
   c.params.resize(c.shape.ParamCount());
   for (int k = 0; k < 3 * kExposureValues; ++k) c.params[c.shape.ExposureStart() + k] = 0.01f * (k % 4 == 3 ? 0 : k);
   const std::string bytes = Bytes(c);
-  EXPECT_EQ(bytes.size(), 280 + 4 * c.params.size());
+  EXPECT_EQ(bytes.size(), 288 + 4 * c.params.size());
   std::istringstream in(bytes);
   const Checkpoint back = ReadCheckpoint(in, "mem");
   EXPECT_EQ(back.shape.exposures, 3);
@@ -152,9 +152,32 @@ TEST(CheckpointTest, ExposuresTravelAndVersionTwoFilesReadWithout) {
   std::istringstream in_sh(Bytes(sh));
   ExpectEqual(ReadCheckpoint(in_sh, "sh"), sh);
 
-  // A version 2 file: the same header without the exposure count; it has no exposures.
+  // Pose corrections travel too, and a bad count is named.
+  Checkpoint posed = c;
+  posed.shape.poses = 3;
+  posed.params.resize(posed.shape.ParamCount());
+  for (size_t i = 0; i < posed.params.size(); ++i) posed.params[i] = 0.25f - 0.0005f * static_cast<float>(i % 700);
+  const std::string posed_bytes = Bytes(posed);
+  std::istringstream in_posed(posed_bytes);
+  ExpectEqual(ReadCheckpoint(in_posed, "posed"), posed);
+  std::string bad_poses = posed_bytes;
+  const int32_t minus = -1;
+  std::memcpy(&bad_poses[280], &minus, 4);
+  EXPECT_EQ(FieldOfError(bad_poses), "poses");
+
+  // A version 3 file: the same header without the pose count; it refines no poses.
   const Checkpoint plain = Sample();
-  const std::string v3 = Bytes(plain);
+  const std::string v4 = Bytes(plain);
+  std::string v3 = v4.substr(0, 280) + v4.substr(288);
+  const uint32_t three_v = 3, header3 = 280;
+  std::memcpy(&v3[8], &three_v, 4);
+  std::memcpy(&v3[12], &header3, 4);
+  std::istringstream in3(v3);
+  const Checkpoint old3 = ReadCheckpoint(in3, "v3");
+  EXPECT_EQ(old3.shape.poses, 0);
+  ExpectEqual(old3, plain);
+
+  // A version 2 file: the same header without the exposure count; it has no exposures.
   std::string v2 = v3.substr(0, 272) + v3.substr(280);
   const uint32_t two = 2, header = 272;
   std::memcpy(&v2[8], &two, 4);
@@ -165,10 +188,10 @@ TEST(CheckpointTest, ExposuresTravelAndVersionTwoFilesReadWithout) {
   ExpectEqual(old, plain);
 }
 
-// The sample's 280-byte header claiming an n^3 grid and m^2 texels per face (two shells), with
+// The sample's 288-byte header claiming an n^3 grid and m^2 texels per face (two shells), with
 // the matching parameter count, and no parameters after it.
 std::string HugeHeader(int32_t n, int32_t m) {
-  std::string h = Bytes(Sample()).substr(0, 280);
+  std::string h = Bytes(Sample()).substr(0, 288);
   std::memcpy(&h[20], &n, 4);
   std::memcpy(&h[24], &m, 4);
   const uint64_t count = static_cast<uint64_t>(ParamCount(n, m, 2));
@@ -190,7 +213,7 @@ Checkpoint SparseSample() {
 TEST(CheckpointTest, SparseGridsRoundTripAndVersion1StillReads) {
   const Checkpoint c = SparseSample();
   const std::string bytes = Bytes(c);
-  EXPECT_EQ(bytes.size(), 280 + 3 * 4 + 4 * c.params.size());
+  EXPECT_EQ(bytes.size(), 288 + 3 * 4 + 4 * c.params.size());
   std::istringstream in(bytes);
   const Checkpoint back = ReadCheckpoint(in, "mem");
   ExpectEqual(back, c);
@@ -212,18 +235,18 @@ TEST(CheckpointTest, DamagedBrickListsAreNamed) {
   const std::string good = Bytes(SparseSample());
   std::string order = good;
   const uint32_t four = 4;
-  std::memcpy(&order[280 + 8], &four, 4);  // bricks 1, 4, 4
+  std::memcpy(&order[288 + 8], &four, 4);  // bricks 1, 4, 4
   EXPECT_EQ(FieldOfError(order), "bricks");
   std::string beyond = good;
   const uint32_t eight = 8;
-  std::memcpy(&beyond[280 + 8], &eight, 4);  // brick 8 of 8
+  std::memcpy(&beyond[288 + 8], &eight, 4);  // brick 8 of 8
   EXPECT_EQ(FieldOfError(beyond), "bricks");
   std::string count = good;
   const int64_t nine = 9;
   std::memcpy(&count[264], &nine, 8);  // more bricks than the grid has
   EXPECT_EQ(FieldOfError(count), "bricks");
   std::string flipped = good;
-  flipped[280] ^= 0x02;  // brick 1 becomes 3: still ascending, but not what the checksum covers
+  flipped[288] ^= 0x02;  // brick 1 becomes 3: still ascending, but not what the checksum covers
   EXPECT_EQ(FieldOfError(flipped), "checksum");
   std::string odd = good;
   odd[20] = 12;  // n = 12: not a multiple of 8

@@ -13,6 +13,7 @@
 #include <utility>
 #include <vector>
 
+#include "recon_cuda/core/pose.h"
 #include "recon_cuda/core/ray_math.h"
 #include "recon_cuda/data/brick_grid.h"
 #include "recon_cuda/solve/backend.h"
@@ -99,6 +100,22 @@ struct TinyProblem {
     EXPECT_EQ(static_cast<int64_t>(x.size()), shape.ParamCount());
   }
 
+  // Refines every camera's pose (VolumeShape::poses) from random corrections of up to `rotation`
+  // rad and `centre` box units per axis; camera k in slot (k + 1) % cameras as for exposures
+  // (the slots are shared: RaySet::exposure_slot). After AddExposures when both are wanted.
+  void AddPoses(uint32_t seed, float rotation = 0.02f, float centre = 0.02f) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> w(-rotation, rotation), c(-centre, centre);
+    const int cameras = static_cast<int>(rays.cameras.size());
+    shape = shape.WithPoses(cameras);
+    rays.exposure_slot.clear();
+    for (int k = 0; k < cameras; ++k) rays.exposure_slot.push_back((k + 1) % cameras);
+    for (int k = 0; k < cameras; ++k) {
+      for (int v = 0; v < kPoseValues; ++v) x.push_back(v % 4 == 3 ? 0.f : v < 4 ? w(rng) : c(rng));
+    }
+    EXPECT_EQ(static_cast<int64_t>(x.size()), shape.ParamCount());
+  }
+
   // Pixel jitter on by default so that the tests cover the jittered ray as well. lambda weighs
   // the fourth residual of either kind (the paper's term, or the alpha one where rays carry alpha).
   LevelProblem Level(float lambda = 0.1f, bool pixel_jitter = true) const {
@@ -125,6 +142,43 @@ inline std::vector<float> RandomDirection(const VolumeShape& shape, uint32_t see
   return p;
 }
 
+// The problem's volume as the double-precision ray math reads it (params: x, which must outlive it).
+inline VolumeView<double> DoubleView(const TinyProblem& p, const std::vector<double>& x) {
+  VolumeView<double> vol{};
+  vol.params = x.data();
+  vol.n = p.shape.n;
+  vol.m = p.shape.m;
+  vol.num_shells = p.shape.num_shells;
+  vol.sh_degree = p.shape.sh_degree;
+  vol.exposures = p.shape.exposures;
+  vol.poses = p.shape.poses;
+  vol.size = {p.geometry.box.size.x, p.geometry.box.size.y, p.geometry.box.size.z};
+  vol.shell_center = {p.geometry.shell_center.x, p.geometry.shell_center.y, p.geometry.shell_center.z};
+  for (int k = 0; k < p.shape.num_shells; ++k) vol.shell_radii[k] = p.geometry.shell_radii[k];
+  return vol;
+}
+
+inline BoxFrame<double> DoubleBox(const TinyProblem& p) {
+  BoxFrame<double> box;
+  box.center = {p.geometry.box.center.x, p.geometry.box.center.y, p.geometry.box.center.z};
+  box.size = {p.geometry.box.size.x, p.geometry.box.size.y, p.geometry.box.size.z};
+  for (int i = 0; i < 9; ++i) box.world_from_box.m[i] = p.geometry.box.world_from_box.m[i];
+  return box;
+}
+
+// Ray i of the problem at x, as the backends march it: through its pixel (jittered for `jit`),
+// then moved by its photo's pose correction when the problem refines poses.
+inline BoxRay<double> DoubleRay(const TinyProblem& p, const VolumeView<double>& vol, int64_t i, const Jitter& jit) {
+  const RayPixel& px = p.rays.pixels[i];
+  const PinholeCamera<float>& cf = p.rays.cameras[px.camera];
+  PinholeCamera<double> cam{cf.fx, cf.fy, cf.cx, cf.cy, {}};
+  for (int k = 0; k < 12; ++k) cam.world_from_cam[k] = cf.world_from_cam[k];
+  BoxRay<double> ray = PixelBoxRay(cam, DoubleBox(p), vol.n, px.x, px.y, jit);
+  const int64_t pose = p.shape.poses > 0 ? PoseParamOfSlot(vol, p.rays.exposure_slot[px.camera]) : -1;
+  if (pose >= 0) ApplyPose(vol, vol.params + pose, &ray);
+  return ray;
+}
+
 // The dense Jacobian [4 rays, params] and residuals of every ray, in double, from the per-ray
 // math at x (as floats widened to double) with the rays' jitter for `seed`.
 struct DenseJacobian {
@@ -139,27 +193,12 @@ struct DenseJacobian {
   template <class S>
   DenseJacobian(const TinyProblem& p, const std::vector<S>& xs, uint32_t seed, double lambda, bool jitter = true,
                 bool pixel_jitter = true, double robust = 0) {
-    const std::vector<double> x(xs.begin(), xs.end());
-    VolumeView<double> vol{};
-    vol.params = x.data();
-    vol.n = p.shape.n;
-    vol.m = p.shape.m;
-    vol.num_shells = p.shape.num_shells;
-    vol.sh_degree = p.shape.sh_degree;
-    vol.size = {p.geometry.box.size.x, p.geometry.box.size.y, p.geometry.box.size.z};
-    vol.shell_center = {p.geometry.shell_center.x, p.geometry.shell_center.y, p.geometry.shell_center.z};
-    for (int k = 0; k < p.shape.num_shells; ++k) vol.shell_radii[k] = p.geometry.shell_radii[k];
-    BoxFrame<double> box;
-    box.center = {p.geometry.box.center.x, p.geometry.box.center.y, p.geometry.box.center.z};
-    box.size = vol.size;
-    for (int i = 0; i < 9; ++i) box.world_from_box.m[i] = p.geometry.box.world_from_box.m[i];
+    std::vector<double> x(xs.begin(), xs.end());
+    const VolumeView<double> vol = DoubleView(p, x);
     for (int64_t i = 0; i < p.rays.size(); ++i) {
       const RayPixel& px = p.rays.pixels[i];
-      const PinholeCamera<float>& cf = p.rays.cameras[px.camera];
-      PinholeCamera<double> cam{cf.fx, cf.fy, cf.cx, cf.cy, {}};
-      for (int k = 0; k < 12; ++k) cam.world_from_cam[k] = cf.world_from_cam[k];
       const Jitter jit{seed, static_cast<uint32_t>(i), jitter, pixel_jitter};
-      const BoxRay<double> ray = PixelBoxRay(cam, box, vol.n, px.x, px.y, jit);
+      const BoxRay<double> ray = DoubleRay(p, vol, i, jit);
       const double target[3] = {p.rays.colours[3 * i], p.rays.colours[3 * i + 1], p.rays.colours[3 * i + 2]};
       // The rays' alpha when they carry one (the backends' default use_alpha), else the paper's term.
       const double alpha = p.rays.alphas.empty() ? -1.0 : p.rays.alphas[i];
@@ -195,6 +234,21 @@ struct DenseJacobian {
           j[c][e + c] = out.h[c];
           j[c][e + 4 + c] = 1;
         }
+      }
+      // The pose's columns by central differences of the residuals (pose.h derives them).
+      const int64_t pose = p.shape.poses > 0 ? PoseParamOfSlot(vol, p.rays.exposure_slot[px.camera]) : -1;
+      for (int v = 0; pose >= 0 && v < kPoseValues; ++v) {
+        if (v % 4 == 3) continue;
+        const double saved = x[pose + v], h = 1e-6;
+        double r_at[2][4];
+        for (int side = 0; side < 2; ++side) {
+          x[pose + v] = saved + (side == 0 ? h : -h);
+          const RayOutput<double> o = Forward(vol, DoubleRay(p, vol, i, jit), jit, target, lambda, 0.0, nullptr, alpha);
+          for (int c = 0; c < 3; ++c) r_at[side][c] = gain[c] * o.h[c];
+          r_at[side][3] = o.residual[3];
+        }
+        x[pose + v] = saved;
+        for (int r = 0; r < 4; ++r) j[r][pose + v] = (r_at[0][r] - r_at[1][r]) / (2 * h);
       }
       // The robust loss: the colour rows and residuals times s = 1 / sqrt(1 + q / c^2), and the
       // ray's colour cost 0.5 c^2 log(1 + q / c^2) (q = |r_colour|^2) instead of 0.5 q.
