@@ -55,7 +55,7 @@ class CpuBackend final : public Backend {
     level_ = p;
     rays_ = {p.rays->cameras.data(), p.rays->pixels.data(), p.rays->colours.data(),
              UsesAlpha(p) ? p.rays->alphas.data() : nullptr, p.rays->size(), p.rays->first_index,
-             ExposureSlots(p)};
+             ExposureSlots(p), PoseSlots(p)};
     weight_ = OpacityResidualWeight(p);
     robust_ = p.residuals.robust_scale;
     const MemoryEstimate e = EstimateMemory(p, num_vectors);
@@ -108,13 +108,13 @@ class CpuBackend final : public Backend {
   void RestrictJacobian(VecId free) override {
     if (!linearized_ || !recorded_) return;
     const float* pf = vec(free).data();
-    const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, nullptr);
+    const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, vec(lin_x_).data());
     vectors_.arena().execute([&] {
       tbb::parallel_for(int64_t{0}, static_cast<int64_t>(blocks_.size()), [&](int64_t b) {
         BlockJ& block = blocks_[b];
         uint32_t first = 0, kept = 0;
         for (size_t r = 0; r < block.end.size(); ++r) {
-          const BoxRay<float> ray = RayOf(b * kBlockRays + static_cast<int64_t>(r), lin_seed_);
+          const BoxRay<float> ray = TrainingRayOf(vol, b * kBlockRays + static_cast<int64_t>(r), lin_seed_).ray;
           for (uint32_t j = first; j < block.end[r]; ++j) {
             const SampleJ& sj = block.samples[j];
             if (SkippableSample(TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(sj.t)), sj.sp, pf)) continue;
@@ -169,11 +169,12 @@ class CpuBackend final : public Backend {
       BlockStats bs;
       AddSink sink{s.acc.data()};
       for (int64_t i = begin; i < end; ++i) {
-        const TrainingRay tr = TrainingRayOf(i, lin_seed_);
+        const TrainingRay tr = TrainingRayOf(vol, i, lin_seed_);
         const BoxRay<float>& ray = tr.ray;
         const SampleJ* samples;
         const ShellJ* shells;
         const float* h;
+        const float* pose_row;
         float scale;
         int count;
         if (recorded_) {
@@ -185,6 +186,7 @@ class CpuBackend final : public Backend {
           shells = &b.shells[r * k_shells];
           h = &b.h[3 * r];
           scale = b.scale[r];
+          pose_row = tr.pose >= 0 ? &b.pose[kPoseRowValues * r] : nullptr;
         } else {
           RecomputeRow(vol, tr, i, s);
           samples = s.row.samples.data();
@@ -192,7 +194,9 @@ class CpuBackend final : public Backend {
           shells = s.row.shells.data();
           h = s.row.h.data();
           scale = s.row.scale[0];
+          pose_row = tr.pose >= 0 ? s.row.pose.data() : nullptr;
         }
+        const PoseRow<float> pr = pose_row ? UnpackPoseRow(pose_row) : PoseRow<float>{};
         const RayExposure<float> e = ExposureAt(vol, i, h, scale);
         const RaySh<float> sh = ShOfRay(vol, ray);
         float u[4] = {0, 0, 0, 0};
@@ -207,6 +211,7 @@ class CpuBackend final : public Backend {
           w[j] = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(samples[j].t));
           AddJpSample(pp, w[j], samples[j].sp, u, sh);
         }
+        if (pose_row) AddJpPose(pr, pp, tr.pose, u);
         FinishJp(e, pp, u);
         float uv[4];
         VolumeU(e, u, uv);
@@ -230,6 +235,7 @@ class CpuBackend final : public Backend {
           merger.Finish(flush);
         }
         ScatterJtuExposure(e, u, sink);
+        if (pose_row) ScatterJtuPose(pr, tr.pose, uv, sink);
         bs.rays += 1;
         bs.samples += count;
       }
@@ -248,7 +254,7 @@ class CpuBackend final : public Backend {
       BlockStats bs;
       int64_t i = begin + ((subset.offset - begin % subset.stride) + subset.stride) % subset.stride;
       for (; i < end; i += subset.stride) {
-        const TrainingRay tr = TrainingRayOf(i, seed);
+        const TrainingRay tr = TrainingRayOf(vol, i, seed);
         const RayOutput<float> fwd =
             Forward(vol, tr.ray, tr.jit, &level_.rays->colours[3 * i], weight_, level_.residuals.stop_transmittance,
                     nullptr, AlphaOf(rays_, i), TransformAt(vol, i));
@@ -305,7 +311,7 @@ class CpuBackend final : public Backend {
                             int64_t end, Scratch& s, BlockJ* out) const {
     BlockStats bs;
     for (int64_t i = begin; i < end; ++i) {
-      const TrainingRay tr = TrainingRayOf(i, seed);
+      const TrainingRay tr = TrainingRayOf(vol, i, seed);
       const BoxRay<float>& ray = tr.ray;
       const Jitter& jit = tr.jit;
       const ColourTransform<float> xf = TransformAt(vol, i);
@@ -325,7 +331,17 @@ class CpuBackend final : public Backend {
       VolumeU(e, r, v.r);
       GainSquared(e, v.g2);
       v.sh = ShOfRay(vol, ray);
-      Backward(vol, ray, jit, fwd, v, s.record.data());
+      if (tr.pose >= 0) {
+        GeometryVisitor<float> geometry(vol, ray, jit);
+        BothVisitors<LinearizeVisitor<kDiag>, GeometryVisitor<float>> both{v, geometry};
+        Backward(vol, ray, jit, fwd, both, s.record.data());
+        const PoseRow<float> row = PoseRowOf(vol, vol.params + tr.pose, ray, geometry.grad);
+        ScatterJtuPose(row, tr.pose, v.r, v.g);
+        if constexpr (kDiag) AddDiagPose(row, tr.pose, v.g2, v.d);
+        if (out) PackPoseRow(row, &out->pose[kPoseRowValues * (i - begin)]);
+      } else {
+        Backward(vol, ray, jit, fwd, v, s.record.data());
+      }
       v.Finish();
       ScatterJtuExposure(e, r, v.g);
       if constexpr (kDiag) AddDiagExposure(e, v.d);
@@ -347,6 +363,13 @@ class CpuBackend final : public Backend {
     for (int32_t slot : p.rays->exposure_slot) PERF_CHECK(slot >= 0 && slot < p.shape.exposures);
     return p.rays->exposure_slot.data();
   }
+  // The pose slots (the exposure slots' numbering), or nullptr when the level refines no poses.
+  static const int32_t* PoseSlots(const LevelProblem& p) {
+    if (p.shape.poses == 0) return nullptr;
+    PERF_CHECK_MSG(p.rays->exposure_slot.size() == p.rays->cameras.size(), "pose slots for every camera");
+    for (int32_t slot : p.rays->exposure_slot) PERF_CHECK(slot >= 0 && slot < p.shape.poses);
+    return p.rays->exposure_slot.data();
+  }
   // Ray i's photo's colour transform at vol's parameters, and its exposure's partials given H.
   ColourTransform<float> TransformAt(const VolumeView<float>& vol, int64_t i) const {
     return TransformOfRay(rays_, vol, i);
@@ -355,10 +378,10 @@ class CpuBackend final : public Backend {
     return ExposureOfRay(vol.ExposureStart(), ExposureSlotOf(rays_, i), TransformAt(vol, i), h, scale);
   }
 
-  // Ray i in the iteration of `seed` (training_ray.h, as the CUDA passes read it).
-  BoxRay<float> RayOf(int64_t i, uint32_t seed) const { return TrainingRayOf(i, seed).ray; }
-  TrainingRay TrainingRayOf(int64_t i, uint32_t seed) const {
-    return recon::RayOf(rays_, level_.geometry.box, level_.shape.n, i, seed, level_.residuals.jitter,
+  // Ray i in the iteration of `seed` through its photo's pose at vol.params (training_ray.h, as
+  // the CUDA passes read it).
+  TrainingRay TrainingRayOf(const VolumeView<float>& vol, int64_t i, uint32_t seed) const {
+    return recon::RayOf(rays_, vol, level_.geometry.box, i, seed, level_.residuals.jitter,
                         level_.residuals.pixel_jitter);
   }
 
@@ -368,6 +391,7 @@ class CpuBackend final : public Backend {
     b->shells.assign(rays * level_.shape.num_shells, ShellJ{{-1, 0.f, 0.f}, {}});
     b->h.assign(3 * rays, 0.f);
     b->scale.assign(rays, 1.f);
+    if (level_.shape.poses > 0) b->pose.assign(kPoseRowValues * rays, 0.f);
   }
 
   // The partials of ray i at the linearisation point, into s.row (no recorded Jacobian).
@@ -379,7 +403,14 @@ class CpuBackend final : public Backend {
         Forward(vol, ray, jit, &level_.rays->colours[3 * i], weight_, level_.residuals.stop_transmittance,
                 s.record.data(), AlphaOf(rays_, i), TransformAt(vol, i));
     RecordOnly visitor{&s.row};
-    Backward(vol, ray, jit, fwd, visitor, s.record.data());
+    if (tr.pose >= 0) {
+      GeometryVisitor<float> geometry(vol, ray, jit);
+      BothVisitors<RecordOnly, GeometryVisitor<float>> both{visitor, geometry};
+      Backward(vol, ray, jit, fwd, both, s.record.data());
+      PackPoseRow(PoseRowOf(vol, vol.params + tr.pose, ray, geometry.grad), s.row.pose.data());
+    } else {
+      Backward(vol, ray, jit, fwd, visitor, s.record.data());
+    }
     for (int c = 0; c < 3; ++c) s.row.h[c] = fwd.h[c];
     s.row.scale[0] = RobustRowScale(fwd.residual, robust_);
   }

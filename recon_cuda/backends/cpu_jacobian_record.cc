@@ -12,7 +12,7 @@ namespace perf::recon::cpu {
 // early termination only shortens it; a sparse grid's march counted sample by sample, plus an
 // eighth for the jittered samples that land differently, on every 4th ray of a block and scaled
 // to the block: an estimate, and a quarter of a march) times the per-sample record, plus the
-// shell records.
+// shell records and, when poses are refined, the pose rows.
 int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, const CpuVectors& vectors) {
   constexpr int64_t kSparseStride = 4;
   const VolumeView<float> vol = MakeView(p.shape, p.geometry, nullptr);
@@ -49,7 +49,8 @@ int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, const C
   for (int64_t c : per_block) samples += c;
   return samples * static_cast<int64_t>(sizeof(SampleJ)) +
          n * (static_cast<int64_t>(sizeof(uint32_t) + 4 * sizeof(float)) +
-              p.shape.num_shells * static_cast<int64_t>(sizeof(ShellJ)));
+              p.shape.num_shells * static_cast<int64_t>(sizeof(ShellJ)) +
+              (p.shape.poses > 0 ? kPoseRowValues * static_cast<int64_t>(sizeof(float)) : 0));
 }
 
 }  // namespace perf::recon::cpu

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "recon_cuda/core/jacobian.h"
+#include "recon_cuda/core/pose.h"
 #include "recon_cuda/core/ray_math.h"
 #include "recon_cuda/solve/backend.h"
 
@@ -48,7 +49,29 @@ struct BlockJ {
   std::vector<ShellJ> shells;  // [rays, num_shells]
   std::vector<float> h;        // [rays, 3] the composited colour H (the exposure's partials)
   std::vector<float> scale;    // [rays] the robust loss's row scale (jacobian.h RobustRowScale)
+  std::vector<float> pose;     // [rays, kPoseRowValues] each ray's pose row (PackPoseRow), when poses are refined
 };
+
+// A ray's pose row (pose.h PoseRow) without its padding columns: 4 residuals x 6 values.
+inline constexpr int kPoseRowValues = 24;
+inline void PackPoseRow(const PoseRow<float>& row, float* out) {
+  for (int r = 0; r < 4; ++r)
+    for (int j = 0; j < 3; ++j) {
+      out[6 * r + j] = row.j[r][j];
+      out[6 * r + 3 + j] = row.j[r][4 + j];
+    }
+}
+inline PoseRow<float> UnpackPoseRow(const float* in) {
+  PoseRow<float> row;
+  for (int r = 0; r < 4; ++r) {
+    for (int j = 0; j < 3; ++j) {
+      row.j[r][j] = in[6 * r + j];
+      row.j[r][4 + j] = in[6 * r + 3 + j];
+    }
+    row.j[r][3] = row.j[r][7] = 0;
+  }
+  return row;
+}
 
 struct Scratch {
   std::vector<SampleRecord<float>> record;  // [max samples a ray]

@@ -41,24 +41,31 @@ struct DeviceRays {
   DeviceBuffer<RayPixel> pixels;
   DeviceBuffer<uint8_t> colours;
   DeviceBuffer<uint8_t> alphas;  // empty when the level has no alpha residual
-  DeviceBuffer<int32_t> exposure_slot;  // empty when the level solves no exposures
+  // Each camera's photo slot (RaySet::exposure_slot); empty when the level solves neither
+  // exposures nor poses.
+  DeviceBuffer<int32_t> exposure_slot;
   int64_t first_index = 0;       // RaySet::first_index
+  bool exposures = false, poses = false;
 
-  DeviceRays(const RaySet& rays, bool use_alpha, int exposures)
+  DeviceRays(const RaySet& rays, bool use_alpha, int num_exposures, int num_poses)
       : cameras(static_cast<int64_t>(rays.cameras.size())),
         pixels(rays.size()),
         colours(3 * rays.size()),
         alphas(use_alpha ? rays.size() : 0),
-        exposure_slot(exposures > 0 ? static_cast<int64_t>(rays.cameras.size()) : 0),
-        first_index(rays.first_index) {
+        exposure_slot(num_exposures > 0 || num_poses > 0 ? static_cast<int64_t>(rays.cameras.size()) : 0),
+        first_index(rays.first_index),
+        exposures(num_exposures > 0),
+        poses(num_poses > 0) {
     PERF_CHECK(static_cast<int64_t>(rays.colours.size()) == 3 * rays.size());
     cameras.CopyFromHost(rays.cameras);
     pixels.CopyFromHost(rays.pixels);
     colours.CopyFromHost(ToBytes(rays.colours));
     if (use_alpha) alphas.CopyFromHost(ToBytes(rays.alphas));
-    if (exposures > 0) {
+    if (exposures || poses) {
       PERF_CHECK(rays.exposure_slot.size() == rays.cameras.size());
-      for (int32_t slot : rays.exposure_slot) PERF_CHECK(slot >= 0 && slot < exposures);
+      for (int32_t slot : rays.exposure_slot) {
+        PERF_CHECK(slot >= 0 && (!exposures || slot < num_exposures) && (!poses || slot < num_poses));
+      }
       exposure_slot.CopyFromHost(rays.exposure_slot);
     }
   }
@@ -69,7 +76,8 @@ struct DeviceRays {
             alphas.size() > 0 ? alphas.data() : nullptr,
             pixels.size(),
             first_index,
-            exposure_slot.size() > 0 ? exposure_slot.data() : nullptr};
+            exposures ? exposure_slot.data() : nullptr,
+            poses ? exposure_slot.data() : nullptr};
   }
 };
 
@@ -159,7 +167,7 @@ class CudaBackend final : public Backend {
       brick_list_ = DeviceBuffer<int64_t>(p.shape.bricks->ActiveBricks());
       brick_list_.CopyFromHost(p.shape.bricks->bricks);
     }
-    rays_ = std::make_unique<DeviceRays>(*p.rays, UsesAlpha(p), p.shape.exposures);
+    rays_ = std::make_unique<DeviceRays>(*p.rays, UsesAlpha(p), p.shape.exposures, p.shape.poses);
     scratch_ = std::make_unique<Scratch>(p.rays->size(), p.shape.ParamCount());
     held_ = e.Total();
     return e;

@@ -105,8 +105,10 @@ struct JpVisitor {
   }
 };
 
-// A ray's exposure entries (jacobian.h ScatterJtuExposure, AddDiagExposure), kept in registers
-// until WarpAddExposure: base is the photo's first exposure parameter (-1: none).
+// A ray's exposure entries (jacobian.h ScatterJtuExposure, AddDiagExposure), or its pose entries
+// (pose.h ScatterJtuPose, AddDiagPose: as many), kept in registers until WarpAddExposure: base is
+// the photo's first exposure (pose) parameter (-1: none).
+static_assert(kPoseValues == kExposureValues);
 struct ExposureSums {
   int64_t base = -1;
   float v[kExposureValues] = {0, 0, 0, 0, 0, 0, 0, 0};
@@ -161,15 +163,18 @@ __device__ __forceinline__ void WriteBlockStats(const RayStats& mine, RayStats* 
 
 // Ray i as every pass of the iteration of in.seed sees it, its targets (training_ray.h).
 __device__ __forceinline__ TrainingRay MakeRay(const PassInput& in, int64_t i) {
-  return RayOf(in.rays, in.box, in.vol.n, i, in.seed, in.jitter, in.pixel_jitter);
+  return RayOf(in.rays, in.vol, in.box, i, in.seed, in.jitter, in.pixel_jitter);
 }
 
-template <bool kDiag>
+// kPoses: the level refines the photos' poses (pose.h): the kernels also sweep the geometry
+// visitor and add the pose rows. A template argument, so that the kernels of a level without
+// poses keep their registers.
+template <bool kDiag, bool kPoses>
 __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, float* g, float* diag, int stride,
                                                                int offset, RayStats* partials) {
   const int64_t i = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   RayStats mine;
-  ExposureSums eg, ed;
+  ExposureSums eg, ed, pg, pd;
   if (i < in.rays.count) {
     const TrainingRay r = MakeRay(in, i);
     float target[3];
@@ -186,7 +191,19 @@ __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, flo
     VolumeU(e, rs, v.u);
     GainSquared(e, v.g2);
     v.sh = ShOfRay(in.vol, r.ray);
-    Backward(in.vol, r.ray, r.jit, fwd, v);
+    if constexpr (kPoses) {
+      GeometryVisitor<float> geometry(in.vol, r.ray, r.jit);
+      BothVisitors<ScatterVisitor<kDiag>, GeometryVisitor<float>> both{v, geometry};
+      Backward(in.vol, r.ray, r.jit, fwd, both);
+      if (r.pose >= 0) {
+        const PoseRow<float> row = PoseRowOf(in.vol, in.vol.params + r.pose, r.ray, geometry.grad);
+        pg.base = pd.base = r.pose;
+        ScatterJtuPose(row, r.pose, v.u, pg);
+        if constexpr (kDiag) AddDiagPose(row, r.pose, v.g2, pd);
+      }
+    } else {
+      Backward(in.vol, r.ray, r.jit, fwd, v);
+    }
     v.Finish();
     eg.base = ed.base = e.param;
     ScatterJtuExposure(e, rs, eg);
@@ -196,14 +213,19 @@ __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, flo
   }
   WarpAddExposure(eg, g);
   if constexpr (kDiag) WarpAddExposure(ed, diag);
+  if constexpr (kPoses) {
+    WarpAddExposure(pg, g);
+    if constexpr (kDiag) WarpAddExposure(pd, diag);
+  }
   WriteBlockStats(mine, partials);
 }
 
+template <bool kPoses>
 __global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const float* p, const float* free,
                                                           float* out, RayStats* partials) {
   const int64_t i = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   RayStats mine;
-  ExposureSums eo;
+  ExposureSums eo, po;
   if (i < in.rays.count) {
     const TrainingRay r = MakeRay(in, i);
     // The partials depend on the forward's transmittances and colours (and on whether the ray
@@ -217,7 +239,18 @@ __global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const fl
                                                RobustRowScale(fwd.residual, in.robust));
     JpVisitor jp{p, free, {0, 0, 0, 0}};
     jp.sh = ShOfRay(in.vol, r.ray);
-    Backward(in.vol, r.ray, r.jit, fwd, jp);
+    PoseRow<float> row;
+    if constexpr (kPoses) {
+      GeometryVisitor<float> geometry(in.vol, r.ray, r.jit);
+      BothVisitors<JpVisitor, GeometryVisitor<float>> both{jp, geometry};
+      Backward(in.vol, r.ray, r.jit, fwd, both);
+      if (r.pose >= 0) {
+        row = PoseRowOf(in.vol, in.vol.params + r.pose, r.ray, geometry.grad);
+        AddJpPose(row, p, r.pose, jp.u);
+      }
+    } else {
+      Backward(in.vol, r.ray, r.jit, fwd, jp);
+    }
     FinishJp(e, p, jp.u);
     ScatterVisitor<false> v{{0, 0, 0, 0}, {out}, {nullptr}, {}, free};
     VolumeU(e, jp.u, v.u);
@@ -226,6 +259,12 @@ __global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const fl
     v.Finish();
     eo.base = e.param;
     ScatterJtuExposure(e, jp.u, eo);
+    if constexpr (kPoses) {
+      if (r.pose >= 0) {
+        po.base = r.pose;
+        ScatterJtuPose(row, r.pose, v.u, po);
+      }
+    }
     mine.rays = 1;
     // The samples that enter the product, as the CPU backend counts them when it records the
     // Jacobian (after RestrictJacobian it visits only the samples it kept; recomputing, it counts
@@ -234,6 +273,7 @@ __global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const fl
     mine.samples = jp.used;
   }
   WarpAddExposure(eo, out);
+  if constexpr (kPoses) WarpAddExposure(po, out);
   WriteBlockStats(mine, partials);
 }
 
@@ -303,9 +343,12 @@ int64_t KernelLocalMemoryBytes() {
     PERF_CUDA_CHECK(cudaFuncGetAttributes(&attr, kernel));
     per_thread = std::max(per_thread, attr.localSizeBytes);
   };
-  at_least(reinterpret_cast<const void*>(LinearizeKernel<true>));
-  at_least(reinterpret_cast<const void*>(LinearizeKernel<false>));
-  at_least(reinterpret_cast<const void*>(JtJpKernel));
+  at_least(reinterpret_cast<const void*>(LinearizeKernel<true, false>));
+  at_least(reinterpret_cast<const void*>(LinearizeKernel<false, false>));
+  at_least(reinterpret_cast<const void*>(LinearizeKernel<true, true>));
+  at_least(reinterpret_cast<const void*>(LinearizeKernel<false, true>));
+  at_least(reinterpret_cast<const void*>(JtJpKernel<false>));
+  at_least(reinterpret_cast<const void*>(JtJpKernel<true>));
   at_least(reinterpret_cast<const void*>(CostKernel));
   at_least(reinterpret_cast<const void*>(RenderKernel));
   int device = 0, sms = 0, threads = 0;
@@ -332,10 +375,15 @@ RayStats Linearize(const PassInput& in, float* g, float* diag, int64_t params, i
   const int64_t blocks = PassBlocks(in.rays.count);
   if (blocks == 0) return {};
   PERF_CHECK(blocks <= s.capacity);
-  if (diag) {
-    LinearizeKernel<true><<<GridFor(blocks), kRayThreads>>>(in, g, diag, stride, offset, s.partials);
+  const bool poses = in.rays.pose_slot != nullptr;
+  if (diag && poses) {
+    LinearizeKernel<true, true><<<GridFor(blocks), kRayThreads>>>(in, g, diag, stride, offset, s.partials);
+  } else if (diag) {
+    LinearizeKernel<true, false><<<GridFor(blocks), kRayThreads>>>(in, g, diag, stride, offset, s.partials);
+  } else if (poses) {
+    LinearizeKernel<false, true><<<GridFor(blocks), kRayThreads>>>(in, g, nullptr, stride, offset, s.partials);
   } else {
-    LinearizeKernel<false><<<GridFor(blocks), kRayThreads>>>(in, g, nullptr, stride, offset, s.partials);
+    LinearizeKernel<false, false><<<GridFor(blocks), kRayThreads>>>(in, g, nullptr, stride, offset, s.partials);
   }
   PERF_CUDA_CHECK_LAUNCH("LinearizeKernel");
   return Total(s, blocks);
@@ -347,7 +395,11 @@ RayStats MultiplyJtJ(const PassInput& in, const float* p, const float* free, flo
   const int64_t blocks = PassBlocks(in.rays.count);
   if (blocks == 0) return {};
   PERF_CHECK(blocks <= s.capacity);
-  JtJpKernel<<<GridFor(blocks), kRayThreads>>>(in, p, free, out, s.partials);
+  if (in.rays.pose_slot) {
+    JtJpKernel<true><<<GridFor(blocks), kRayThreads>>>(in, p, free, out, s.partials);
+  } else {
+    JtJpKernel<false><<<GridFor(blocks), kRayThreads>>>(in, p, free, out, s.partials);
+  }
   PERF_CUDA_CHECK_LAUNCH("JtJpKernel");
   return Total(s, blocks);
 }

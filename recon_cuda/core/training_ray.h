@@ -7,7 +7,7 @@
 #include <stdint.h>
 
 #include "recon_cuda/core/hd.h"
-#include "recon_cuda/core/ray_math.h"
+#include "recon_cuda/core/pose.h"
 
 namespace perf::recon {
 
@@ -27,20 +27,30 @@ struct TrainingRays {
   int64_t first_index;
   // Each camera's exposure slot (ray_types.h ExposureParam), or nullptr: no exposure is solved.
   const int32_t* exposure_slot;
+  // Each camera's pose slot (ray_types.h PoseParam; the same numbering), or nullptr: no pose is
+  // refined.
+  const int32_t* pose_slot = nullptr;
 };
 
 struct TrainingRay {
   BoxRay<float> ray;
   Jitter jit;
+  int64_t pose;  // where its photo's pose values are in params (-1: not refined)
 };
 
-// Ray i in the iteration of `seed`: every pass of the iteration sees the same ray and jitter.
+// Ray i in the iteration of `seed`: every pass of the iteration sees the same ray and jitter,
+// through its photo's corrected pose at vol.params when poses are refined (pose.h ApplyPose).
 template <class Colour>
-PERF_HD_INLINE TrainingRay RayOf(const TrainingRays<Colour>& rays, const BoxFrame<float>& box, int n, int64_t i,
-                                 uint32_t seed, bool jitter, bool pixel_jitter) {
+PERF_HD_INLINE TrainingRay RayOf(const TrainingRays<Colour>& rays, const VolumeView<float>& vol,
+                                 const BoxFrame<float>& box, int64_t i, uint32_t seed, bool jitter, bool pixel_jitter) {
   const RayPixel px = rays.pixels[i];
   const Jitter jit{seed, static_cast<uint32_t>(rays.first_index + i), jitter, pixel_jitter};
-  return {PixelBoxRay(rays.cameras[px.camera], box, n, px.x, px.y, jit), jit};
+  TrainingRay tr{PixelBoxRay(rays.cameras[px.camera], box, vol.n, px.x, px.y, jit), jit, -1};
+  if (rays.pose_slot) {
+    tr.pose = PoseParamOfSlot(vol, rays.pose_slot[px.camera]);
+    if (tr.pose >= 0) ApplyPose(vol, vol.params + tr.pose, &tr.ray);
+  }
+  return tr;
 }
 
 template <class Colour>

@@ -161,7 +161,6 @@ TEST(CheckpointTest, ExposuresTravelAndVersionTwoFilesReadWithout) {
   std::istringstream in_posed(posed_bytes);
   ExpectEqual(ReadCheckpoint(in_posed, "posed"), posed);
   std::string bad_poses = posed_bytes;
-  const int32_t minus = -1;
   std::memcpy(&bad_poses[280], &minus, 4);
   EXPECT_EQ(FieldOfError(bad_poses), "poses");
 
@@ -223,7 +222,7 @@ TEST(CheckpointTest, SparseGridsRoundTripAndVersion1StillReads) {
 
   // A version 1 file (dense, no brick count): what version 1 wrote for the dense sample.
   std::string v1 = Bytes(Sample());
-  v1.erase(264, 16);  // the brick count and the exposure count
+  v1.erase(264, 24);  // the brick count, the exposure count and the pose count
   const uint32_t one = 1, header = 264;
   std::memcpy(&v1[8], &one, 4);
   std::memcpy(&v1[12], &header, 4);

@@ -154,8 +154,10 @@ struct PassOutputs {
 // Linearize, Cost and MultiplyJtJ of a 2-thread CPU backend (its Jacobian recorded or recomputed)
 // on p at p.x with the robust loss of scale `robust` (0: none), each against `want`; returns the
 // vectors for checks of their own entries.
+// split > 0: the entries before and from `split` are compared on their own scales (the pose
+// entries' diagonal dwarfs the volume's).
 PassOutputs ExpectPassesMatch(const TinyProblem& p, const DenseWant& want, const std::vector<float>& pv, uint32_t seed,
-                              bool cache, float robust = 0.f) {
+                              bool cache, float robust = 0.f, int64_t split = 0) {
   auto b = Cpu(2, cache);
   LevelProblem level = p.Level();
   level.residuals.robust_scale = robust;
@@ -171,9 +173,16 @@ PassOutputs ExpectPassesMatch(const TinyProblem& p, const DenseWant& want, const
   b->Download(kG, o.g);
   b->Download(kD, o.d);
   b->Download(kOut, o.out);
-  ExpectClose(o.g, want.jtr, "J^T r");
-  ExpectClose(o.d, want.diag, "diag(J^T J)");
-  ExpectClose(o.out, want.jtjp, "J^T J p");
+  const auto close = [&](const std::vector<float>& got, const std::vector<double>& w, const char* what) {
+    if (split <= 0) return ExpectClose(got, w, what);
+    ExpectClose(std::vector<float>(got.begin(), got.begin() + split), std::vector<double>(w.begin(), w.begin() + split),
+                what);
+    ExpectClose(std::vector<float>(got.begin() + split, got.end()), std::vector<double>(w.begin() + split, w.end()),
+                what);
+  };
+  close(o.g, want.jtr, "J^T r");
+  close(o.d, want.diag, "diag(J^T J)");
+  close(o.out, want.jtjp, "J^T J p");
   return o;
 }
 
@@ -203,6 +212,45 @@ TEST(CpuBackendTest, ExposuresMatchTheDenseJacobian) {
   }
   const DenseJacobian without(plain, plain.x, seed, 0.1);
   EXPECT_GT(std::abs(without.Cost() - j.Cost()), 1e-3 * j.Cost());
+}
+
+// Pose refinement (pose.h) with exposures and the robust loss: every pass against the dense
+// Jacobian whose pose columns are central differences of the residuals, with the Jacobian recorded
+// and recomputed; the pose entries are exercised and the corrected poses change the cost.
+TEST(CpuBackendTest, PosesMatchTheDenseJacobian) {
+  TinyProblem p(7, 4, 2, 3, 7, 6);
+  p.AddExposures(6);
+  const TinyProblem unposed = [&] {
+    TinyProblem q = p;
+    q.AddPoses(9, 0.f, 0.f);
+    return q;
+  }();
+  p.AddPoses(9);
+  const uint32_t seed = 23;
+  for (float robust : {0.f, 0.3f}) {
+    SCOPED_TRACE(robust);
+    const DenseJacobian j(p, p.x, seed, 0.1, true, true, robust);
+    const std::vector<float> pv = test::RandomDirection(p.shape, 8);
+    const DenseWant want(j, pv);
+    for (bool cache : {true, false}) {
+      SCOPED_TRACE(cache ? "recorded" : "recomputed");
+      const PassOutputs o = ExpectPassesMatch(p, want, pv, seed, cache, robust, p.shape.PoseStart());
+      int exercised = 0;
+      for (int64_t i = p.shape.PoseStart(); i < p.shape.ParamCount(); ++i) {
+        SCOPED_TRACE(i);
+        const bool pad = (i - p.shape.PoseStart()) % 4 == 3;
+        EXPECT_EQ(pad, o.g[i] == 0.f && o.d[i] == 0.f && o.out[i] == 0.f);
+        EXPECT_NEAR(o.d[i], want.diag[i], 2e-3 * std::abs(want.diag[i]) + 1e-4);
+        EXPECT_NEAR(o.g[i], want.jtr[i], 2e-3 * std::abs(want.jtr[i]) + 1e-4);
+        EXPECT_NEAR(o.out[i], want.jtjp[i], 2e-3 * std::abs(want.jtjp[i]) + 1e-3);
+        exercised += std::abs(want.diag[i]) > 1e-2 ? 1 : 0;
+      }
+      EXPECT_GE(exercised, 6 * p.shape.poses - 2);
+    }
+  }
+  const DenseJacobian without(unposed, unposed.x, seed, 0.1);
+  const DenseJacobian with(p, p.x, seed, 0.1);
+  EXPECT_GT(std::abs(without.Cost() - with.Cost()), 1e-3 * with.Cost());
 }
 
 // The robust loss (ResidualSettings::robust_scale): every pass against the dense Jacobian of the
