@@ -167,7 +167,7 @@ EvalResult RunEval(const EvalOptions& o) {
 
   const std::vector<recon::PosedImage> test = recon::LoadImages(scene, o.workspace, Split::kTest);
   // Each held-out render under the blend of its two nearest training photos' exposures (recon/exposure.h).
-  const recon::PhotoExposures exposures = recon::ExposuresOf(l, scene);
+  const recon::PhotoCorrections exposures = recon::CorrectionsOf(l, scene);
   std::vector<ReportStripView> strip;
   int masked_views = 0;
   for (const recon::PosedImage& v : test) {
@@ -197,7 +197,7 @@ EvalResult RunEval(const EvalOptions& o) {
     r.mean.psnr_masked /= masked_views;
     r.mean.ssim_masked /= masked_views;
   }
-  CompareWithTruth(o, scene, l, &r);
+  CompareWithTruth(o, recon::PosedAsCheckpoint(l, scene), l, &r);
 
   const nlohmann::json report = ReportJson(o, r, l);
   WriteFileAtomically(o.workspace / "report.json", report.dump(2) + "\n");

@@ -292,9 +292,11 @@ ExportResult RunExport(const ExportOptions& o) {
   }
   if (o.orbit.frames < 0) throw InputError("command line", "--orbit-frames", StrCat(o.orbit.frames), "must be >= 0");
   if (o.renders && o.orbit.frames > 0) CheckOrbitOptions(o.orbit);
-  const Scene scene = ReadScene(o.workspace / "scene.json");
-  for (const SceneImage& im : scene.images) ProtectInput(im.source_path);  // the user's photos
+  const Scene imported = ReadScene(o.workspace / "scene.json");
+  for (const SceneImage& im : imported.images) ProtectInput(im.source_path);  // the user's photos
   LoadedCheckpoint l = recon::LoadForRendering(o.workspace, o.checkpoint, o.device, o.threads);
+  // Masks, cut-outs, renders and the mesh's views see the cameras as the checkpoint refined them.
+  const Scene scene = recon::PosedAsCheckpoint(l, imported);
   ExportResult r;
   r.checkpoint = l.path;
   // Every output folder is checked before any work, so a bad one fails fast and writes nothing.

@@ -40,6 +40,10 @@ void AddRunCommand(CLI::App& app) {
   AddChoiceOption(cmd, "--exposure", &o.exposure,
                   {{"auto", ExposureChoice::kAuto}, {"on", ExposureChoice::kOn}, {"off", ExposureChoice::kOff}},
                   "Solve each photo's exposure (gain and offset per channel; auto: for COLMAP photos)");
+  using recon::PoseChoice;
+  AddChoiceOption(cmd, "--refine-poses", &o.poses,
+                  {{"auto", PoseChoice::kAuto}, {"on", PoseChoice::kOn}, {"off", PoseChoice::kOff}},
+                  "Refine every training photo's camera with the volume (auto: off)");
   cmd->add_flag("--keep-bad-poses", o.keep_bad_poses,
                 "Train and score on COLMAP photos whose pose looks wrong too (by default they are left out and named)");
   cmd->add_option("--log-level", args->log_level, "info (progress and summary) or quiet (errors only)")

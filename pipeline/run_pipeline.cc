@@ -267,6 +267,7 @@ recon::ReconstructOptions RunOptions::ReconstructStage(const PresetSettings& pre
   ro.max_resolution = preset.max_resolution;
   ro.iterations = preset.iterations;
   ro.exposure = exposure;
+  ro.poses = poses;
   ro.resume = fresh && !force;
   return ro;
 }

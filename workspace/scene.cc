@@ -157,6 +157,7 @@ std::string SceneToJson(const Scene& scene) {
               {"world_from_cam", MatToJson<3, 4>(im.world_from_cam)}};
     if (im.split == Split::kExcluded) e["excluded_because"] = im.excluded_because;
     if (!im.alpha_path.empty()) e["alpha_path"] = im.alpha_path;
+    if (im.refined_world_from_cam) e["refined_world_from_cam"] = MatToJson<3, 4>(*im.refined_world_from_cam);
     imgs.push_back(e);
   }
   j["images"] = imgs;
@@ -273,10 +274,18 @@ Scene SceneFromJson(const std::string& text, const std::string& name) {
     if (im.split == Split::kExcluded && e.contains("excluded_because")) {
       im.excluded_because = r.String(e["excluded_because"], p + ".excluded_because");
     }
-    im.world_from_cam = r.Mat<3, 4>(r.Get(e, "world_from_cam", p), p + ".world_from_cam");
-    const Eigen::Matrix3d R = im.world_from_cam.leftCols<3>();
-    if (!(R.transpose() * R).isIdentity(1e-6) || R.determinant() < 0) {
-      r.Fail(p + ".world_from_cam", e["world_from_cam"], "the 3x3 part is not a rotation");
+    for (const char* field : {"world_from_cam", "refined_world_from_cam"}) {
+      if (!e.contains(field) && std::string(field) != "world_from_cam") continue;
+      const Eigen::Matrix<double, 3, 4> pose = r.Mat<3, 4>(r.Get(e, field, p), p + "." + field);
+      const Eigen::Matrix3d R = pose.leftCols<3>();
+      if (!(R.transpose() * R).isIdentity(1e-6) || R.determinant() < 0) {
+        r.Fail(p + "." + field, e[field], "the 3x3 part is not a rotation");
+      }
+      if (std::string(field) == "world_from_cam") {
+        im.world_from_cam = pose;
+      } else {
+        im.refined_world_from_cam = pose;
+      }
     }
     s.images.push_back(std::move(im));
   }

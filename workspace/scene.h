@@ -8,6 +8,7 @@
 
 #include <Eigen/Core>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -47,6 +48,9 @@ struct SceneImage {
   std::string alpha_path;   // relative to the workspace; empty if the source had no alpha
   int camera_id = 0;
   Eigen::Matrix<double, 3, 4> world_from_cam = Eigen::Matrix<double, 3, 4>::Identity();
+  // The pose as perf reconstruct --refine-poses refined it (the last level's checkpoint; a held-out
+  // view's from its neighbours'), or none; world_from_cam stays the imported pose.
+  std::optional<Eigen::Matrix<double, 3, 4>> refined_world_from_cam;
   Split split = Split::kTrain;
   std::string excluded_because;  // why, when split is kExcluded (empty otherwise)
 };

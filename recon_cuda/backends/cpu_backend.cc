@@ -15,6 +15,7 @@
 #include "recon_cuda/backends/cpu_vectors.h"
 #include "recon_cuda/core/jacobian.h"
 #include "recon_cuda/core/training_ray.h"
+#include "recon_cuda/solve/pose_blocks.h"
 
 namespace perf::recon {
 
@@ -51,6 +52,7 @@ class CpuBackend final : public Backend {
     PERF_CHECK(p.shape.num_shells == p.geometry.num_shells() && p.shape.num_shells <= kMaxShells);
     vectors_.Assign(0, 0);
     blocks_.clear();
+    pose_blocks_.clear();
     scratch_.clear();
     level_ = p;
     rays_ = {p.rays->cameras.data(), p.rays->pixels.data(), p.rays->colours.data(),
@@ -100,7 +102,7 @@ class CpuBackend final : public Backend {
   std::array<double, kParamKinds> SumByKind(VecId v) const override { return vectors_.SumByKind(v, level_.shape); }
   void Project(VecId x) override { vectors_.Project(x, level_.shape); }
   void HoldParameters(VecId x, VecId g, VecId free, bool bounds) override {
-    vectors_.HoldParameters(x, g, free, level_.shape, level_.fixed_shells, level_.fixed_poses, bounds);
+    vectors_.HoldParameters(x, g, free, level_.shape, level_.Held(), bounds);
   }
   void Multiply(VecId y, VecId m) override { vectors_.Multiply(y, m); }
   // Drops the recorded samples that reach no free parameter with a non-zero value (jacobian.h
@@ -128,6 +130,13 @@ class CpuBackend final : public Backend {
     });
   }
 
+  void PreconditionPoses(VecId z, VecId r, VecId diag, VecId free, float floor) override {
+    if (level_.shape.poses == 0 || pose_blocks_.empty()) return;
+    const int64_t at = level_.shape.PoseStart();
+    SolvePoseBlocks(level_.shape.poses, pose_blocks_, vec(r).data() + at, vec(diag).data() + at,
+                    vec(free).data() + at, floor, vec(z).data() + at);
+  }
+
   void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) override {
     vectors_.AdamStep(x, g, m, v, s, t, level_.shape);
   }
@@ -147,6 +156,11 @@ class CpuBackend final : public Backend {
     });
     if (want_diag) {
       ReduceInterleaved(pass, g, diag);
+      pose_blocks_.assign(static_cast<size_t>(level_.shape.poses) * kPoseBlock, 0.0);
+      for (Scratch& s : scratch_) {
+        if (s.pass != pass) continue;
+        for (size_t i = 0; i < s.pose_blocks.size(); ++i) pose_blocks_[i] += s.pose_blocks[i];
+      }
     } else {
       ReduceInto(pass, g);
     }
@@ -337,7 +351,10 @@ class CpuBackend final : public Backend {
         Backward(vol, ray, jit, fwd, both, s.record.data());
         const PoseRow<float> row = PoseRowOf(vol, vol.params + tr.pose, ray, geometry.grad);
         ScatterJtuPose(row, tr.pose, v.r, v.g);
-        if constexpr (kDiag) AddDiagPose(row, tr.pose, v.g2, v.d);
+        if constexpr (kDiag) {
+          AddDiagPose(row, tr.pose, v.g2, v.d);
+          AddPoseBlock(row, v.g2, &s.pose_blocks[kPoseBlock * ((tr.pose - vol.PoseStart()) / kPoseValues)]);
+        }
         if (out) PackPoseRow(row, &out->pose[kPoseRowValues * (i - begin)]);
       } else {
         Backward(vol, ray, jit, fwd, v, s.record.data());
@@ -457,6 +474,7 @@ class CpuBackend final : public Backend {
         }
         if (width > 0 && s.pass != pass) {
           s.acc.assign(params * width, 0.f);
+          s.pose_blocks.assign(width == 2 ? static_cast<size_t>(level_.shape.poses) * kPoseBlock : 0, 0.0);
           s.pass = pass;
         }
         for (int64_t b = r.begin(); b < r.end(); ++b) {
@@ -497,6 +515,7 @@ class CpuBackend final : public Backend {
   CpuVectors vectors_;  // and the arena every pass runs in
   LevelProblem level_;
   std::vector<BlockJ> blocks_;
+  std::vector<double> pose_blocks_;  // the last Linearize's pose blocks (pose_blocks.h), with a diagonal
   tbb::enumerable_thread_specific<Scratch> scratch_;
   bool cache_ = false, linearized_ = false, recorded_ = false;
   int max_samples_ = 0;

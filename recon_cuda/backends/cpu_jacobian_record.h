@@ -78,6 +78,7 @@ struct Scratch {
   std::vector<GridSample<float>> weights;   // [max samples a ray]
   BlockJ row;                               // one ray, when recomputing
   std::vector<float> acc;                   // per-thread sums (Linearize: g and diag interleaved)
+  std::vector<double> pose_blocks;          // per-thread sums of the pose blocks (kPoseBlock a photo)
   uint64_t pass = 0;                        // the pass acc was zeroed for
 };
 

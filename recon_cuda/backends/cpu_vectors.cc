@@ -135,15 +135,14 @@ void CpuVectors::Project(VecId x, const VolumeShape& shape) {
   });
 }
 
-void CpuVectors::HoldParameters(VecId x, VecId g, VecId free, const VolumeShape& shape, bool fixed_shells,
-                                bool fixed_poses,
+void CpuVectors::HoldParameters(VecId x, VecId g, VecId free, const VolumeShape& shape, const HeldKinds& held_kinds,
                                 bool bounds) {
   const float* px = (*this)[x].data();
   float* pg = (*this)[g].data();
   float* pf = (*this)[free].data();
   ForChunks([&](int64_t b, int64_t e) {
     for (int64_t i = b; i < e; ++i) {
-      const bool held = HeldParameter(KindOf(shape, i), px[i], pg[i], fixed_shells, bounds, fixed_poses);
+      const bool held = HeldParameter(KindOf(shape, i), px[i], pg[i], held_kinds, bounds);
       pf[i] = held ? 0.f : 1.f;
       if (held) pg[i] = 0.f;
     }

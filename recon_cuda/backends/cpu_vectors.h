@@ -41,8 +41,7 @@ class CpuVectors {
   double MaxAbs(VecId v, int64_t count = -1) const;  // of the first `count` entries (-1: all)
   // The operations that know what each parameter is (param_ops.h).
   void Project(VecId x, const VolumeShape& shape);
-  void HoldParameters(VecId x, VecId g, VecId free, const VolumeShape& shape, bool fixed_shells,
-                      bool fixed_poses, bool bounds);
+  void HoldParameters(VecId x, VecId g, VecId free, const VolumeShape& shape, const HeldKinds& held, bool bounds);
   void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t, const VolumeShape& shape);
   void AddSmoothness(VecId v, const VolumeShape& shape, const SmoothnessWeights& w, VecId out, VecId diag);
   double SmoothnessCost(VecId v, const VolumeShape& shape, const SmoothnessWeights& w) const;

@@ -11,6 +11,7 @@
 #include "recon_cuda/backends/cuda_check.h"
 #include "recon_cuda/backends/cuda_kernels.h"
 #include "recon_cuda/backends/device_buffer.h"
+#include "recon_cuda/solve/pose_blocks.h"
 
 namespace perf::recon {
 namespace {
@@ -168,6 +169,8 @@ class CudaBackend final : public Backend {
       brick_list_.CopyFromHost(p.shape.bricks->bricks);
     }
     rays_ = std::make_unique<DeviceRays>(*p.rays, UsesAlpha(p), p.shape.exposures, p.shape.poses);
+    pose_blocks_ = DeviceBuffer<float>(static_cast<int64_t>(p.shape.poses) * kPoseBlock);
+    blocks_fresh_ = false;
     scratch_ = std::make_unique<Scratch>(p.rays->size(), p.shape.ParamCount());
     held_ = e.Total();
     return e;
@@ -212,9 +215,26 @@ class CudaBackend final : public Backend {
   }
   void HoldParameters(VecId x, VecId g, VecId free, bool bounds) override {
     cuda::HoldParameters(ptr(x), ptr(g), ptr(free), n(), level_.shape.Layout(),
-                         level_.fixed_shells, bounds, level_.fixed_poses);
+                         level_.Held(), bounds);
   }
   void Multiply(VecId y, VecId m) override { cuda::Multiply(ptr(y), ptr(m), n()); }
+  // The blocks are solved on the host: a photo's 6 values, a few hundred photos (pose_blocks.h).
+  void PreconditionPoses(VecId z, VecId r, VecId diag, VecId free, float floor) override {
+    const int poses = level_.shape.poses;
+    if (poses == 0 || !blocks_fresh_) return;
+    const int64_t at = level_.shape.PoseStart(), count = static_cast<int64_t>(poses) * kPoseValues;
+    std::vector<float> blocks(pose_blocks_.size()), hr(count), hd(count), hf(count), hz(count);
+    pose_blocks_.CopyToHost(blocks);
+    const auto get = [&](VecId v, std::vector<float>& host) {
+      PERF_CUDA_CHECK(cudaMemcpy(host.data(), ptr(v) + at, count * sizeof(float), cudaMemcpyDeviceToHost));
+    };
+    get(r, hr);
+    get(diag, hd);
+    get(free, hf);
+    const std::vector<double> wide(blocks.begin(), blocks.end());
+    SolvePoseBlocks(poses, wide, hr.data(), hd.data(), hf.data(), floor, hz.data());
+    PERF_CUDA_CHECK(cudaMemcpy(ptr(z) + at, hz.data(), count * sizeof(float), cudaMemcpyHostToDevice));
+  }
   // Nothing is recorded: JtJpKernel skips the samples on the fly (jacobian.h SkippableSample).
   void RestrictJacobian(VecId free) override { restrict_to_ = ptr(free); }
   void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) override {
@@ -224,9 +244,11 @@ class CudaBackend final : public Backend {
   PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset) override {
     PERF_CHECK(subset.Valid());
     const auto t0 = WallClock::now();
-    const cuda::RayStats r = cuda::Linearize(Input(x, seed), ptr(g), diag == kNoVector ? nullptr : ptr(diag), n(),
-                                             subset.stride, subset.offset,
-                                             scratch_->Stats());
+    const cuda::RayStats r =
+        cuda::Linearize(Input(x, seed), ptr(g), diag == kNoVector ? nullptr : ptr(diag),
+                        pose_blocks_.size() > 0 ? pose_blocks_.data() : nullptr, n(), subset.stride, subset.offset,
+                        scratch_->Stats());
+    blocks_fresh_ = diag != kNoVector && pose_blocks_.size() > 0;
     lin_x_ = x;
     lin_seed_ = seed;
     linearized_ = true;
@@ -279,6 +301,8 @@ class CudaBackend final : public Backend {
     brick_list_ = DeviceBuffer<int64_t>();
     rays_.reset();
     scratch_.reset();
+    pose_blocks_ = DeviceBuffer<float>();
+    blocks_fresh_ = false;
     held_ = 0;
     linearized_ = false;
   }
@@ -373,6 +397,8 @@ class CudaBackend final : public Backend {
   DeviceBuffer<int32_t> bricks_;  // a sparse level's brick table (VolumeView::brick_slot)
   DeviceBuffer<int64_t> brick_list_;  // and the brick of each slot (SmoothnessLayout::bricks)
   std::unique_ptr<DeviceRays> rays_;
+  DeviceBuffer<float> pose_blocks_;  // [poses, kPoseBlock] of the last Linearize with a diagonal
+  bool blocks_fresh_ = false;        // whether pose_blocks_ are of the last linearisation
   std::unique_ptr<Scratch> scratch_;
   int64_t held_ = 0;  // bytes of the current level (EstimateMemory's Total)
   bool linearized_ = false;

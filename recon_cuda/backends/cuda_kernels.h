@@ -63,9 +63,10 @@ int64_t PassBlocks(int64_t rays);
 size_t StatsTempBytes(int64_t blocks);
 
 // Passes (backend.h). Outputs are overwritten (zeroed first), not accumulated.
-// g, diag: [ParamCount]; diag may be nullptr (Adam).
-RayStats Linearize(const PassInput& in, float* g, float* diag, int64_t params, int stride, int offset,
-                   const StatsScratch& s);
+// g, diag: [ParamCount]; diag may be nullptr (Adam). pose_blocks: [poses, kPoseBlock] the
+// photos' pose blocks (pose.h AddPoseBlock), needed with diag when the rays refine poses.
+RayStats Linearize(const PassInput& in, float* g, float* diag, float* pose_blocks, int64_t params, int stride,
+                   int offset, const StatsScratch& s);
 // out = J^T J p at in.vol (the linearisation point) and in.seed; p, out: [ParamCount].
 // free: nullptr, or the parameters the product is needed on (backend.h RestrictJacobian).
 RayStats MultiplyJtJ(const PassInput& in, const float* p, const float* free, float* out, int64_t params,
@@ -88,7 +89,7 @@ void AxpyDiag(float* y, float a, const float* d, const float* x, int64_t n);  //
 void Project(float* x, int64_t n, const ParamLayout& layout);
 // backend.h HoldParameters and Multiply.
 void HoldParameters(const float* x, float* g, float* free, int64_t n, const ParamLayout& layout,
-                    bool fixed_shells, bool bounds, bool fixed_poses);
+                    const HeldKinds& held, bool bounds);
 void Multiply(float* y, const float* m, int64_t n);
 void AdamStep(float* x, const float* g, float* m, float* v, const AdamCoefficients& c, int64_t n,
               const ParamLayout& layout);

@@ -108,10 +108,12 @@ struct JpVisitor {
 // A ray's exposure entries (jacobian.h ScatterJtuExposure, AddDiagExposure), or its pose entries
 // (pose.h ScatterJtuPose, AddDiagPose: as many), kept in registers until WarpAddExposure: base is
 // the photo's first exposure (pose) parameter (-1: none).
-static_assert(kPoseValues == kExposureValues);
-struct ExposureSums {
+// (A photo's pose block, pose.h AddPoseBlock, is a group of kPoseBlock values at base.)
+static_assert(kPoseValues == kExposureValues && kPoseBlock % 4 == 0);
+template <int N>
+struct GroupSums {
   int64_t base = -1;
-  float v[kExposureValues] = {0, 0, 0, 0, 0, 0, 0, 0};
+  float v[N] = {};
   __device__ __forceinline__ void Add4(int64_t i, float x, float y, float z, float w) {
     float* p = v + (i - base);
     p[0] += x;
@@ -120,26 +122,28 @@ struct ExposureSums {
     p[3] += w;
   }
 };
+using ExposureSums = GroupSums<kExposureValues>;
 
-// Adds every lane's ExposureSums to dst. Every ray of a photo adds to the same 8 values, and a
-// warp's rays are usually of one photo (the rays go photo by photo, tile by tile): then the warp
-// sums them with shuffles and one lane adds, instead of 32 atomics on one address. Call from
-// every lane of the warp (lanes without a ray pass base -1).
-__device__ void WarpAddExposure(ExposureSums& e, float* dst) {
+// Adds every lane's group sums to dst. Every ray of a photo adds to the same values, and a warp's
+// rays are usually of one photo (the rays go photo by photo, tile by tile): then the warp sums
+// them with shuffles and one lane adds, instead of 32 atomics on one address. Call from every
+// lane of the warp (lanes without a ray pass base -1).
+template <int N>
+__device__ void WarpAddGroup(GroupSums<N>& e, float* dst) {
   constexpr unsigned kAll = 0xffffffffu;
   const long long first = __shfl_sync(kAll, static_cast<long long>(e.base), 0);
   if (__all_sync(kAll, e.base == first)) {
     if (first < 0) return;
-    for (int k = 0; k < kExposureValues; ++k)
+    for (int k = 0; k < N; ++k)
       for (int offset = 16; offset > 0; offset >>= 1) e.v[k] += __shfl_down_sync(kAll, e.v[k], offset);
     if ((threadIdx.x & 31) != 0) return;
   } else if (e.base < 0) {
     return;
   }
   AtomicSink sink{dst};
-  sink.Add4(e.base, e.v[0], e.v[1], e.v[2], e.v[3]);
-  sink.Add4(e.base + 4, e.v[4], e.v[5], e.v[6], e.v[7]);
+  for (int k = 0; k < N; k += 4) sink.Add4(e.base + k, e.v[k], e.v[k + 1], e.v[k + 2], e.v[k + 3]);
 }
+__device__ void WarpAddExposure(ExposureSums& e, float* dst) { WarpAddGroup(e, dst); }
 
 struct SumStats {
   __device__ __forceinline__ RayStats operator()(const RayStats& a, const RayStats& b) const {
@@ -170,11 +174,12 @@ __device__ __forceinline__ TrainingRay MakeRay(const PassInput& in, int64_t i) {
 // visitor and add the pose rows. A template argument, so that the kernels of a level without
 // poses keep their registers.
 template <bool kDiag, bool kPoses>
-__global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, float* g, float* diag, int stride,
-                                                               int offset, RayStats* partials) {
+__global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, float* g, float* diag, float* pose_blocks,
+                                                               int stride, int offset, RayStats* partials) {
   const int64_t i = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   RayStats mine;
   ExposureSums eg, ed, pg, pd;
+  GroupSums<kPoses && kDiag ? kPoseBlock : 4> pb;
   if (i < in.rays.count) {
     const TrainingRay r = MakeRay(in, i);
     float target[3];
@@ -199,7 +204,11 @@ __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, flo
         const PoseRow<float> row = PoseRowOf(in.vol, in.vol.params + r.pose, r.ray, geometry.grad);
         pg.base = pd.base = r.pose;
         ScatterJtuPose(row, r.pose, v.u, pg);
-        if constexpr (kDiag) AddDiagPose(row, r.pose, v.g2, pd);
+        if constexpr (kDiag) {
+          AddDiagPose(row, r.pose, v.g2, pd);
+          pb.base = kPoseBlock * ((r.pose - in.vol.PoseStart()) / kPoseValues);
+          AddPoseBlock(row, v.g2, pb.v);
+        }
       }
     } else {
       Backward(in.vol, r.ray, r.jit, fwd, v);
@@ -215,7 +224,10 @@ __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, flo
   if constexpr (kDiag) WarpAddExposure(ed, diag);
   if constexpr (kPoses) {
     WarpAddExposure(pg, g);
-    if constexpr (kDiag) WarpAddExposure(pd, diag);
+    if constexpr (kDiag) {
+      WarpAddExposure(pd, diag);
+      WarpAddGroup(pb, pose_blocks);
+    }
   }
   WriteBlockStats(mine, partials);
 }
@@ -368,22 +380,27 @@ size_t StatsTempBytes(int64_t blocks) {
   return bytes;
 }
 
-RayStats Linearize(const PassInput& in, float* g, float* diag, int64_t params, int stride, int offset,
-                   const StatsScratch& s) {
+RayStats Linearize(const PassInput& in, float* g, float* diag, float* pose_blocks, int64_t params, int stride,
+                   int offset, const StatsScratch& s) {
   PERF_CUDA_CHECK(cudaMemset(g, 0, params * sizeof(float)));
   if (diag) PERF_CUDA_CHECK(cudaMemset(diag, 0, params * sizeof(float)));
+  const bool poses = in.rays.pose_slot != nullptr;
+  PERF_CHECK(!(poses && diag) || pose_blocks != nullptr);
+  if (poses && diag) {
+    PERF_CUDA_CHECK(cudaMemset(pose_blocks, 0, static_cast<size_t>(in.vol.poses) * kPoseBlock * sizeof(float)));
+  }
   const int64_t blocks = PassBlocks(in.rays.count);
   if (blocks == 0) return {};
   PERF_CHECK(blocks <= s.capacity);
-  const bool poses = in.rays.pose_slot != nullptr;
   if (diag && poses) {
-    LinearizeKernel<true, true><<<GridFor(blocks), kRayThreads>>>(in, g, diag, stride, offset, s.partials);
+    LinearizeKernel<true, true><<<GridFor(blocks), kRayThreads>>>(in, g, diag, pose_blocks, stride, offset, s.partials);
   } else if (diag) {
-    LinearizeKernel<true, false><<<GridFor(blocks), kRayThreads>>>(in, g, diag, stride, offset, s.partials);
+    LinearizeKernel<true, false><<<GridFor(blocks), kRayThreads>>>(in, g, diag, nullptr, stride, offset, s.partials);
   } else if (poses) {
-    LinearizeKernel<false, true><<<GridFor(blocks), kRayThreads>>>(in, g, nullptr, stride, offset, s.partials);
+    LinearizeKernel<false, true><<<GridFor(blocks), kRayThreads>>>(in, g, nullptr, nullptr, stride, offset, s.partials);
   } else {
-    LinearizeKernel<false, false><<<GridFor(blocks), kRayThreads>>>(in, g, nullptr, stride, offset, s.partials);
+    LinearizeKernel<false, false><<<GridFor(blocks), kRayThreads>>>(in, g, nullptr, nullptr, stride, offset,
+                                                                    s.partials);
   }
   PERF_CUDA_CHECK_LAUNCH("LinearizeKernel");
   return Total(s, blocks);

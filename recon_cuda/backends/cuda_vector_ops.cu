@@ -103,11 +103,12 @@ void Project(float* x, int64_t n, const ParamLayout& layout) {
   ForEach(n, [=] __device__(int64_t i) { x[i] = ProjectToValid(KindOfParam(layout, i), x[i]); }, "Project");
 }
 void HoldParameters(const float* x, float* g, float* free, int64_t n, const ParamLayout& layout,
-                    bool fixed_shells, bool bounds, bool fixed_poses) {
+                    const HeldKinds& held_kinds, bool bounds) {
+  const HeldKinds kinds = held_kinds;
   ForEach(
       n,
       [=] __device__(int64_t i) {
-        const bool held = HeldParameter(KindOfParam(layout, i), x[i], g[i], fixed_shells, bounds, fixed_poses);
+        const bool held = HeldParameter(KindOfParam(layout, i), x[i], g[i], kinds, bounds);
         free[i] = held ? 0.f : 1.f;
         if (held) g[i] = 0.f;
       },

@@ -77,11 +77,17 @@ PERF_HD_INLINE float ProjectToValid(ParamKind kind, float v) { return Clamp(v, L
 // gradient points out of the range would only be moved out by a descent step and projected
 // back; leaving it in the system lets CG spend the step on that move and shape every other
 // parameter's step around it. Held parameters are left out of that iteration's system.
-// fixed_poses: the photos' pose corrections are held too (a level that does not refine them).
-PERF_HD_INLINE bool HeldParameter(ParamKind kind, float x, float g, bool fixed_shells, bool bounds,
-                                  bool fixed_poses = false) {
-  if (fixed_shells && (kind == ParamKind::kShellColour || kind == ParamKind::kShellOpacity)) return true;
-  if (fixed_poses && (kind == ParamKind::kPoseRotation || kind == ParamKind::kPoseCentre)) return true;
+// The kinds a level holds whatever their gradient: the shells (a known background), the photos'
+// pose corrections (a level that does not refine them), everything but the poses (a pose fit
+// against a frozen volume).
+struct HeldKinds {
+  bool shells = false, poses = false, volume = false;
+};
+PERF_HD_INLINE bool IsPose(ParamKind kind) { return kind == ParamKind::kPoseRotation || kind == ParamKind::kPoseCentre; }
+
+PERF_HD_INLINE bool HeldParameter(ParamKind kind, float x, float g, const HeldKinds& held, bool bounds) {
+  if (held.shells && (kind == ParamKind::kShellColour || kind == ParamKind::kShellOpacity)) return true;
+  if (IsPose(kind) ? held.poses : held.volume) return true;
   if (!bounds) return false;
   if (x <= LowerBound(kind) && g > 0) return true;
   return x >= UpperBound(kind) && g < 0;
@@ -99,8 +105,7 @@ PERF_HD_INLINE void AdamUpdate(const AdamCoefficients& a, ParamKind kind, float 
   *m = a.beta1 * *m + (1 - a.beta1) * g;
   *v = a.beta2 * *v + (1 - a.beta2) * g * g;
   // Adam does not refine poses (--refine-poses is a Gauss-Newton option): their rate is 0.
-  const bool pose = kind == ParamKind::kPoseRotation || kind == ParamKind::kPoseCentre;
-  const float lr = pose                                ? 0.f
+  const float lr = IsPose(kind)                                ? 0.f
                    : kind == ParamKind::kGridDensity  ? a.lr_density
                    : kind == ParamKind::kShellOpacity ? a.lr_opacity
                                                        : a.lr_colour;

@@ -365,6 +365,24 @@ PERF_HD_INLINE void AddDiagPose(const PoseRow<T>& row, int64_t param, const T* g
   sink.Add4(param + 4, v[4], v[5], v[6], v[7]);
 }
 
+// The pose block of J^T J (block-Jacobi preconditioning, solve/pose_blocks.h): per photo the
+// 6 x 6 products of its solved values (PoseParam order without the padding), row-major.
+inline constexpr int kPoseSolved = 6;
+inline constexpr int kPoseBlock = kPoseSolved * kPoseSolved;
+PERF_HD_INLINE int PoseValueOf(int a) { return a < 3 ? a : a + 1; }  // solved value a in PoseParam order
+
+// block += the ray's share: sum over the rows of g2_row J[row][a] J[row][b] (g2 as AddDiagPose's).
+template <class T, class Acc>
+PERF_HD_INLINE void AddPoseBlock(const PoseRow<T>& row, const T* g2, Acc* block) {
+  for (int a = 0; a < kPoseSolved; ++a) {
+    for (int b = 0; b < kPoseSolved; ++b) {
+      T s = row.j[3][PoseValueOf(a)] * row.j[3][PoseValueOf(b)];
+      for (int r = 0; r < 3; ++r) s += g2[r] * row.j[r][PoseValueOf(a)] * row.j[r][PoseValueOf(b)];
+      block[kPoseSolved * a + b] += s;
+    }
+  }
+}
+
 // Calls a.X and b.X for each Backward callback: one sweep feeds two visitors.
 template <class A, class B>
 struct BothVisitors {

@@ -89,7 +89,9 @@ std::vector<float> InitialParams(const VolumeShape& shape, const VolumeGeometry&
       case ParamKind::kExposureGain:
       case ParamKind::kExposureOffset: x[i] = 0; break;  // the identity
       case ParamKind::kGridSh: x[i] = 0; break;          // no view dependence
-      default: x[i] = unit(rng); break;
+      case ParamKind::kPoseRotation:
+      case ParamKind::kPoseCentre: x[i] = 0; break;      // the imported poses
+      case ParamKind::kGridColour: x[i] = unit(rng); break;
     }
   }
   ProjectToValidRange(shape, x);

@@ -29,14 +29,15 @@ Image OpacityImage(const RenderOutput& render) {
 }
 
 RenderOutput RenderAsShot(Backend* backend, VecId x, const PosedImage& view, float min_box_opacity,
-                          const PhotoExposures& exposures) {
-  RenderOutput r = backend->Render(x, view.camera, view.image.width, view.image.height, min_box_opacity);
-  if (!exposures.empty()) ApplyTransform(exposures.Nearest(view.camera), &r);
+                          const PhotoCorrections& exposures) {
+  RenderOutput r =
+      backend->Render(x, exposures.CameraFor(view.camera), view.image.width, view.image.height, min_box_opacity);
+  if (!exposures.transforms().empty()) ApplyTransform(exposures.TransformFor(view.camera), &r);
   return r;
 }
 
 std::vector<ViewScore> ScoreViews(Backend* backend, VecId x, const std::vector<PosedImage>& views,
-                                  float min_box_opacity, const PhotoExposures& exposures) {
+                                  float min_box_opacity, const PhotoCorrections& exposures) {
   std::vector<ViewScore> scores;
   for (const PosedImage& v : views) {
     scores.push_back({v.name, Psnr(RenderAsShot(backend, x, v, min_box_opacity, exposures), v.image)});

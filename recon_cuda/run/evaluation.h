@@ -5,7 +5,7 @@
 #include <string>
 #include <vector>
 
-#include "recon_cuda/run/exposure.h"
+#include "recon_cuda/run/photo_corrections.h"
 #include "recon_cuda/solve/backend.h"
 
 namespace perf::recon {
@@ -20,14 +20,15 @@ Image ToImage(const RenderOutput& render);          // RGB
 Image OpacityImage(const RenderOutput& render);     // one channel: 1 - T_box
 
 // A view rendered at its own size as its photo was shot: no jitter, the render rule at
-// `min_box_opacity` (render_rule.h), then with exposures the transform of its nearest training
-// photos (exposure.h PhotoExposures::Nearest).
+// `min_box_opacity` (render_rule.h), from its camera as the refined training cameras place it and
+// with the colour transform of its nearest training photos (photo_corrections.h CameraFor,
+// TransformFor).
 RenderOutput RenderAsShot(Backend* backend, VecId x, const PosedImage& view, float min_box_opacity,
-                          const PhotoExposures& exposures = {});
+                          const PhotoCorrections& exposures = {});
 
 // Every view rendered as shot (RenderAsShot) and scored.
 std::vector<ViewScore> ScoreViews(Backend* backend, VecId x, const std::vector<PosedImage>& views,
-                                  float min_box_opacity, const PhotoExposures& exposures = {});
+                                  float min_box_opacity, const PhotoCorrections& exposures = {});
 
 // The mean of the per-view PSNRs (the NeRF convention); 0 for no views.
 double MeanPsnr(const std::vector<ViewScore>& scores);

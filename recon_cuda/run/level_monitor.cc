@@ -8,6 +8,7 @@
 #include "recon_cuda/data/checkpoint.h"
 #include "recon_cuda/run/evaluation.h"
 #include "recon_cuda/run/photo_fit.h"
+#include "recon_cuda/run/refined_poses.h"
 #include "workspace/image_io.h"
 
 namespace perf::recon {
@@ -82,7 +83,7 @@ bool LevelMonitor::Iteration(const HierarchyLevel& h, const IterationSummary& s)
   const bool last_it = s.iteration + 1 == h.solver.max_iterations;
   const bool score = run_.test_views > 0 && o_.eval_every > 0 && ((s.iteration + 1) % o_.eval_every == 0 || last_it);
   const bool preview = run_.root && o_.preview_every > 0 && ((s.iteration + 1) % o_.preview_every == 0 || last_it);
-  const PhotoExposures exposures = score || preview ? ExposuresAt(h) : PhotoExposures();
+  const PhotoCorrections exposures = score || preview ? CorrectionsAt(h) : PhotoCorrections();
   if (score) {
     held_out_psnr_ = HeldOutPsnr(h.params, exposures);
     held_out_iteration_ = s.iteration;
@@ -113,7 +114,8 @@ void LevelMonitor::LevelDone(const HierarchyLevel& h, const SolverSummary& summa
   lr_.cost = summary.final_cost;
   lr_.train_psnr = summary.per_iteration.empty() ? 0 : summary.per_iteration.back().train_psnr;
   lr_.status = StatusName(summary.status);
-  const PhotoExposures fitted(h.shape, x, run_.train_views);  // none when the level solves none
+  // None when the level solves neither exposures nor poses.
+  const PhotoCorrections fitted(h.shape, x, run_.train_views, run_.geometry);
   if (h.level == 0) {
     const auto t0 = WallClock::now();
     const PhotoFits fits =
@@ -127,7 +129,7 @@ void LevelMonitor::LevelDone(const HierarchyLevel& h, const SolverSummary& summa
     // The last iteration's, when the log has it; else now (the backend still holds x).
     lr_.test_psnr = held_out_iteration_ == summary.iterations - 1 ? held_out_psnr_ : HeldOutPsnr(h.params, fitted);
   }
-  if (!fitted.empty()) {
+  if (!fitted.transforms().empty()) {
     result.gain_range[0] = 2, result.gain_range[1] = 0;
     for (const ColourTransform<float>& xf : fitted.transforms()) {
       for (float g : xf.gain) {
@@ -136,6 +138,7 @@ void LevelMonitor::LevelDone(const HierarchyLevel& h, const SolverSummary& summa
       }
     }
   }
+  if (h.shape.poses > 0) ReportPoses(h, fitted);
   if (run_.root) {
     WriteCheckpoint(CheckpointPath(o_.workspace, h.level),
                     MakeCheckpoint(run_.scene, h.level, h.shape, summary.iterations, o_.solver.type, x));
@@ -149,6 +152,20 @@ void LevelMonitor::LevelDone(const HierarchyLevel& h, const SolverSummary& summa
   result.solve_seconds += lr_.seconds;
   result.final_checkpoint = CheckpointPath(o_.workspace, h.level);
   result.test_psnr = lr_.test_psnr;
+}
+
+void LevelMonitor::ReportPoses(const HierarchyLevel& h, const PhotoCorrections& fitted) {
+  ReconstructResult& result = run_.result;
+  const Scene refined = WithRefinedPoses(run_.scene, fitted);
+  const std::vector<PoseCorrection> moved = DescribeCorrections(refined);
+  result.pose_corrections = CorrectionsToJson(moved);
+  result.pose_warning = LargeCorrectionsWarning(moved);
+  json summary = result.pose_corrections;
+  summary.erase("photos");
+  run_.log.Write({{"event", "poses"}, {"level", h.level}, {"poses", summary}});
+  if (h.level + 1 == run_.levels && !result.pose_warning.empty()) run_.Say("warning: " + result.pose_warning);
+  // Before the level's checkpoint, which stays the newer file (perf run's freshness test).
+  if (run_.root) WriteScene(run_.scene_path, refined);
 }
 
 void LevelMonitor::OutOfMemory(const HierarchyLevel& h) {
@@ -177,16 +194,16 @@ void LevelMonitor::CheckBox(const HierarchyLevel& h, const std::vector<float>& x
   if (!result.box_warning.empty() && grow_faces_.empty()) run_.Say("warning: " + result.box_warning);
 }
 
-PhotoExposures LevelMonitor::ExposuresAt(const HierarchyLevel& h) {
-  if (h.shape.exposures == 0) return PhotoExposures();
+PhotoCorrections LevelMonitor::CorrectionsAt(const HierarchyLevel& h) {
+  if (h.shape.exposures == 0 && h.shape.poses == 0) return PhotoCorrections();
   const auto t0 = WallClock::now();
   std::vector<float> x(static_cast<size_t>(h.shape.ParamCount()));
   run_.backend->Download(h.params, x);
   eval_seconds_ += SecondsSince(t0);
-  return PhotoExposures(h.shape, x, run_.train_views);
+  return PhotoCorrections(h.shape, x, run_.train_views, run_.geometry);
 }
 
-double LevelMonitor::HeldOutPsnr(VecId params, const PhotoExposures& exposures) {
+double LevelMonitor::HeldOutPsnr(VecId params, const PhotoCorrections& exposures) {
   const auto t0 = WallClock::now();
   double sum[2] = {0, 0};  // PSNR, views
   for (const ViewScore& s : ScoreViews(run_.backend.get(), params, run_.test, o_.min_box_opacity, exposures)) {
@@ -198,7 +215,7 @@ double LevelMonitor::HeldOutPsnr(VecId params, const PhotoExposures& exposures) 
   return sum[1] > 0 ? sum[0] / sum[1] : 0.0;
 }
 
-void LevelMonitor::WritePreview(const HierarchyLevel& h, int iteration, const PhotoExposures& exposures) {
+void LevelMonitor::WritePreview(const HierarchyLevel& h, int iteration, const PhotoCorrections& exposures) {
   const auto t0 = WallClock::now();
   // Rank 0's first held-out view (its share starts with the split's first image), else training view.
   const PosedImage& view = run_.test.empty() ? run_.train.front() : run_.test.front();

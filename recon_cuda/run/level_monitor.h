@@ -8,7 +8,7 @@
 
 #include "common/stopwatch.h"
 #include "recon_cuda/run/box_check.h"
-#include "recon_cuda/run/exposure.h"
+#include "recon_cuda/run/photo_corrections.h"
 #include "recon_cuda/run/reconstruct_run.h"
 
 namespace perf::recon {
@@ -36,10 +36,13 @@ class LevelMonitor {
   void CheckBox(const HierarchyLevel& h, const std::vector<float>& x);
   // The photos' exposures at the level's current parameters (none when it solves none), read
   // from the backend once for a callback's scoring and preview.
-  PhotoExposures ExposuresAt(const HierarchyLevel& h);
+  PhotoCorrections CorrectionsAt(const HierarchyLevel& h);
   // The mean PSNR over every rank's held-out views (collective).
-  double HeldOutPsnr(VecId params, const PhotoExposures& exposures);
-  void WritePreview(const HierarchyLevel& h, int iteration, const PhotoExposures& exposures);
+  double HeldOutPsnr(VecId params, const PhotoCorrections& exposures);
+  // The level's refined cameras: recon.json's "poses", the log, scene.json's refined poses and,
+  // after the last level, the warning naming large corrections.
+  void ReportPoses(const HierarchyLevel& h, const PhotoCorrections& fitted);
+  void WritePreview(const HierarchyLevel& h, int iteration, const PhotoCorrections& exposures);
   // The log's "level" line; with several ranks, every rank's pass and sum seconds (collective).
   nlohmann::json LevelLine(const SolverSummary& summary);
   // Ends the level's clock: its solver seconds (held-out scoring and previews left out).

@@ -49,7 +49,7 @@ PhotoFits FindPoorFits(std::vector<PhotoFit> fits, const PhotoFitOptions& o) {
 }
 
 PhotoFits CheckPhotoFits(Backend* backend, VecId x, const std::vector<PosedImage>& share,
-                         const std::vector<std::string>& names, const PhotoExposures& exposures, Communicator& comm,
+                         const std::vector<std::string>& names, const PhotoCorrections& exposures, Communicator& comm,
                          const PhotoFitOptions& o) {
   std::map<std::string, size_t> index;
   for (size_t i = 0; i < names.size(); ++i) index[names[i]] = i;

@@ -13,7 +13,7 @@
 
 #include "common/comm.h"
 #include "recon_cuda/data/training_data.h"
-#include "recon_cuda/run/exposure.h"
+#include "recon_cuda/run/photo_corrections.h"
 #include "recon_cuda/solve/backend.h"
 
 namespace perf::recon {
@@ -46,7 +46,7 @@ PhotoFits FindPoorFits(std::vector<PhotoFit> fits, const PhotoFitOptions& option
 // exposure) and scored; the poor fits among them. share: this rank's training photos; names:
 // every rank's, in scene.json order (collective over comm).
 PhotoFits CheckPhotoFits(Backend* backend, VecId x, const std::vector<PosedImage>& share,
-                         const std::vector<std::string>& names, const PhotoExposures& exposures, Communicator& comm,
+                         const std::vector<std::string>& names, const PhotoCorrections& exposures, Communicator& comm,
                          const PhotoFitOptions& options = {});
 
 }  // namespace perf::recon

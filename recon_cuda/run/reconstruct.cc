@@ -306,6 +306,14 @@ json ReconstructResult::ToJson(const ReconstructOptions& o) const {
                 {"gain_range", {gain_range[0], gain_range[1]}},
                 {"held_out", exposures > 0 ? "the inverse-distance blend of the two nearest training photos' (camera centres)"
                                            : "none"}}},
+              {"poses",
+               {{"photos", ho.poses},
+                {"from_level", ho.refine_poses_from + 1},
+                {"prior", ho.solver.pose_prior},
+                {"held_out", ho.poses > 0 ? "the inverse-distance blend of the two nearest training photos' corrections"
+                                          : "as imported"},
+                {"warning", pose_warning},
+                {"corrections", pose_corrections}}},
               {"robust_scale", o.residuals.robust_scale},
               {"robust_from_level", ho.robust_from_level + 1},
               {"opacity_residual", opacity_residual},

@@ -60,6 +60,9 @@ struct ReconstructResult {
   nlohmann::json box_faces = nlohmann::json::array();    // the last first-level fit's (box_check.h)
   std::string box_warning;
   nlohmann::json box_growths = nlohmann::json::array();  // BoxGrowth::ToJson of each
+  // The refined cameras of the last level (refined_poses.h CorrectionsToJson); null without.
+  nlohmann::json pose_corrections;
+  std::string pose_warning;  // the large corrections (LargeCorrectionsWarning); empty: none
 
   // recon.json: the settings `options` ran with, the choices made and every level run.
   nlohmann::json ToJson(const ReconstructOptions& options) const;

@@ -38,6 +38,12 @@ void ReconstructOptions::Check() const {
     if (i < 0) Fail("--level-iterations", std::to_string(i), "must be >= 0 for every level");
   }
   if (preview_every < 0) Fail("--preview-every", std::to_string(preview_every), "must be >= 0");
+  if (poses == PoseChoice::kOn && solver.type == SolverType::kAdam) {
+    Fail("--refine-poses", "on", "refines poses in Gauss-Newton only", "use --solver gn, or --refine-poses off");
+  }
+  if (refine_poses_from < 0 || refine_poses_from > 6) {
+    Fail("--refine-poses-from", std::to_string(refine_poses_from), "must be a level, 0 to 6");
+  }
   if (eval_every < 0) Fail("--eval-every", std::to_string(eval_every), "must be >= 0");
   if (!(residuals.lambda >= 0 && std::isfinite(residuals.lambda))) {
     Fail("--lambda", StrCat(residuals.lambda), "must be finite and >= 0 (0: off)");
@@ -79,7 +85,10 @@ HierarchyOptions ReconstructOptions::Hierarchy(const Scene& scene, const LevelCh
   SetHierarchyBackground(background, scene, &h);
   if (h.solver.smooth_grid < 0) h.solver.smooth_grid = h.fixed_background ? 0.0 : kAutoSmoothGrid;
   if (solver.type == SolverType::kAdam) h.solver.smooth_grid = h.solver.smooth_shells = 0;  // Gauss-Newton only
-  h.exposures = SolvesExposures(exposure, scene) ? static_cast<int>(SplitViews(scene, Split::kTrain).size()) : 0;
+  const int train = static_cast<int>(SplitViews(scene, Split::kTrain).size());
+  h.exposures = SolvesExposures(exposure, scene) ? train : 0;
+  h.poses = RefinesPoses(poses, scene, solver.type) ? train : 0;
+  h.refine_poses_from = refine_poses_from;
   return h;
 }
 
@@ -89,6 +98,10 @@ bool FixedBackground(BackgroundChoice background, const Scene& scene) {
 
 bool SolvesExposures(ExposureChoice exposure, const Scene& scene) {
   return exposure == ExposureChoice::kOn || (exposure == ExposureChoice::kAuto && scene.source.type == "colmap");
+}
+
+bool RefinesPoses(PoseChoice poses, const Scene&, SolverType solver) {
+  return poses == PoseChoice::kOn && solver == SolverType::kGaussNewton;
 }
 
 void SetHierarchyBackground(BackgroundChoice background, const Scene& scene, HierarchyOptions* options) {

@@ -31,6 +31,10 @@ enum class BackgroundChoice { kAuto, kFixed, kLearn };
 // json scenes (synthetic renders share one exposure).
 enum class ExposureChoice { kAuto, kOn, kOff };
 
+// Camera refinement (--refine-poses): solve a rotation and a centre correction for every training
+// photo with the volume (pose.h), from level refine_poses_from on, or not. kAuto: see PosesRefined.
+enum class PoseChoice { kAuto, kOn, kOff };
+
 // The grid's smoothness weight chosen where the background is learned (--smooth-grid's default
 // there; 0 where it is fixed).
 inline constexpr double kAutoSmoothGrid = 0.3;
@@ -59,6 +63,10 @@ struct ReconstructOptions {
   BackgroundChoice background = BackgroundChoice::kAuto;
   // Per-photo exposure; solver.exposure_prior weighs its prior.
   ExposureChoice exposure = ExposureChoice::kAuto;
+  // Camera refinement; solver.pose_prior weighs its prior. Levels before refine_poses_from fit
+  // the volume on the imported poses (held), the others refine them.
+  PoseChoice poses = PoseChoice::kAuto;
+  int refine_poses_from = 0;
   // View-dependent colour: spherical harmonics of this degree (0, 1 or 2) beyond each cell's
   // colour (ray_types.h ShParam); 0: none.
   int sh_degree = 0;
@@ -103,6 +111,10 @@ bool FixedBackground(BackgroundChoice background, const Scene& scene);
 
 // Whether `exposure` solves the photos' exposures for this scene (kAuto: COLMAP photos).
 bool SolvesExposures(ExposureChoice exposure, const Scene& scene);
+
+// Whether `poses` refines the training photos' poses for this scene with this solver (kAuto: off
+// until measurements choose otherwise; Adam never refines them).
+bool RefinesPoses(PoseChoice poses, const Scene& scene, SolverType solver);
 
 // The hierarchy's background as perf reconstruct sets it: fixed or not (FixedBackground), and
 // the colour fixed shells hold (scene.json's background).

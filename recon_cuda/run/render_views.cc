@@ -3,6 +3,7 @@
 #include "common/atomic_file.h"
 #include "common/errors.h"
 #include "recon_cuda/data/checkpoint.h"
+#include "recon_cuda/run/refined_poses.h"
 #include "workspace/image_io.h"
 
 namespace perf::recon {
@@ -27,22 +28,29 @@ LoadedCheckpoint LoadForRendering(const fs::path& workspace, const fs::path& che
   return l;
 }
 
-PhotoExposures ExposuresOf(const LoadedCheckpoint& l, const Scene& scene) {
+PhotoCorrections CorrectionsOf(const LoadedCheckpoint& l, const Scene& scene) {
   const Checkpoint& c = l.checkpoint;
-  if (c.shape.exposures == 0) return {};
+  if (c.shape.exposures == 0 && c.shape.poses == 0) return {};
   const std::vector<ViewFrustum> train = SplitViews(scene, Split::kTrain);
-  if (static_cast<int>(train.size()) != c.shape.exposures) {
-    throw InputError(l.path.string(), "exposures", StrCat(c.shape.exposures, " photos"),
-                     StrCat("scene.json has ", train.size(), " training photos: the workspace was imported again"),
-                     "run perf reconstruct again");
+  for (const auto& [field, count] : {std::pair{"exposures", c.shape.exposures}, std::pair{"poses", c.shape.poses}}) {
+    if (count != 0 && static_cast<int>(train.size()) != count) {
+      throw InputError(l.path.string(), field, StrCat(count, " photos"),
+                       StrCat("scene.json has ", train.size(), " training photos: the workspace was imported again"),
+                       "run perf reconstruct again");
+    }
   }
-  return PhotoExposures(c.shape, c.params, train);
+  return PhotoCorrections(c.shape, c.params, train, GeometryOf(c));
+}
+
+Scene PosedAsCheckpoint(const LoadedCheckpoint& l, const Scene& scene) {
+  if (l.checkpoint.shape.poses == 0) return scene;
+  return PosedAsRefined(WithRefinedPoses(scene, CorrectionsOf(l, scene)));
 }
 
 RenderViewsResult RenderViews(const RenderViewsOptions& o) {
   const Scene scene = ReadScene(o.workspace / "scene.json");
   LoadedCheckpoint loaded = LoadForRendering(o.workspace, o.checkpoint, o.device, o.threads);
-  const PhotoExposures exposures = ExposuresOf(loaded, scene);
+  const PhotoCorrections exposures = CorrectionsOf(loaded, scene);
   RenderViewsResult result;
   result.checkpoint = loaded.path;
 

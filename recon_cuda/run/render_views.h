@@ -31,7 +31,11 @@ LoadedCheckpoint LoadForRendering(const std::filesystem::path& workspace, const 
 
 // The photos' exposures the checkpoint holds, placed at the scene's training cameras (exposure.h;
 // none when it solved none). InputError when the scene's training photos are not the ones fitted.
-PhotoExposures ExposuresOf(const LoadedCheckpoint& loaded, const Scene& scene);
+PhotoCorrections CorrectionsOf(const LoadedCheckpoint& loaded, const Scene& scene);
+
+// The scene posed as the checkpoint's refined cameras place every view (refined_poses.h
+// PosedAsRefined of WithRefinedPoses); the scene itself when the checkpoint refined none.
+Scene PosedAsCheckpoint(const LoadedCheckpoint& loaded, const Scene& scene);
 
 // Which of a workspace's photos a command renders or scores (--split).
 enum class ViewSplit { kTest, kTrain, kAll };

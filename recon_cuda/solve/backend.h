@@ -63,6 +63,10 @@ struct LevelProblem {
   // The photos' pose corrections (VolumeShape::poses) are held where they are at this level:
   // they shape the rays but are not solved (HierarchyOptions::refine_poses_from).
   bool fixed_poses = false;
+  // Everything but the pose corrections is held: a fit of the cameras against a frozen volume
+  // (run/pose_fit.h).
+  bool fixed_volume = false;
+  HeldKinds Held() const { return {fixed_shells, fixed_poses, fixed_volume}; }
 };
 
 // Whether the level's fourth residual is the alpha one (ResidualSettings::use_alpha).
@@ -192,6 +196,11 @@ class Backend {
   // as they were. The CUDA backend, which recomputes the partials, skips those samples on the fly
   // (jacobian.h SkippableSample).
   virtual void RestrictJacobian(VecId /*free*/) {}
+  // z's pose part (VolumeShape::poses) = the photos' 6 x 6 pose blocks of J^T J at the last
+  // Linearize, their diagonal replaced by max(diag, floor), solved for r's pose part over the
+  // entries where free is 1 (solve/pose_blocks.h), after DivideClamped gave z the Jacobi step.
+  // The default keeps the Jacobi step (a backend that keeps no blocks).
+  virtual void PreconditionPoses(VecId /*z*/, VecId /*r*/, VecId /*diag*/, VecId /*free*/, float /*floor*/) {}
   // The smoothness term (smoothness.h) with weights w at v: out += L v unless out is kNoVector
   // (out != v), diag += L's diagonal unless diag is kNoVector.
   virtual void AddSmoothness(VecId v, const SmoothnessWeights& w, VecId out, VecId diag) = 0;

@@ -66,6 +66,9 @@ void SolverOptions::Check() const {
   if (!(step_factor > 0 && step_factor < 1)) Fail("step_factor", StrCat(step_factor), "must be in (0, 1)");
   if (max_line_search_steps < 1) Fail("max_line_search_steps", std::to_string(max_line_search_steps), "must be >= 1");
   if (line_search_ray_stride < 1) Fail("line_search_ray_stride", std::to_string(line_search_ray_stride), "must be >= 1");
+  if (!(pose_prior >= 0 && std::isfinite(pose_prior))) {
+    Fail("pose_prior (--pose-prior)", StrCat(pose_prior), "must be finite and >= 0");
+  }
   if (!(exposure_prior >= 0 && std::isfinite(exposure_prior))) {
     Fail("exposure_prior", StrCat(exposure_prior), "must be finite and >= 0");
   }
@@ -118,7 +121,10 @@ nlohmann::json SolverSummary::ToJson() const {
            {{"grid_colour", smoothness.grid_colour},
             {"grid_density", smoothness.grid_density},
             {"shell_colour", smoothness.shell_colour},
-            {"shell_opacity", smoothness.shell_opacity}}},
+            {"shell_opacity", smoothness.shell_opacity},
+            {"exposure", smoothness.exposure},
+            {"pose_rotation", smoothness.pose_rotation},
+            {"pose_centre", smoothness.pose_centre}}},
           {"report", BriefReport()}};
 }
 
@@ -140,7 +146,8 @@ SmoothnessWeights CalibrateSmoothness(const SolverOptions& o, Backend* b) {
   SmoothnessWeights w;
   const VolumeShape& shape = b->level().shape;
   const bool exposures = shape.exposures > 0 && o.exposure_prior > 0;
-  if (o.smooth_grid <= 0 && o.smooth_shells <= 0 && !exposures) return w;
+  const bool poses = shape.poses > 0 && o.pose_prior > 0;
+  if (o.smooth_grid <= 0 && o.smooth_shells <= 0 && !exposures && !poses) return w;
   const std::array<double, kParamKinds> sums = b->SumByKind(kDiag);
   const double cells = static_cast<double>(shape.StoredCells());
   const double texels = static_cast<double>(shape.ShellTexels());
@@ -152,6 +159,10 @@ SmoothnessWeights CalibrateSmoothness(const SolverOptions& o, Backend* b) {
     w.shell_opacity = static_cast<float>(o.smooth_shells * mean(ParamKind::kShellOpacity, texels));
   }
   if (exposures) w.exposure = static_cast<float>(o.exposure_prior * mean(ParamKind::kExposureGain, 3.0 * shape.exposures));
+  if (poses) {
+    w.pose_rotation = static_cast<float>(o.pose_prior * mean(ParamKind::kPoseRotation, 3.0 * shape.poses));
+    w.pose_centre = static_cast<float>(o.pose_prior * mean(ParamKind::kPoseCentre, 3.0 * shape.poses));
+  }
   return w;
 }
 
@@ -162,7 +173,9 @@ int SolvePcg(const SolverOptions& o, Backend* b, const SmoothnessWeights& w, Sol
   b->Fill(kResidual, 0.f);
   b->Axpy(kResidual, -1.0, kG);  // r0 = b - A 0 = -g
   const double floor = std::max(o.diagonal_floor * b->MaxAbsVolume(kDiag), 1e-30);
+  const bool poses = b->level().shape.poses > 0;
   b->DivideClamped(kZ, kResidual, kDiag, static_cast<float>(floor));
+  if (poses) b->PreconditionPoses(kZ, kResidual, kDiag, kFree, static_cast<float>(floor));
   b->Copy(kDir, kZ);
   double rz = b->Dot(kResidual, kZ);
   double r_prev = b->Dot(kResidual, kResidual);
@@ -184,6 +197,7 @@ int SolvePcg(const SolverOptions& o, Backend* b, const SmoothnessWeights& w, Sol
     if (r < o.cg_relative_tolerance * r0 || r / r_prev > o.cg_exit_ratio || k == o.max_cg_iterations) break;
     r_prev = r;
     b->DivideClamped(kZ, kResidual, kDiag, static_cast<float>(floor));
+    if (poses) b->PreconditionPoses(kZ, kResidual, kDiag, kFree, static_cast<float>(floor));
     const double rz_next = b->Dot(kResidual, kZ);
     b->Xpby(kDir, kZ, rz_next / rz);
     rz = rz_next;

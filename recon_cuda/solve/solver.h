@@ -5,7 +5,8 @@
 //
 // Gauss-Newton iteration:
 //   1. Linearize at x: cost, g = J^T r, D = diag(J^T J), one jitter seed for the whole iteration;
-//   2. PCG (paper Algorithm 2) on (J^T J + mu D) d = -g from d = 0, Jacobi preconditioner D,
+//   2. PCG (paper Algorithm 2) on (J^T J + mu D) d = -g from d = 0, Jacobi preconditioner D (each
+//      refined photo's 6 pose values: its block of J^T J, Backend::PreconditionPoses),
 //      leaving after max_cg_iterations or, with the paper's exit (cg_exit_ratio), when
 //      R / R_prev exceeds the ratio (R = |r|^2); restricted to the free parameters: fixed shells
 //      and (hold_at_bounds) those at a bound that g points out of keep d = 0 (param_ops.h
@@ -74,6 +75,11 @@ struct SolverOptions {
   // are: this times the mean of diag(J^T J) over the gains, i.e. 1 holds a gain as firmly as a
   // whole photo's pixels do. Fixes the gauge; 1 measured best of 0.01 to 10 (docs/tuning.md).
   double exposure_prior = 1.0;
+  // The photos' pose corrections' prior toward the imported poses (smoothness.h), relative to the
+  // data likewise: this times the mean of diag(J^T J) over the rotations (the centres), so 1
+  // holds a pose as firmly as the average photo's pixels do, and a correction the photos pin
+  // down is shrunk by 1 / (1 + this). Fixes the gauge (every camera moving with the volume).
+  double pose_prior = 0.01;
 
   AdamSettings adam;
 

@@ -119,7 +119,7 @@ TEST(SolverBoundsTest, StepSolvesTheFreeParametersSystem) {
     std::vector<char> held(n);
     int num_held = 0;
     for (int64_t i = 0; i < n; ++i) {
-      held[i] = hold && HeldParameter(KindOf(p.shape, i), p.x[i], static_cast<float>(g[i]), false, true);
+      held[i] = hold && HeldParameter(KindOf(p.shape, i), p.x[i], static_cast<float>(g[i]), HeldKinds{}, true);
       num_held += held[i];
     }
     // A = J_F^T J_F on the free set: (J^T J d_F) restricted, with d_F = d on free, 0 on held.
@@ -146,7 +146,7 @@ TEST(SolverBoundsTest, StepSolvesTheFreeParametersSystem) {
       // Without the active set the same parameters do move: the comparison above is not vacuous.
       int moved = 0;
       for (int64_t i = 0; i < n; ++i) {
-        moved += HeldParameter(KindOf(p.shape, i), p.x[i], static_cast<float>(g[i]), false, true) && d[i] != 0.f;
+        moved += HeldParameter(KindOf(p.shape, i), p.x[i], static_cast<float>(g[i]), HeldKinds{}, true) && d[i] != 0.f;
       }
       EXPECT_GT(moved, 10);
     }

@@ -1,7 +1,8 @@
 // The host-side volume: level-to-level resampling (exact for constant and linear fields),
 // the random start, the valid-range projection, and placement from scene.json.
 #include "recon_cuda/data/volume.h"
-#include "recon_cuda/run/exposure.h"
+#include "recon_cuda/core/pose.h"
+#include "recon_cuda/run/photo_corrections.h"
 
 #include <gtest/gtest.h>
 
@@ -174,21 +175,21 @@ TEST(VolumeTest, AViewTakesTheBlendOfItsTwoNearestPhotosExposures) {
       x[ExposureParam(s.ExposureStart(), k) + 4 + c] = offsets[k];
     }
   }
-  const PhotoExposures e(s, x, views);
+  const PhotoCorrections e(s, x, views, VolumeGeometry{});
   PinholeCamera<float> at{};
   at.world_from_cam[3] = 0.5f;  // 0.5 from photo 0, 1.5 from photo 1: weights 2 and 2/3
-  ColourTransform<float> xf = e.Nearest(at);
+  ColourTransform<float> xf = e.TransformFor(at);
   EXPECT_NEAR(xf.gain[1], (2 * 1.0 + 2.0 / 3 * 1.2) / (2 + 2.0 / 3), 1e-6);
   EXPECT_NEAR(xf.offset[2], (2.0 / 3 * 0.1) / (2 + 2.0 / 3), 1e-6);
   at.world_from_cam[3] = 4.f;  // photo 2's own centre
-  xf = e.Nearest(at);
+  xf = e.TransformFor(at);
   EXPECT_FLOAT_EQ(xf.gain[0], 0.7f);
   RenderOutput r;
   r.colour = {0.5f, 0.5f, 0.5f};
-  ApplyTransform(e.Nearest(views[1].camera), &r);
+  ApplyTransform(e.TransformFor(views[1].camera), &r);
   EXPECT_FLOAT_EQ(r.colour[0], 1.2f * 0.5f + 0.1f);
-  EXPECT_TRUE(PhotoExposures().empty());
-  EXPECT_FLOAT_EQ(PhotoExposures().Nearest(at).gain[0], 1.f);
+  EXPECT_TRUE(PhotoCorrections().empty());
+  EXPECT_FLOAT_EQ(PhotoCorrections().TransformFor(at).gain[0], 1.f);
 }
 
 TEST(VolumeTest, GeometryFromSceneAndItsErrors) {
@@ -239,6 +240,46 @@ TEST(VolumeTest, PixelsAcrossTheBox) {
   }
   EXPECT_NEAR(PixelsAcrossBox(cams, g), 50.0, 1e-4);
   EXPECT_EQ(PixelsAcrossBox({}, g), 0.0);
+}
+
+// A refined camera (photo_corrections.h CorrectedCamera) shoots the rays that ApplyPose gives the
+// imported one, and a view between two refined cameras takes the blend of their corrections.
+TEST(VolumeTest, ACorrectedCameraShootsThePosedRays) {
+  VolumeGeometry g;
+  const float c = 0.6f, s = 0.8f;
+  g.box = {{0.2f, -0.1f, 0.05f}, {{c, 0, -s, 0, 1, 0, s, 0, c}}, {2.0f, 1.6f, 1.4f}};
+  const PinholeCamera<float> cam{40, 42, 16, 12, {0.8f, 0.f, -0.6f, 3.f, 0.f, 1.f, 0.f, -0.5f, 0.6f, 0.f, 0.8f, 1.f}};
+  const float pose[kPoseValues] = {0.03f, -0.02f, 0.05f, 0, 0.04f, 0.01f, -0.03f, 0};
+  const PinholeCamera<float> moved = CorrectedCamera(cam, pose, g);
+  VolumeView<float> vol{};
+  vol.n = 8;
+  vol.size = g.box.size;
+  const Jitter none{0, 0, false, false};
+  for (const auto& [px, py] : {std::pair{0, 0}, std::pair{31, 5}, std::pair{12, 23}}) {
+    BoxRay<float> want = PixelBoxRay(cam, g.box, vol.n, px, py, none);
+    ApplyPose(vol, pose, &want);
+    const BoxRay<float> got = PixelBoxRay(moved, g.box, vol.n, px, py, none);
+    for (int a = 0; a < 3; ++a) {
+      EXPECT_NEAR(got.origin[a], want.origin[a], 1e-5f);
+      EXPECT_NEAR(got.dir[a], want.dir[a], 1e-5f);
+      EXPECT_NEAR(got.grid_origin[a], want.grid_origin[a], 1e-4f);
+    }
+  }
+  // Two training cameras with corrections; a view a quarter of the way from the first.
+  const VolumeShape shape = VolumeShape(2, 1, 1).WithPoses(2);
+  std::vector<float> x(shape.ParamCount(), 0.f);
+  std::vector<ViewFrustum> views(2);
+  views[1].camera.world_from_cam[3] = 4.f;
+  x[PoseParam(shape.PoseStart(), 0) + 2] = 0.04f;
+  x[PoseParam(shape.PoseStart(), 1) + 2] = 0.08f;
+  const PhotoCorrections e(shape, x, views, g);
+  EXPECT_TRUE(e.has_poses());
+  EXPECT_TRUE(e.transforms().empty());
+  PinholeCamera<float> at{};
+  at.world_from_cam[3] = 1.f;
+  EXPECT_NEAR(e.PoseFor(at)[2], 0.75f * 0.04f + 0.25f * 0.08f, 1e-6f);
+  EXPECT_FLOAT_EQ(e.PoseFor(views[1].camera)[2], 0.08f);
+  EXPECT_FLOAT_EQ(PhotoCorrections().CameraFor(cam).world_from_cam[5], cam.world_from_cam[5]);
 }
 
 }  // namespace
