@@ -32,7 +32,9 @@ struct EvalOptions {
 
 struct ViewReport {
   std::string name;
-  ImageScores scores;
+  ImageScores scores;          // the headline: the camera from its neighbours' corrections
+  double psnr_pose_fit = -1;   // after the test-time fit of its camera alone (-1: not run)
+  double pose_fit_degrees = 0, pose_fit_centre_fraction = 0;  // how far that fit moved the camera
 };
 
 struct MaskReport {
@@ -49,6 +51,11 @@ struct EvalResult {
   std::vector<MaskReport> masks;
   MaskAgreement pooled;             // over every pixel of every image with a true mask
   double mean_iou = 0;              // mean of the per-image IoUs
+  // With refined cameras (--refine-poses), the held-out views are scored a second way: after a
+  // test-time fit of each view's camera alone against the frozen volume (recon/pose_fit.h), the
+  // protocol of pose-refining NeRF papers. Reported beside the headline, never instead of it.
+  bool pose_fit = false;
+  double mean_psnr_pose_fit = 0;
 };
 
 EvalResult RunEval(const EvalOptions& options);

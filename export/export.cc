@@ -221,6 +221,12 @@ nlohmann::json Manifest(const ExportOptions& o, const ExportResult& r, const fs:
                   {"orbit", r.orbit_frames},
                   {"orbit_arc_degrees", r.orbit_arc_degrees},  // 360: a full turn; less: the captured arc and back
                   {"min_box_opacity", o.min_box_opacity}};
+  if (!r.refined_model.dir.empty() || !r.refined_model.not_written.empty()) {
+    j["refined_model"] = {{"dir", r.refined_model.dir.generic_string()},
+                          {"images_moved", r.refined_model.moved},
+                          {"format", "COLMAP binary (cameras.bin, images.bin, points3D.bin)"},
+                          {"not_written", r.refined_model.not_written}};
+  }
   j["seconds"] = r.seconds;
   j["files"] = files;
   return j;
@@ -320,6 +326,12 @@ ExportResult RunExport(const ExportOptions& o) {
   }
   if (o.mesh) ExportMesh(o, scene, l, out, &r);
   if (o.renders) ExportRenders(o, scene, l, out, &r);
+  if (l.checkpoint.shape.poses > 0) {
+    r.refined_model = WriteRefinedModel(scene, o.workspace);
+    if (!r.refined_model.dir.empty()) {
+      for (const char* f : {"cameras.bin", "images.bin", "points3D.bin"}) r.files.push_back(r.refined_model.dir / f);
+    }
+  }
   r.seconds = SecondsSince(start);
   WriteFileAtomically(o.workspace / "export.json", Manifest(o, r, o.workspace).dump(2) + "\n");
   return r;

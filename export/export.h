@@ -24,6 +24,7 @@
 #include "export/mesh_export.h"
 #include "export/mesh_iso.h"
 #include "export/orbit.h"
+#include "export/refined_model.h"
 #include "export/vdb_export.h"
 #include "recon_cuda/backends/make_backend.h"
 #include "recon_cuda/core/render_rule.h"
@@ -66,6 +67,7 @@ struct ExportResult {
   IsoChoice iso;  // the mesh's level, its silhouettes' IoU, and a warning when it is empty
   int64_t mesh_triangles_extracted = 0;  // before simplification
   std::array<int, 2> texture_size{0, 0};  // mesh.png (0: no texture, an empty mesh)
+  RefinedModel refined_model;  // WORKSPACE/sparse_refined (refined_model.h), with --refine-poses
   std::vector<std::filesystem::path> files;  // relative to the workspace
   double seconds = 0;
 };

@@ -173,6 +173,16 @@ std::string ReportHtml(const nlohmann::json& report, const std::vector<ReportStr
     row(v["name"].get<std::string>(), v, v["mask_coverage"].get<double>() > 0);
   }
   h << "</table>\n";
+  if (report.contains("held_out_cameras")) {
+    const nlohmann::json& cams = report["held_out_cameras"];
+    h << "<p>Held-out cameras (the headline): " << Escape(cams["headline"].get<std::string>()) << ".";
+    if (!cams["pose_fit"].is_null()) {
+      h << " After a test-time fit of each camera alone: mean PSNR "
+        << Fixed(cams["pose_fit"]["mean_psnr"].get<double>(), 2) << " dB ("
+        << Escape(cams["pose_fit"]["protocol"].get<std::string>()) << ").";
+    }
+    h << "</p>\n";
+  }
   if (report.contains("masks")) {
     const nlohmann::json& m = report["masks"];
     h << "<h2>Foreground masks against the true ones (" << Escape(m["truth"].get<std::string>()) << ", "

@@ -14,7 +14,7 @@
 namespace perf::recon {
 
 struct PoseFitOptions {
-  int iterations = 30;        // Gauss-Newton iterations
+  int iterations = 12;        // Gauss-Newton iterations (measured converged by 10 on lego)
   int max_cg_iterations = 8;
   double pose_prior = 1e-3;  // relative to the data, as SolverOptions::pose_prior
   ResidualSettings residuals;
