@@ -179,9 +179,11 @@ nlohmann::json ReportJson(const EvalOptions& o, const EvalResult& r, const Loade
                              "photos' refined corrections (the photo being scored is not used)"
                            : "as imported"},
       {"pose_fit", r.pose_fit ? nlohmann::json{{"mean_psnr", r.mean_psnr_pose_fit},
-                                               {"protocol", "each view's camera fitted alone to its photo against the "
-                                                            "frozen volume (Gauss-Newton, 8 iterations), then scored; "
-                                                            "uses the photo being scored, so it is not the headline"}}
+                                               {"protocol", StrCat("each view's camera fitted alone to its photo "
+                                                                   "against the frozen volume (Gauss-Newton, ",
+                                                                   recon::PoseFitOptions{}.iterations,
+                                                                   " iterations), then scored; uses the photo being "
+                                                                   "scored, so it is not the headline")}}
                               : nlohmann::json(nullptr)}};
   if (!r.mask_truth.empty()) {
     nlohmann::json per = nlohmann::json::array();

@@ -42,6 +42,21 @@ void AddSolverOptions(CLI::App* cmd, recon::SolverOptions* solver) {
   cmd->add_option("--lr-density", solver->adam.lr_density, "Adam learning rate of densities")->capture_default_str();
 }
 
+// --refine-poses and its settings.
+void AddPoseOptions(CLI::App* cmd, recon::ReconstructOptions& o) {
+  using recon::PoseChoice;
+  AddChoiceOption(cmd, "--refine-poses", &o.poses,
+                  {{"auto", PoseChoice::kAuto}, {"on", PoseChoice::kOn}, {"off", PoseChoice::kOff}},
+                  "Refine every training photo's camera (a rotation and a centre correction) with the volume in "
+                  "Gauss-Newton (auto: off)");
+  cmd->add_option("--refine-poses-from", o.refine_poses_from,
+                  "With --refine-poses: the first level that refines them (earlier levels hold the imported poses)")
+      ->capture_default_str();
+  cmd->add_option("--pose-prior", o.solver.pose_prior,
+                  "Weight of the prior that keeps the refined cameras near the imported ones, relative to the photos")
+      ->capture_default_str();
+}
+
 }  // namespace
 
 void AddReconstructCommand(CLI::App& app) {
@@ -131,17 +146,7 @@ void AddReconstructCommand(CLI::App& app) {
                   "Solve a gain and an offset per colour channel for every training photo (auto: for COLMAP "
                   "photos, not for NeRF json scenes); held-out views take the blend of their two nearest training "
                   "photos' (by camera centre)");
-  using recon::PoseChoice;
-  AddChoiceOption(cmd, "--refine-poses", &o.poses,
-                  {{"auto", PoseChoice::kAuto}, {"on", PoseChoice::kOn}, {"off", PoseChoice::kOff}},
-                  "Refine every training photo's camera (a rotation and a centre correction) with the volume in "
-                  "Gauss-Newton (auto: off)");
-  cmd->add_option("--refine-poses-from", o.refine_poses_from,
-                  "With --refine-poses: the first level that refines them (earlier levels hold the imported poses)")
-      ->capture_default_str();
-  cmd->add_option("--pose-prior", o.solver.pose_prior,
-                  "Weight of the prior that keeps the refined cameras near the imported ones, relative to the photos")
-      ->capture_default_str();
+  AddPoseOptions(cmd, o);
   cmd->add_option("--sh-degree", o.sh_degree,
                   "View-dependent colour: spherical harmonics of degree 1 (3 more values per channel and cell) or 2 "
                   "(8 more) beyond each cell's colour; 0: none")

@@ -57,7 +57,7 @@ class CpuBackend final : public Backend {
     level_ = p;
     rays_ = {p.rays->cameras.data(), p.rays->pixels.data(), p.rays->colours.data(),
              UsesAlpha(p) ? p.rays->alphas.data() : nullptr, p.rays->size(), p.rays->first_index,
-             ExposureSlots(p), PoseSlots(p)};
+             PhotoSlots(p, p.shape.exposures), PhotoSlots(p, p.shape.poses)};
     weight_ = OpacityResidualWeight(p);
     robust_ = p.residuals.robust_scale;
     const MemoryEstimate e = EstimateMemory(p, num_vectors);
@@ -150,7 +150,7 @@ class CpuBackend final : public Backend {
     const uint64_t pass = BeginPass();
     PassStats stats = ForBlocks(want_diag ? 2 : 1, pass, [&](int64_t block, int64_t begin, int64_t end, Scratch& s) {
       BlockJ* out = record ? &blocks_[block] : nullptr;
-      if (out) ClearBlock(out, end - begin);
+      if (out) out->Clear(end - begin, level_.shape);
       return want_diag ? LinearizeBlock<true>(vol, seed, subset, begin, end, s, out)
                        : LinearizeBlock<false>(vol, seed, subset, begin, end, s, out);
     });
@@ -372,21 +372,6 @@ class CpuBackend final : public Backend {
     return bs;
   }
 
-  // The exposure slots the level's rays read (RaySet::exposure_slot), or nullptr when the level
-  // solves no exposures.
-  static const int32_t* ExposureSlots(const LevelProblem& p) {
-    if (p.shape.exposures == 0) return nullptr;
-    PERF_CHECK_MSG(p.rays->exposure_slot.size() == p.rays->cameras.size(), "exposure slots for every camera");
-    for (int32_t slot : p.rays->exposure_slot) PERF_CHECK(slot >= 0 && slot < p.shape.exposures);
-    return p.rays->exposure_slot.data();
-  }
-  // The pose slots (the exposure slots' numbering), or nullptr when the level refines no poses.
-  static const int32_t* PoseSlots(const LevelProblem& p) {
-    if (p.shape.poses == 0) return nullptr;
-    PERF_CHECK_MSG(p.rays->exposure_slot.size() == p.rays->cameras.size(), "pose slots for every camera");
-    for (int32_t slot : p.rays->exposure_slot) PERF_CHECK(slot >= 0 && slot < p.shape.poses);
-    return p.rays->exposure_slot.data();
-  }
   // Ray i's photo's colour transform at vol's parameters, and its exposure's partials given H.
   ColourTransform<float> TransformAt(const VolumeView<float>& vol, int64_t i) const {
     return TransformOfRay(rays_, vol, i);
@@ -402,20 +387,11 @@ class CpuBackend final : public Backend {
                         level_.residuals.pixel_jitter);
   }
 
-  void ClearBlock(BlockJ* b, int64_t rays) const {
-    b->samples.clear();
-    b->end.assign(rays, 0);
-    b->shells.assign(rays * level_.shape.num_shells, ShellJ{{-1, 0.f, 0.f}, {}});
-    b->h.assign(3 * rays, 0.f);
-    b->scale.assign(rays, 1.f);
-    if (level_.shape.poses > 0) b->pose.assign(kPoseRowValues * rays, 0.f);
-  }
-
   // The partials of ray i at the linearisation point, into s.row (no recorded Jacobian).
   void RecomputeRow(const VolumeView<float>& vol, const TrainingRay& tr, int64_t i, Scratch& s) const {
     const BoxRay<float>& ray = tr.ray;
     const Jitter& jit = tr.jit;
-    ClearBlock(&s.row, 1);
+    s.row.Clear(1, level_.shape);
     const RayOutput<float> fwd =
         Forward(vol, ray, jit, &level_.rays->colours[3 * i], weight_, level_.residuals.stop_transmittance,
                 s.record.data(), AlphaOf(rays_, i), TransformAt(vol, i));
@@ -431,26 +407,6 @@ class CpuBackend final : public Backend {
     for (int c = 0; c < 3; ++c) s.row.h[c] = fwd.h[c];
     s.row.scale[0] = RobustRowScale(fwd.residual, robust_);
   }
-  // A cell's merged J^T u values (JtuValues summed along the ray) into the grid and its bands.
-  struct MergedScatter {
-    AddSink& sink;
-    const RaySh<float>& sh;
-    void operator()(int64_t cell, const float* acc) {
-      sink.Add4(GridParam(cell, 0), acc[0], acc[1], acc[2], acc[3]);
-      ScatterSh(sh, cell, acc, sink);
-    }
-  };
-
-  // Records a ray's partials without scattering anything.
-  struct RecordOnly {
-    BlockJ* row;
-    void Shell(int k, const CubeCoord<float>& c, const TexelSample<float>&, const ShellPartials<float>& sp) {
-      row->shells[k] = {c, sp};
-    }
-    void Sample(int, const MarchStep<float>& st, const GridSample<float>&, const SamplePartials<float>& sp) {
-      row->samples.push_back({st.t, sp});
-    }
-  };
 
   int64_t CacheBytes(const LevelProblem& p) const { return RecordedJacobianBytes(p, kBlockRays, vectors_); }
 

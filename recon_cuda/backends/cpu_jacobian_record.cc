@@ -4,6 +4,7 @@
 
 #include <algorithm>
 
+#include "common/errors.h"
 #include "recon_cuda/backends/cpu_vectors.h"
 
 namespace perf::recon::cpu {
@@ -13,6 +14,22 @@ namespace perf::recon::cpu {
 // eighth for the jittered samples that land differently, on every 4th ray of a block and scaled
 // to the block: an estimate, and a quarter of a march) times the per-sample record, plus the
 // shell records and, when poses are refined, the pose rows.
+void BlockJ::Clear(int64_t rays, const VolumeShape& shape) {
+  samples.clear();
+  end.assign(rays, 0);
+  shells.assign(rays * shape.num_shells, ShellJ{{-1, 0.f, 0.f}, {}});
+  h.assign(3 * rays, 0.f);
+  scale.assign(rays, 1.f);
+  pose.assign(shape.poses > 0 ? kPoseRowValues * rays : 0, 0.f);
+}
+
+const int32_t* PhotoSlots(const LevelProblem& p, int count) {
+  if (count == 0) return nullptr;
+  PERF_CHECK_MSG(p.rays->exposure_slot.size() == p.rays->cameras.size(), "photo slots for every camera");
+  for (int32_t slot : p.rays->exposure_slot) PERF_CHECK(slot >= 0 && slot < count);
+  return p.rays->exposure_slot.data();
+}
+
 int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, const CpuVectors& vectors) {
   constexpr int64_t kSparseStride = 4;
   const VolumeView<float> vol = MakeView(p.shape, p.geometry, nullptr);

@@ -50,6 +50,9 @@ struct BlockJ {
   std::vector<float> h;        // [rays, 3] the composited colour H (the exposure's partials)
   std::vector<float> scale;    // [rays] the robust loss's row scale (jacobian.h RobustRowScale)
   std::vector<float> pose;     // [rays, kPoseRowValues] each ray's pose row (PackPoseRow), when poses are refined
+
+  // Empty, for `rays` rays of a level of `shape`.
+  void Clear(int64_t rays, const VolumeShape& shape);
 };
 
 // A ray's pose row (pose.h PoseRow) without its padding columns: 4 residuals x 6 values.
@@ -126,6 +129,31 @@ struct LinearizeVisitor {
     if constexpr (kDiag) merger.Finish(*this);
   }
 };
+
+// A cell's merged J^T u values (JtuValues summed along the ray) into the grid and its bands.
+struct MergedScatter {
+  AddSink& sink;
+  const RaySh<float>& sh;
+  void operator()(int64_t cell, const float* acc) {
+    sink.Add4(GridParam(cell, 0), acc[0], acc[1], acc[2], acc[3]);
+    ScatterSh(sh, cell, acc, sink);
+  }
+};
+
+// Records a ray's partials without scattering anything.
+struct RecordOnly {
+  BlockJ* row;
+  void Shell(int k, const CubeCoord<float>& c, const TexelSample<float>&, const ShellPartials<float>& sp) {
+    row->shells[k] = {c, sp};
+  }
+  void Sample(int, const MarchStep<float>& st, const GridSample<float>&, const SamplePartials<float>& sp) {
+    row->samples.push_back({st.t, sp});
+  }
+};
+
+// The photo slots the level's rays read (RaySet::exposure_slot: the exposures' and the poses'),
+// checked against `count` photos, or nullptr when the level solves none (count 0).
+const int32_t* PhotoSlots(const LevelProblem& p, int count);
 
 // Bytes of the Jacobian record of `p`'s rays, in blocks of `block_rays` rays (an estimate made by
 // marching the rays, on the arena of `vectors`).
