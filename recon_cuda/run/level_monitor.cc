@@ -138,7 +138,7 @@ void LevelMonitor::LevelDone(const HierarchyLevel& h, const SolverSummary& summa
       }
     }
   }
-  if (h.shape.poses > 0) ReportPoses(h, fitted);
+  ReportPoses(h, fitted);
   if (run_.root) {
     WriteCheckpoint(CheckpointPath(o_.workspace, h.level),
                     MakeCheckpoint(run_.scene, h.level, h.shape, summary.iterations, o_.solver.type, x));
@@ -156,6 +156,15 @@ void LevelMonitor::LevelDone(const HierarchyLevel& h, const SolverSummary& summa
 
 void LevelMonitor::ReportPoses(const HierarchyLevel& h, const PhotoCorrections& fitted) {
   ReconstructResult& result = run_.result;
+  if (h.shape.poses == 0) {  // an earlier run's refined poses no longer describe the checkpoints
+    bool stale = false;
+    for (SceneImage& im : run_.scene.images) {
+      stale = stale || im.refined_world_from_cam.has_value();
+      im.refined_world_from_cam.reset();
+    }
+    if (stale && run_.root) WriteScene(run_.scene_path, run_.scene);
+    return;
+  }
   const Scene refined = WithRefinedPoses(run_.scene, fitted);
   const std::vector<PoseCorrection> moved = DescribeCorrections(refined);
   result.pose_corrections = CorrectionsToJson(moved);

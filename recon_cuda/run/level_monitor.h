@@ -40,7 +40,8 @@ class LevelMonitor {
   // The mean PSNR over every rank's held-out views (collective).
   double HeldOutPsnr(VecId params, const PhotoCorrections& exposures);
   // The level's refined cameras: recon.json's "poses", the log, scene.json's refined poses and,
-  // after the last level, the warning naming large corrections.
+  // after the last level, the warning naming large corrections. A level that refines none drops
+  // an earlier run's refined poses from scene.json.
   void ReportPoses(const HierarchyLevel& h, const PhotoCorrections& fitted);
   void WritePreview(const HierarchyLevel& h, int iteration, const PhotoCorrections& exposures);
   // The log's "level" line; with several ranks, every rank's pass and sum seconds (collective).

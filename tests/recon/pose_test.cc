@@ -31,6 +31,19 @@ void Residuals(const TinyProblem& p, const VolumeView<double>& vol, int64_t i, c
   *count = o.count;
 }
 
+// Ray i's pose row from pose.h at x (its photo's pose values at *pose).
+PoseRow<double> AnalyticRow(const TinyProblem& p, const VolumeView<double>& vol, int64_t i, const Jitter& jit,
+                            int64_t* pose, int* count) {
+  const BoxRay<double> ray = DoubleRay(p, vol, i, jit);
+  const double target[3] = {0, 0, 0};
+  const RayOutput<double> fwd = Forward(vol, ray, jit, target, 0.3, 0.0);
+  GeometryVisitor<double> visit(vol, ray, jit);
+  Backward(vol, ray, jit, fwd, visit);
+  *pose = PoseParamOfSlot(vol, p.rays.exposure_slot[p.rays.pixels[i].camera]);
+  *count = fwd.count;
+  return PoseRowOf(vol, vol.params + *pose, ray, visit.grad);
+}
+
 // Compares every ray's PoseRowOf with central differences in the pose values; returns counts.
 Checked CheckPoseRows(const TinyProblem& p, const std::vector<float>& xf, uint32_t seed, double tol) {
   std::vector<double> x(xf.begin(), xf.end());
@@ -38,15 +51,11 @@ Checked CheckPoseRows(const TinyProblem& p, const std::vector<float>& xf, uint32
   Checked checked;
   for (int64_t i = 0; i < p.rays.size(); ++i) {
     const Jitter jit{seed, static_cast<uint32_t>(i), true, true};
-    const BoxRay<double> ray = DoubleRay(p, vol, i, jit);
-    const double target[3] = {0, 0, 0};
-    const RayOutput<double> fwd = Forward(vol, ray, jit, target, 0.3, 0.0);
-    GeometryVisitor<double> visit(vol, ray, jit);
-    Backward(vol, ray, jit, fwd, visit);
-    const int64_t pose = PoseParamOfSlot(vol, p.rays.exposure_slot[p.rays.pixels[i].camera]);
+    int64_t pose;
+    int count;
+    const PoseRow<double> row = AnalyticRow(p, vol, i, jit, &pose, &count);
     EXPECT_GE(pose, 0);
     if (pose < 0) return checked;
-    const PoseRow<double> row = PoseRowOf(vol, vol.params + pose, ray, visit.grad);
     double numeric[4][kPoseValues] = {};
     double at[4];
     int n_at;
@@ -62,7 +71,7 @@ Checked CheckPoseRows(const TinyProblem& p, const std::vector<float>& xf, uint32
       x[pose + v] = saved - h;
       Residuals(p, vol, i, jit, minus, &n_minus);
       x[pose + v] = saved;
-      same_samples = same_samples && n_plus == fwd.count && n_minus == fwd.count;
+      same_samples = same_samples && n_plus == count && n_minus == count;
       for (int r = 0; r < 4; ++r) {
         numeric[r][v] = (plus[r] - minus[r]) / (2 * h);
         // A kink within h (a sample crossing a clamped border or a brick's edge, the entry face
@@ -158,15 +167,10 @@ TEST(PoseTest, TheCheckSeesASmallError) {
   int differ = 0;
   for (int64_t i = 0; i < p.rays.size(); ++i) {
     const Jitter jit{4, static_cast<uint32_t>(i), true, true};
-    const BoxRay<double> ray = DoubleRay(p, vol, i, jit);
-    const double target[3] = {0, 0, 0};
-    const RayOutput<double> fwd = Forward(vol, ray, jit, target, 0.3, 0.0);
-    GeometryVisitor<double> visit(vol, ray, jit);
-    Backward(vol, ray, jit, fwd, visit);
-    const int64_t pose = PoseParamOfSlot(vol, p.rays.exposure_slot[p.rays.pixels[i].camera]);
-    const PoseRow<double> row = PoseRowOf(vol, vol.params + pose, ray, visit.grad);
-    double plus[4], minus[4];
+    int64_t pose;
     int n;
+    const PoseRow<double> row = AnalyticRow(p, vol, i, jit, &pose, &n);
+    double plus[4], minus[4];
     const double saved = x[pose + 4], h = 1e-6;
     x[pose + 4] = saved + h;
     Residuals(p, vol, i, jit, plus, &n);
