@@ -326,7 +326,9 @@ ExportResult RunExport(const ExportOptions& o) {
   }
   if (o.mesh) ExportMesh(o, scene, l, out, &r);
   if (o.renders) ExportRenders(o, scene, l, out, &r);
-  if (l.checkpoint.shape.poses > 0) {
+  if (l.checkpoint.shape.poses == 0) {
+    RemoveStaleRefinedModel(o.workspace);
+  } else {
     r.refined_model = WriteRefinedModel(scene, o.workspace);
     if (!r.refined_model.dir.empty()) {
       for (const char* f : {"cameras.bin", "images.bin", "points3D.bin"}) r.files.push_back(r.refined_model.dir / f);

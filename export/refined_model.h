@@ -22,4 +22,9 @@ struct RefinedModel {
 // Writes WORKSPACE/sparse_refined/{cameras,images,points3D}.bin, each atomically.
 RefinedModel WriteRefinedModel(const Scene& posed, const std::filesystem::path& workspace);
 
+// Removes an earlier export's WORKSPACE/sparse_refined (its three files, then the folder if that
+// leaves it empty) when the checkpoint being exported refines no cameras; a file that is one of
+// the workspace's inputs stays. Returns whether something was removed.
+bool RemoveStaleRefinedModel(const std::filesystem::path& workspace);
+
 }  // namespace perf::exporter

@@ -54,6 +54,8 @@ class DistributedBackend final : public Backend {
   void Project(VecId x) override { inner_->Project(x); }
   void HoldParameters(VecId x, VecId g, VecId free, bool bounds) override { inner_->HoldParameters(x, g, free, bounds); }
   void Multiply(VecId y, VecId m) override { inner_->Multiply(y, m); }
+  // PreconditionPoses is not forwarded: each rank's pose blocks hold its own rays only, and the
+  // ranks must precondition alike; the pose values keep the Jacobi step (backend.h).
   void RestrictJacobian(VecId free) override { inner_->RestrictJacobian(free); }
   void AddSmoothness(VecId v, const SmoothnessWeights& w, VecId out, VecId diag) override {
     inner_->AddSmoothness(v, w, out, diag);

@@ -132,10 +132,12 @@ std::vector<float> Resample(const VolumeShape& from, std::span<const float> para
   PERF_CHECK(static_cast<int64_t>(params.size()) == from.ParamCount());
   PERF_CHECK(from.num_shells == to.num_shells);
   std::vector<float> out(static_cast<size_t>(to.ParamCount()));
-  // The photos' exposures and poses carry over as they are (the same photos at every level).
-  if (from.exposures == to.exposures && from.poses == to.poses) {
-    std::copy(params.begin() + from.ExposureStart(), params.end(), out.begin() + to.ExposureStart());
+  // The photos' exposures and pose corrections carry over as they are (the same photos at every
+  // level); a level that stops (starts) solving one kind drops it (starts it at the identity).
+  if (from.exposures == to.exposures) {
+    std::copy(params.begin() + from.ExposureStart(), params.begin() + from.PoseStart(), out.begin() + to.ExposureStart());
   }
+  if (from.poses == to.poses) std::copy(params.begin() + from.PoseStart(), params.end(), out.begin() + to.PoseStart());
   const std::vector<Axis> g = AxisWeights(from.n, to.n);
   // The grid's spherical harmonics are interpolated as its values are (when both levels have them).
   const int sh = from.sh_degree == to.sh_degree && to.sh_degree > 0 ? ShStride(to.sh_degree) : 0;

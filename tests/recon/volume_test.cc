@@ -282,5 +282,24 @@ TEST(VolumeTest, ACorrectedCameraShootsThePosedRays) {
   EXPECT_FLOAT_EQ(PhotoCorrections().CameraFor(cam).world_from_cam[5], cam.world_from_cam[5]);
 }
 
+// The photos' exposures and pose corrections carry over from level to level; a level that stops
+// refining poses keeps the exposures.
+TEST(VolumeTest, ResampleCarriesExposuresAndPoses) {
+  const VolumeShape from = VolumeShape(4, 2, 1, nullptr, 3).WithPoses(3);
+  std::vector<float> x(from.ParamCount(), 0.5f);
+  for (int64_t i = from.ExposureStart(); i < from.ParamCount(); ++i) x[i] = 0.001f * static_cast<float>(i % 97);
+  const std::vector<float> same = Resample(from, x, from.Doubled());
+  const VolumeShape to = from.Doubled();
+  for (int64_t k = 0; k < from.ParamCount() - from.ExposureStart(); ++k) {
+    EXPECT_EQ(same[to.ExposureStart() + k], x[from.ExposureStart() + k]) << k;
+  }
+  const VolumeShape unposed = to.WithPoses(0);
+  const std::vector<float> kept = Resample(from, x, unposed);
+  ASSERT_EQ(static_cast<int64_t>(kept.size()), unposed.ParamCount());
+  for (int64_t k = 0; k < unposed.ParamCount() - unposed.ExposureStart(); ++k) {
+    EXPECT_EQ(kept[unposed.ExposureStart() + k], x[from.ExposureStart() + k]) << k;
+  }
+}
+
 }  // namespace
 }  // namespace perf::recon
