@@ -70,13 +70,6 @@ PERF_HD_INLINE float UpperBound(ParamKind kind) {
 }
 PERF_HD_INLINE float ProjectToValid(ParamKind kind, float v) { return Clamp(v, LowerBound(kind), UpperBound(kind)); }
 
-// Whether parameter x (gradient g, kind `kind`) is held for one iteration, given whether the
-// shells are fixed (a known background) and whether bounds are active: the active set of a
-// projected Gauss-Newton method (Bertsekas, "Projected Newton methods for optimization
-// problems with simple constraints", 1982). A parameter at a bound of its valid range whose
-// gradient points out of the range would only be moved out by a descent step and projected
-// back; leaving it in the system lets CG spend the step on that move and shape every other
-// parameter's step around it. Held parameters are left out of that iteration's system.
 // The kinds a level holds whatever their gradient: the shells (a known background), the photos'
 // pose corrections (a level that does not refine them), everything but the poses (a pose fit
 // against a frozen volume).
@@ -85,6 +78,13 @@ struct HeldKinds {
 };
 PERF_HD_INLINE bool IsPose(ParamKind kind) { return kind == ParamKind::kPoseRotation || kind == ParamKind::kPoseCentre; }
 
+// Whether parameter x (gradient g, kind `kind`) is held for one iteration, given the kinds the
+// level holds and whether bounds are active: the active set of a
+// projected Gauss-Newton method (Bertsekas, "Projected Newton methods for optimization
+// problems with simple constraints", 1982). A parameter at a bound of its valid range whose
+// gradient points out of the range would only be moved out by a descent step and projected
+// back; leaving it in the system lets CG spend the step on that move and shape every other
+// parameter's step around it. Held parameters are left out of that iteration's system.
 PERF_HD_INLINE bool HeldParameter(ParamKind kind, float x, float g, const HeldKinds& held, bool bounds) {
   if (held.shells && (kind == ParamKind::kShellColour || kind == ParamKind::kShellOpacity)) return true;
   if (IsPose(kind) ? held.poses : held.volume) return true;
