@@ -50,7 +50,8 @@ void AddPoseOptions(CLI::App* cmd, recon::ReconstructOptions& o) {
                   "Refine every training photo's camera (a rotation and a centre correction) with the volume in "
                   "Gauss-Newton (auto: off)");
   cmd->add_option("--refine-poses-from", o.refine_poses_from,
-                  "With --refine-poses: the first level that refines them (earlier levels hold the imported poses)")
+                  "With --refine-poses: the first level that refines them, 1 to 6 (earlier levels hold the "
+                  "imported poses)")
       ->capture_default_str();
   cmd->add_option("--pose-prior", o.solver.pose_prior,
                   "Weight of the prior that keeps the refined cameras near the imported ones, relative to the photos")

@@ -41,8 +41,8 @@ void ReconstructOptions::Check() const {
   if (poses == PoseChoice::kOn && solver.type == SolverType::kAdam) {
     Fail("--refine-poses", "on", "refines poses in Gauss-Newton only", "use --solver gn, or --refine-poses off");
   }
-  if (refine_poses_from < 0 || refine_poses_from > 6) {
-    Fail("--refine-poses-from", std::to_string(refine_poses_from), "must be a level, 0 to 6");
+  if (refine_poses_from < 1 || refine_poses_from > 6) {
+    Fail("--refine-poses-from", std::to_string(refine_poses_from), "must be a level, 1 (the first) to 6");
   }
   if (eval_every < 0) Fail("--eval-every", std::to_string(eval_every), "must be >= 0");
   if (!(residuals.lambda >= 0 && std::isfinite(residuals.lambda))) {
@@ -88,7 +88,7 @@ HierarchyOptions ReconstructOptions::Hierarchy(const Scene& scene, const LevelCh
   const int train = static_cast<int>(SplitViews(scene, Split::kTrain).size());
   h.exposures = SolvesExposures(exposure, scene) ? train : 0;
   h.poses = RefinesPoses(poses, scene, solver.type) ? train : 0;
-  h.refine_poses_from = refine_poses_from;
+  h.refine_poses_from = refine_poses_from - 1;
   return h;
 }
 

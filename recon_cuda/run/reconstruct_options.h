@@ -63,10 +63,10 @@ struct ReconstructOptions {
   BackgroundChoice background = BackgroundChoice::kAuto;
   // Per-photo exposure; solver.exposure_prior weighs its prior.
   ExposureChoice exposure = ExposureChoice::kAuto;
-  // Camera refinement; solver.pose_prior weighs its prior. Levels before refine_poses_from fit
-  // the volume on the imported poses (held), the others refine them.
+  // Camera refinement; solver.pose_prior weighs its prior. Levels before refine_poses_from (1:
+  // the first, as the log numbers them) fit the volume on the imported poses, the others refine them.
   PoseChoice poses = PoseChoice::kAuto;
-  int refine_poses_from = 0;
+  int refine_poses_from = 1;
   // View-dependent colour: spherical harmonics of this degree (0, 1 or 2) beyond each cell's
   // colour (ray_types.h ShParam); 0: none.
   int sh_degree = 0;
