@@ -1,10 +1,9 @@
 #include "export/evaluate.h"
 
-#include <Eigen/Geometry>
+#include <Eigen/Core>
 #include <algorithm>
 #include <map>
 #include <nlohmann/json.hpp>
-#include <numbers>
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
@@ -13,6 +12,7 @@
 #include "export/report_html.h"
 #include "recon_cuda/data/training_data.h"
 #include "recon_cuda/run/pose_fit.h"
+#include "recon_cuda/run/refined_poses.h"
 #include "recon_cuda/run/render_views.h"
 #include "workspace/image_io.h"
 
@@ -134,16 +134,13 @@ void ScoreAfterPoseFit(const EvalOptions& o, LoadedCheckpoint& l, const std::vec
     recon::ApplyTransform(transforms[k], &render);
     ViewReport& v = r->views[k];
     v.psnr_pose_fit = recon::Psnr(render, moved.image);
-    const recon::PinholeCamera<float> a = corrections.CameraFor(test[k].camera);
-    const recon::PinholeCamera<float>& b = moved.camera;
-    Eigen::Matrix3d ra, rb;
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) ra(i, j) = a.world_from_cam[4 * i + j], rb(i, j) = b.world_from_cam[4 * i + j];
-    const Eigen::Vector3d ca(a.world_from_cam[3], a.world_from_cam[7], a.world_from_cam[11]);
-    const Eigen::Vector3d cb(b.world_from_cam[3], b.world_from_cam[7], b.world_from_cam[11]);
-    v.pose_fit_degrees = Eigen::AngleAxisd(Eigen::Matrix3d(ra.transpose() * rb)).angle() * 180 / std::numbers::pi;
+    const auto pose = [](const recon::PinholeCamera<float>& cam) {
+      return Eigen::Matrix<float, 3, 4, Eigen::RowMajor>(cam.world_from_cam).cast<double>().eval();
+    };
     const Eigen::Vector3d box(c.placement.box_center[0], c.placement.box_center[1], c.placement.box_center[2]);
-    v.pose_fit_centre_fraction = (cb - ca).norm() / std::max((ca - box).norm(), 1e-12);
+    const recon::CameraMove m = recon::MoveBetween(pose(corrections.CameraFor(test[k].camera)), pose(moved.camera), box);
+    v.pose_fit_degrees = m.degrees;
+    v.pose_fit_centre_fraction = m.centre_fraction;
     sum += v.psnr_pose_fit;
   }
   r->pose_fit = true;

@@ -27,16 +27,28 @@ nlohmann::json PoseCorrection::ToJson() const {
           {"large", large}};
 }
 
+CameraMove MoveBetween(const Eigen::Matrix<double, 3, 4>& from, const Eigen::Matrix<double, 3, 4>& to,
+                       const Eigen::Vector3d& target) {
+  CameraMove m;
+  const Eigen::Matrix3d r = from.leftCols<3>().transpose() * to.leftCols<3>();
+  m.degrees = Eigen::AngleAxisd(r).angle() * 180 / std::numbers::pi;
+  m.centre_shift = (to.col(3) - from.col(3)).norm();
+  const double distance = (from.col(3) - target).norm();
+  m.centre_fraction = distance > 0 ? m.centre_shift / distance : 0;
+  return m;
+}
+
 Scene WithRefinedPoses(const Scene& scene, const PhotoCorrections& corrections) {
   Scene out = scene;
   if (!corrections.has_poses()) return out;
+  const VolumeGeometry geometry = VolumeGeometry::FromScene(scene);
   for (SceneImage& im : out.images) {
     const PinholeCamera<float> camera = ToPinhole(scene.camera(im.camera_id), im.world_from_cam);
     const std::array<float, kPoseValues> pose = corrections.PoseFor(camera);
     double in[12], moved[12];
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 4; ++j) in[4 * i + j] = im.world_from_cam(i, j);
-    CorrectedPose(in, pose.data(), VolumeGeometry::FromScene(scene), moved);
+    CorrectedPose(in, pose.data(), geometry, moved);
     Eigen::Matrix<double, 3, 4> refined;
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 4; ++j) refined(i, j) = moved[4 * i + j];
@@ -61,11 +73,10 @@ std::vector<PoseCorrection> DescribeCorrections(const Scene& refined) {
     if (im.split != Split::kTrain || !im.refined_world_from_cam) continue;
     PoseCorrection c;
     c.name = im.name;
-    const Eigen::Matrix3d r = im.world_from_cam.leftCols<3>().transpose() * im.refined_world_from_cam->leftCols<3>();
-    c.rotation_degrees = Eigen::AngleAxisd(r).angle() * 180 / std::numbers::pi;
-    c.centre_shift = (im.refined_world_from_cam->col(3) - im.world_from_cam.col(3)).norm();
-    const double distance = (im.world_from_cam.col(3) - refined.box.center).norm();
-    c.centre_fraction = distance > 0 ? c.centre_shift / distance : 0;
+    const CameraMove m = MoveBetween(im.world_from_cam, *im.refined_world_from_cam, refined.box.center);
+    c.rotation_degrees = m.degrees;
+    c.centre_shift = m.centre_shift;
+    c.centre_fraction = m.centre_fraction;
     c.large = c.rotation_degrees > kLargeRotationDegrees || c.centre_fraction > kLargeCentreFraction;
     out.push_back(c);
   }

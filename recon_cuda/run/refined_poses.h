@@ -3,6 +3,7 @@
 // moved, and which moved so far that its imported pose was wrong rather than imprecise.
 #pragma once
 
+#include <Eigen/Core>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -25,6 +26,15 @@ struct PoseCorrection {
   bool large = false;
   nlohmann::json ToJson() const;
 };
+
+// How far camera `to` is from camera `from` (world_from_cam [R | centre]): the angle between
+// their rotations, the shift of the centre, and that shift over from's distance to `target` (0
+// when from is there).
+struct CameraMove {
+  double degrees = 0, centre_shift = 0, centre_fraction = 0;
+};
+CameraMove MoveBetween(const Eigen::Matrix<double, 3, 4>& from, const Eigen::Matrix<double, 3, 4>& to,
+                       const Eigen::Vector3d& target);
 
 // The scene with refined_world_from_cam set on every image from `corrections` (a training image
 // its own, the others the blend of their nearest training photos'); unchanged without poses.
