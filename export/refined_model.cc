@@ -5,6 +5,7 @@
 
 #include "common/errors.h"
 #include "common/inputs.h"
+#include "sfm_import/camera_models.h"
 #include "sfm_import/colmap_model.h"
 
 namespace perf::exporter {
@@ -26,6 +27,7 @@ RefinedModel WriteRefinedModel(const Scene& posed, const fs::path& workspace) {
     return r;
   }
   colmap::Reconstruction rec = colmap::ReadReconstruction(posed.source.path);
+  uint32_t next_camera = rec.cameras.empty() ? 1 : rec.cameras.rbegin()->first + 1;
   for (auto& [id, image] : rec.images) {
     const auto it = by_name.find(image.name);
     if (it == by_name.end()) continue;
@@ -35,6 +37,19 @@ RefinedModel WriteRefinedModel(const Scene& posed, const fs::path& workspace) {
     const Eigen::Vector3d t = -r_cw * w.col(3);
     image.qvec = {q.w(), q.x(), q.y(), q.z()};
     image.tvec = {t.x(), t.y(), t.z()};
+    // Its own camera with the model's focal length(s) scaled: the refined focal is of the undistorted
+    // workspace camera, which equals this to first order in the lens distortion.
+    if (const std::optional<double>& f = it->second->refined_focal_scale) {
+      const auto cam = rec.cameras.find(image.camera_id);
+      if (cam != rec.cameras.end()) {
+        colmap::Camera c = cam->second;
+        c.camera_id = next_camera++;
+        const int focals = colmap::NumFocalParams(static_cast<colmap::CameraModelId>(c.model_id)) == 3 ? 1 : 2;
+        for (int k = 0; k < focals && k < static_cast<int>(c.params.size()); ++k) c.params[k] *= *f;
+        rec.cameras[c.camera_id] = c;
+        image.camera_id = c.camera_id;
+      }
+    }
     ++r.moved;
   }
   r.dir = "sparse_refined";

@@ -53,6 +53,8 @@ void AddPoseOptions(CLI::App* cmd, recon::ReconstructOptions& o) {
                   "With --refine-poses: the first level that refines them, 1 to 6 (earlier levels hold the "
                   "imported poses)")
       ->capture_default_str();
+  AddChoiceOption(cmd, "--refine-intrinsics", &o.refine_focal, {{"off", false}, {"focal", true}},
+                  "With --refine-poses on: also refine each training photo's focal length (off: the imported one)");
   cmd->add_option("--pose-prior", o.solver.pose_prior,
                   "Weight of the prior that keeps the refined cameras near the imported ones, relative to the photos")
       ->capture_default_str();

@@ -33,6 +33,7 @@ struct RunOptions {
   bool keep_bad_poses = false;  // import: train and score on photos whose pose looks wrong too
   recon::ExposureChoice exposure = recon::ExposureChoice::kAuto;  // reconstruct: per-photo exposure
   recon::PoseChoice poses = recon::PoseChoice::kAuto;             // reconstruct: camera refinement
+  bool refine_focal = false;                                       // reconstruct: and the focal lengths
   // Overrides of the preset (0: the preset's).
   int max_size = 0, levels = 0, iterations = 0, max_resolution = 0;
   bool quiet = false;

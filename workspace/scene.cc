@@ -158,6 +158,7 @@ std::string SceneToJson(const Scene& scene) {
     if (im.split == Split::kExcluded) e["excluded_because"] = im.excluded_because;
     if (!im.alpha_path.empty()) e["alpha_path"] = im.alpha_path;
     if (im.refined_world_from_cam) e["refined_world_from_cam"] = MatToJson<3, 4>(*im.refined_world_from_cam);
+    if (im.refined_focal_scale) e["refined_focal_scale"] = *im.refined_focal_scale;
     imgs.push_back(e);
   }
   j["images"] = imgs;
@@ -286,6 +287,13 @@ Scene SceneFromJson(const std::string& text, const std::string& name) {
       } else {
         im.refined_world_from_cam = pose;
       }
+    }
+    if (e.contains("refined_focal_scale")) {
+      const double f = r.Number(e["refined_focal_scale"], p + ".refined_focal_scale");
+      if (!(f > 0.5 && f < 2)) {
+        r.Fail(p + ".refined_focal_scale", e["refined_focal_scale"], "must be a scale of the focal length in (0.5, 2)");
+      }
+      im.refined_focal_scale = f;
     }
     s.images.push_back(std::move(im));
   }

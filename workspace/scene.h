@@ -51,6 +51,9 @@ struct SceneImage {
   // The pose as perf reconstruct --refine-poses refined it (the last level's checkpoint; a held-out
   // view's from its neighbours'), or none; world_from_cam stays the imported pose.
   std::optional<Eigen::Matrix<double, 3, 4>> refined_world_from_cam;
+  // The refined focal length as a scale of its camera's fx and fy (--refine-intrinsics focal), or
+  // none: the camera's.
+  std::optional<double> refined_focal_scale;
   Split split = Split::kTrain;
   std::string excluded_because;  // why, when split is kExcluded (empty otherwise)
 };

@@ -349,7 +349,7 @@ class CpuBackend final : public Backend {
         GeometryVisitor<float> geometry(vol, ray, jit);
         BothVisitors<LinearizeVisitor<kDiag>, GeometryVisitor<float>> both{v, geometry};
         Backward(vol, ray, jit, fwd, both, s.record.data());
-        const PoseRow<float> row = PoseRowOf(vol, vol.params + tr.pose, ray, geometry.grad);
+        const PoseRow<float> row = PoseRowOf(vol, vol.params + tr.pose, tr.forward, ray, geometry.grad);
         ScatterJtuPose(row, tr.pose, v.r, v.g);
         if constexpr (kDiag) {
           AddDiagPose(row, tr.pose, v.g2, v.d);
@@ -400,7 +400,7 @@ class CpuBackend final : public Backend {
       GeometryVisitor<float> geometry(vol, ray, jit);
       BothVisitors<RecordOnly, GeometryVisitor<float>> both{visitor, geometry};
       Backward(vol, ray, jit, fwd, both, s.record.data());
-      PackPoseRow(PoseRowOf(vol, vol.params + tr.pose, ray, geometry.grad), s.row.pose.data());
+      PackPoseRow(PoseRowOf(vol, vol.params + tr.pose, tr.forward, ray, geometry.grad), s.row.pose.data());
     } else {
       Backward(vol, ray, jit, fwd, visitor, s.record.data());
     }

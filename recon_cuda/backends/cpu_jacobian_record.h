@@ -55,23 +55,17 @@ struct BlockJ {
   void Clear(int64_t rays, const VolumeShape& shape);
 };
 
-// A ray's pose row (pose.h PoseRow) without its padding columns: 4 residuals x 6 values.
-inline constexpr int kPoseRowValues = 24;
+// A ray's pose row (pose.h PoseRow) without its padding column: 4 residuals x 7 values.
+inline constexpr int kPoseRowValues = 4 * kPoseSolved;
 inline void PackPoseRow(const PoseRow<float>& row, float* out) {
   for (int r = 0; r < 4; ++r)
-    for (int j = 0; j < 3; ++j) {
-      out[6 * r + j] = row.j[r][j];
-      out[6 * r + 3 + j] = row.j[r][4 + j];
-    }
+    for (int j = 0; j < kPoseSolved; ++j) out[kPoseSolved * r + j] = row.j[r][PoseValueOf(j)];
 }
 inline PoseRow<float> UnpackPoseRow(const float* in) {
   PoseRow<float> row;
   for (int r = 0; r < 4; ++r) {
-    for (int j = 0; j < 3; ++j) {
-      row.j[r][j] = in[6 * r + j];
-      row.j[r][4 + j] = in[6 * r + 3 + j];
-    }
-    row.j[r][3] = row.j[r][7] = 0;
+    for (int j = 0; j < kPoseSolved; ++j) row.j[r][PoseValueOf(j)] = in[kPoseSolved * r + j];
+    row.j[r][7] = 0;
   }
   return row;
 }

@@ -218,7 +218,7 @@ class CudaBackend final : public Backend {
                          level_.Held(), bounds);
   }
   void Multiply(VecId y, VecId m) override { cuda::Multiply(ptr(y), ptr(m), n()); }
-  // The blocks are solved on the host: a photo's 6 values, a few hundred photos (pose_blocks.h).
+  // The blocks are solved on the host: a photo's 7 values, a few hundred photos (pose_blocks.h).
   void PreconditionPoses(VecId z, VecId r, VecId diag, VecId free, float floor) override {
     const int poses = level_.shape.poses;
     if (poses == 0 || !blocks_fresh_) return;

@@ -201,7 +201,7 @@ __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, flo
       BothVisitors<ScatterVisitor<kDiag>, GeometryVisitor<float>> both{v, geometry};
       Backward(in.vol, r.ray, r.jit, fwd, both);
       if (r.pose >= 0) {
-        const PoseRow<float> row = PoseRowOf(in.vol, in.vol.params + r.pose, r.ray, geometry.grad);
+        const PoseRow<float> row = PoseRowOf(in.vol, in.vol.params + r.pose, r.forward, r.ray, geometry.grad);
         pg.base = pd.base = r.pose;
         ScatterJtuPose(row, r.pose, v.u, pg);
         if constexpr (kDiag) {
@@ -257,7 +257,7 @@ __global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const fl
       BothVisitors<JpVisitor, GeometryVisitor<float>> both{jp, geometry};
       Backward(in.vol, r.ray, r.jit, fwd, both);
       if (r.pose >= 0) {
-        row = PoseRowOf(in.vol, in.vol.params + r.pose, r.ray, geometry.grad);
+        row = PoseRowOf(in.vol, in.vol.params + r.pose, r.forward, r.ray, geometry.grad);
         AddJpPose(row, p, r.pose, jp.u);
       }
     } else {

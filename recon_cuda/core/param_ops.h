@@ -19,9 +19,10 @@ enum class ParamKind {
   kExposureOffset,
   kGridSh,
   kPoseRotation,
-  kPoseCentre
+  kPoseCentre,
+  kPoseFocal
 };
-inline constexpr int kParamKinds = 9;
+inline constexpr int kParamKinds = 10;
 
 // Where each part of the parameter vector starts (layout in ray_types.h; VolumeShape::Layout).
 struct ParamLayout {
@@ -34,7 +35,8 @@ struct ParamLayout {
 // What parameter i is. Padding zeros count with their group (they never move).
 PERF_HD_INLINE ParamKind KindOfParam(const ParamLayout& l, int64_t i) {
   if (i >= l.pose_start) {
-    return (i - l.pose_start) % kPoseValues < 4 ? ParamKind::kPoseRotation : ParamKind::kPoseCentre;
+    const int64_t v = (i - l.pose_start) % kPoseValues;
+    return v < 3 ? ParamKind::kPoseRotation : v == 3 ? ParamKind::kPoseFocal : ParamKind::kPoseCentre;
   }
   if (i >= l.exposure_start) {
     return (i - l.exposure_start) % kExposureValues < 4 ? ParamKind::kExposureGain : ParamKind::kExposureOffset;
@@ -49,15 +51,18 @@ PERF_HD_INLINE ParamKind KindOfParam(const ParamLayout& l, int64_t i) {
 // The valid range of a kind: sigma >= 0, colours and opacities in [0, 1], a photo's gain 1 + gamma
 // in [0.5, 2] and its offset in [-0.5, 0.5] (wider would mean a badly exposed or wrong photo), a
 // spherical-harmonic coefficient in [-1, 1] (a band then moves the colour by up to 0.49 or 1.09),
-// a pose's rotation within 0.1 rad (5.7 degrees) per axis and its centre within a quarter of the
-// box's shortest side per axis (larger corrections mean a wrong registration, not a refinement).
+// a pose's rotation within 0.1 rad (5.7 degrees) per axis, its centre within a quarter of the
+// box's shortest side per axis and its focal length's log scale within 0.1 (10.5 %) (larger
+// corrections mean a wrong registration or calibration, not a refinement).
 inline constexpr float kMaxPoseRotation = 0.1f;
 inline constexpr float kMaxPoseCentre = 0.25f;
+inline constexpr float kMaxPoseFocal = 0.1f;
 PERF_HD_INLINE float LowerBound(ParamKind kind) {
   return kind == ParamKind::kExposureGain || kind == ParamKind::kExposureOffset ? -0.5f
          : kind == ParamKind::kGridSh                                            ? -1.f
          : kind == ParamKind::kPoseRotation                                      ? -kMaxPoseRotation
          : kind == ParamKind::kPoseCentre                                        ? -kMaxPoseCentre
+         : kind == ParamKind::kPoseFocal                                         ? -kMaxPoseFocal
                                                                                  : 0.f;
 }
 PERF_HD_INLINE float UpperBound(ParamKind kind) {
@@ -66,17 +71,20 @@ PERF_HD_INLINE float UpperBound(ParamKind kind) {
          : kind == ParamKind::kExposureOffset ? 0.5f
          : kind == ParamKind::kPoseRotation ? kMaxPoseRotation
          : kind == ParamKind::kPoseCentre ? kMaxPoseCentre
+         : kind == ParamKind::kPoseFocal ? kMaxPoseFocal
                                           : 1.f;
 }
 PERF_HD_INLINE float ProjectToValid(ParamKind kind, float v) { return Clamp(v, LowerBound(kind), UpperBound(kind)); }
 
 // The kinds a level holds whatever their gradient: the shells (a known background), the photos'
 // pose corrections (a level that does not refine them), everything but the poses (a pose fit
-// against a frozen volume).
+// against a frozen volume), the photos' focal lengths (not refined: --refine-intrinsics off).
 struct HeldKinds {
-  bool shells = false, poses = false, volume = false;
+  bool shells = false, poses = false, volume = false, focal = false;
 };
-PERF_HD_INLINE bool IsPose(ParamKind kind) { return kind == ParamKind::kPoseRotation || kind == ParamKind::kPoseCentre; }
+PERF_HD_INLINE bool IsPose(ParamKind kind) {
+  return kind == ParamKind::kPoseRotation || kind == ParamKind::kPoseCentre || kind == ParamKind::kPoseFocal;
+}
 
 // Whether parameter x (gradient g, kind `kind`) is held for one iteration, given the kinds the
 // level holds and whether bounds are active: the active set of a
@@ -88,6 +96,7 @@ PERF_HD_INLINE bool IsPose(ParamKind kind) { return kind == ParamKind::kPoseRota
 PERF_HD_INLINE bool HeldParameter(ParamKind kind, float x, float g, const HeldKinds& held, bool bounds) {
   if (held.shells && (kind == ParamKind::kShellColour || kind == ParamKind::kShellOpacity)) return true;
   if (IsPose(kind) ? held.poses : held.volume) return true;
+  if (held.focal && kind == ParamKind::kPoseFocal) return true;
   if (!bounds) return false;
   if (x <= LowerBound(kind) && g > 0) return true;
   return x >= UpperBound(kind) && g < 0;

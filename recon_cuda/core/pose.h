@@ -49,14 +49,29 @@ PERF_HD_INLINE int64_t PoseParamOfSlot(const VolumeView<T>& vol, int slot) {
   return slot < 0 || vol.poses == 0 ? int64_t{-1} : PoseParam(vol.PoseStart(), slot);
 }
 
-// Moves a ray of the photo whose pose values are at `param` (>= 0) to the corrected pose: the
-// origin by s c, the direction turned by exp([w]x) (ray_types.h PoseParam), in the box frame.
+// The imported camera's optical axis (its +z) in the box frame: the direction that the focal
+// correction (PoseParam's value 3) scales the rest of a ray's direction against.
 template <class T>
-PERF_HD_INLINE void ApplyPose(const VolumeView<T>& vol, const T* pose, BoxRay<T>* ray) {
+PERF_HD_INLINE Vec3<T> BoxForward(const PinholeCamera<T>& cam, const BoxFrame<T>& box) {
+  const T* m = cam.world_from_cam;
+  return MulMatTransposed(box.world_from_box, Vec3<T>{m[2], m[6], m[10]});
+}
+
+// Moves a ray of the photo whose pose values are at `param` (>= 0) to the corrected pose: the
+// focal length scaled by exp(f) (the direction's part across `forward`, the imported optical axis
+// in the box frame, divided by exp(f)), the direction then turned by exp([w]x), the origin moved
+// by s c (ray_types.h PoseParam), in the box frame. f = 0 leaves the direction's bits as they are.
+template <class T>
+PERF_HD_INLINE void ApplyPose(const VolumeView<T>& vol, const T* pose, Vec3<T> forward, BoxRay<T>* ray) {
   Mat3<T> r, jl;
   RotationOfVector(Vec3<T>{pose[0], pose[1], pose[2]}, &r, &jl);
+  Vec3<T> d = ray->dir;
+  if (pose[3] != 0) {
+    const T along = Dot(d, forward);
+    d = Normalized(forward + (d * (1 / along) - forward) * Exp(-pose[3]));
+  }
   ray->origin = ray->origin + Vec3<T>{pose[4], pose[5], pose[6]} * vol.PoseScale();
-  ray->dir = MulMat(r, ray->dir);
+  ray->dir = MulMat(r, d);
   SetGridRay(vol.size, vol.n, ray);
 }
 
@@ -308,28 +323,33 @@ struct GeometryVisitor {
 };
 
 // The Jacobian of a ray's four residuals with respect to its photo's 8 pose values (PoseParam
-// order; the two padding columns are 0): rotation column a = (J_l(w)^T (d x grad_d r))_a, centre
-// column a = s grad_o r_a, d the corrected direction, w the stored rotation vector.
+// order; the padding column 7 is 0): rotation column a = (J_l(w)^T (d x grad_d r))_a, focal column
+// = grad_d r . (d . F)(F - (d . F) d) with F = exp([w]x) forward (the corrected optical axis),
+// centre column a = s grad_o r_a; d the corrected direction, w the stored rotation vector.
 template <class T>
 struct PoseRow {
   T j[4][kPoseValues];
 };
 
 template <class T>
-PERF_HD_INLINE PoseRow<T> PoseRowOf(const VolumeView<T>& vol, const T* pose, const BoxRay<T>& ray,
+PERF_HD_INLINE PoseRow<T> PoseRowOf(const VolumeView<T>& vol, const T* pose, Vec3<T> forward, const BoxRay<T>& ray,
                                     const RayGeometryGradient<T>& g) {
   Mat3<T> r, jl;
   RotationOfVector(Vec3<T>{pose[0], pose[1], pose[2]}, &r, &jl);
   const T s = vol.PoseScale();
+  const Vec3<T> axis = MulMat(r, forward);
+  const T along = Dot(ray.dir, axis);
+  const Vec3<T> dfocal = (axis - ray.dir * along) * along;  // d direction / d f
   PoseRow<T> row;
   for (int k = 0; k < 4; ++k) {
-    const Vec3<T> turn = Cross(ray.dir, Vec3<T>{g.d_dir[k][0], g.d_dir[k][1], g.d_dir[k][2]});
-    const Vec3<T> rot = MulMatTransposed(jl, turn);
+    const Vec3<T> gd{g.d_dir[k][0], g.d_dir[k][1], g.d_dir[k][2]};
+    const Vec3<T> rot = MulMatTransposed(jl, Cross(ray.dir, gd));
     for (int a = 0; a < 3; ++a) {
       row.j[k][a] = rot[a];
       row.j[k][4 + a] = s * g.d_origin[k][a];
     }
-    row.j[k][3] = row.j[k][7] = 0;
+    row.j[k][3] = Dot(gd, dfocal);
+    row.j[k][7] = 0;
   }
   return row;
 }
@@ -366,19 +386,23 @@ PERF_HD_INLINE void AddDiagPose(const PoseRow<T>& row, int64_t param, const T* g
 }
 
 // The pose block of J^T J (block-Jacobi preconditioning, solve/pose_blocks.h): per photo the
-// 6 x 6 products of its solved values (PoseParam order without the padding), row-major.
-inline constexpr int kPoseSolved = 6;
-inline constexpr int kPoseBlock = kPoseSolved * kPoseSolved;
-PERF_HD_INLINE int PoseValueOf(int a) { return a < 3 ? a : a + 1; }  // solved value a in PoseParam order
+// products of its 7 solved values (PoseParam order without the padding: rotation, focal, centre),
+// the upper triangle row by row (28 values, a multiple of 4 for the CUDA group sums).
+inline constexpr int kPoseSolved = 7;
+inline constexpr int kPoseBlock = kPoseSolved * (kPoseSolved + 1) / 2;
+PERF_HD_INLINE int PoseValueOf(int a) { return a; }  // solved value a in PoseParam order
+// Where entry (a, b), a <= b, of the upper triangle is.
+PERF_HD_INLINE int PoseBlockEntry(int a, int b) { return a * kPoseSolved - a * (a - 1) / 2 + (b - a); }
 
 // block += the ray's share: sum over the rows of g2_row J[row][a] J[row][b] (g2 as AddDiagPose's).
 template <class T, class Acc>
 PERF_HD_INLINE void AddPoseBlock(const PoseRow<T>& row, const T* g2, Acc* block) {
+  int e = 0;
   for (int a = 0; a < kPoseSolved; ++a) {
-    for (int b = 0; b < kPoseSolved; ++b) {
+    for (int b = a; b < kPoseSolved; ++b, ++e) {
       T s = row.j[3][PoseValueOf(a)] * row.j[3][PoseValueOf(b)];
       for (int r = 0; r < 3; ++r) s += g2[r] * row.j[r][PoseValueOf(a)] * row.j[r][PoseValueOf(b)];
-      block[kPoseSolved * a + b] += s;
+      block[e] += s;
     }
   }
 }

@@ -174,11 +174,13 @@ PERF_HD_INLINE int64_t ExposureParam(int64_t exposure_start, int slot) {
 }
 
 // Per-photo pose correction (--refine-poses), after the exposures: training photo `slot` holds
-// kPoseValues values at pose_start + 8 slot: a rotation vector omega (3), 0, then the camera
-// centre's offset (3), 0, both in the box frame. The photo's rays leave from o + s c (s: the
-// box's shortest side, VolumeView::PoseScale, so that c is in box units) in the direction
-// exp([omega]x) d, (o, d) the imported camera's box-frame ray (pose.h ApplyPose). The zeros keep
-// each group of 4 aligned, as the exposures' do.
+// kPoseValues values at pose_start + 8 slot: a rotation vector omega (3), the log f of its focal
+// length's scale (--refine-intrinsics focal; held at 0 otherwise), then the camera centre's
+// offset c (3), 0, all in the box frame. The photo's rays leave from o + s c (s: the box's
+// shortest side, VolumeView::PoseScale, so that c is in box units) in the direction
+// exp([omega]x) d_f, d_f the imported camera's box-frame direction d with the focal length
+// scaled by exp(f) (pose.h ApplyPose). The zero keeps each group of 4 aligned, as the exposures'
+// do.
 inline constexpr int kPoseValues = 8;
 PERF_HD_INLINE int64_t PoseParam(int64_t pose_start, int slot) {
   return pose_start + static_cast<int64_t>(kPoseValues) * slot;

@@ -20,15 +20,15 @@ namespace perf::recon {
 // no neighbours: their weight is a prior's, the residual sqrt(w) x_i (gain 1, offset 0), which
 // fixes the gauge (all gains against all colours) and keeps the transforms near the identity.
 // The photos' pose corrections have a prior of the same form toward the imported pose, one
-// weight for the rotations and one for the centres: it holds the set of cameras where the photos
+// weight for the rotations, one for the centres and one for the focal lengths: it holds the set of cameras where the photos
 // do not say otherwise, and fixes the gauge (all cameras moving together against the volume).
 struct SmoothnessWeights {
   float grid_colour = 0, grid_density = 0, shell_colour = 0, shell_opacity = 0, exposure = 0;
-  float pose_rotation = 0, pose_centre = 0;
+  float pose_rotation = 0, pose_centre = 0, pose_focal = 0;
 
   PERF_HD_INLINE bool Any() const {
     return grid_colour > 0 || grid_density > 0 || shell_colour > 0 || shell_opacity > 0 || exposure > 0 ||
-           pose_rotation > 0 || pose_centre > 0;
+           pose_rotation > 0 || pose_centre > 0 || pose_focal > 0;
   }
   PERF_HD_INLINE float Of(ParamKind k) const {
     switch (k) {
@@ -39,6 +39,7 @@ struct SmoothnessWeights {
       case ParamKind::kShellOpacity: return shell_opacity;
       case ParamKind::kPoseRotation: return pose_rotation;
       case ParamKind::kPoseCentre: return pose_centre;
+      case ParamKind::kPoseFocal: return pose_focal;
       default: return exposure;
     }
   }

@@ -36,6 +36,7 @@ struct TrainingRay {
   BoxRay<float> ray;
   Jitter jit;
   int64_t pose;  // where its photo's pose values are in params (-1: not refined)
+  Vec3<float> forward;  // its photo's imported optical axis in the box frame (pose.h BoxForward), with a pose
 };
 
 // Ray i in the iteration of `seed`: every pass of the iteration sees the same ray and jitter,
@@ -45,10 +46,13 @@ PERF_HD_INLINE TrainingRay RayOf(const TrainingRays<Colour>& rays, const VolumeV
                                  const BoxFrame<float>& box, int64_t i, uint32_t seed, bool jitter, bool pixel_jitter) {
   const RayPixel px = rays.pixels[i];
   const Jitter jit{seed, static_cast<uint32_t>(rays.first_index + i), jitter, pixel_jitter};
-  TrainingRay tr{PixelBoxRay(rays.cameras[px.camera], box, vol.n, px.x, px.y, jit), jit, -1};
+  TrainingRay tr{PixelBoxRay(rays.cameras[px.camera], box, vol.n, px.x, px.y, jit), jit, -1, {}};
   if (rays.pose_slot) {
     tr.pose = PoseParamOfSlot(vol, rays.pose_slot[px.camera]);
-    if (tr.pose >= 0) ApplyPose(vol, vol.params + tr.pose, &tr.ray);
+    if (tr.pose >= 0) {
+      tr.forward = BoxForward(rays.cameras[px.camera], box);
+      ApplyPose(vol, vol.params + tr.pose, tr.forward, &tr.ray);
+    }
   }
   return tr;
 }

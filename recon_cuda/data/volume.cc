@@ -90,7 +90,8 @@ std::vector<float> InitialParams(const VolumeShape& shape, const VolumeGeometry&
       case ParamKind::kExposureOffset: x[i] = 0; break;  // the identity
       case ParamKind::kGridSh: x[i] = 0; break;          // no view dependence
       case ParamKind::kPoseRotation:
-      case ParamKind::kPoseCentre: x[i] = 0; break;      // the imported poses
+      case ParamKind::kPoseCentre:
+      case ParamKind::kPoseFocal: x[i] = 0; break;       // the imported poses
       case ParamKind::kGridColour: x[i] = unit(rng); break;
     }
   }

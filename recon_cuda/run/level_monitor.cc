@@ -159,8 +159,9 @@ void LevelMonitor::ReportPoses(const HierarchyLevel& h, const PhotoCorrections& 
   if (h.shape.poses == 0) {  // an earlier run's refined poses no longer describe the checkpoints
     bool stale = false;
     for (SceneImage& im : run_.scene.images) {
-      stale = stale || im.refined_world_from_cam.has_value();
+      stale = stale || im.refined_world_from_cam.has_value() || im.refined_focal_scale.has_value();
       im.refined_world_from_cam.reset();
+      im.refined_focal_scale.reset();
     }
     if (stale && run_.root) WriteScene(run_.scene_path, run_.scene);
     return;

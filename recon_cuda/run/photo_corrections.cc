@@ -94,6 +94,8 @@ PinholeCamera<float> CorrectedCamera(const PinholeCamera<float>& camera, const f
                                      const VolumeGeometry& geometry) {
   PinholeCamera<float> out = camera;
   CorrectedPose(camera.world_from_cam, pose, geometry, out.world_from_cam);
+  out.fx = camera.fx * FocalScale(pose);
+  out.fy = camera.fy * FocalScale(pose);
   return out;
 }
 

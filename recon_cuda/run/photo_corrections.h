@@ -13,6 +13,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <span>
 #include <vector>
 
@@ -87,7 +88,10 @@ void CorrectedPose(const T* world_from_cam, const float* pose, const VolumeGeome
   }
 }
 
-// The camera moved by `pose` (CorrectedPose).
+// How much pose values `pose` scale the focal length: exp(f), f its value 3 (pose.h ApplyPose).
+inline double FocalScale(const float* pose) { return std::exp(static_cast<double>(pose[3])); }
+
+// The camera moved by `pose` (CorrectedPose), its fx and fy scaled by FocalScale.
 PinholeCamera<float> CorrectedCamera(const PinholeCamera<float>& camera, const float* pose,
                                      const VolumeGeometry& geometry);
 

@@ -309,6 +309,7 @@ json ReconstructResult::ToJson(const ReconstructOptions& o) const {
               {"poses",
                {{"photos", ho.poses},
                 {"from_level", ho.refine_poses_from + 1},
+                {"focal", ho.refine_focal},
                 {"prior", ho.solver.pose_prior},
                 {"held_out", ho.poses > 0 ? "the inverse-distance blend of the two nearest training photos' corrections"
                                           : "as imported"},

@@ -41,6 +41,9 @@ void ReconstructOptions::Check() const {
   if (poses == PoseChoice::kOn && solver.type == SolverType::kAdam) {
     Fail("--refine-poses", "on", "refines poses in Gauss-Newton only", "use --solver gn, or --refine-poses off");
   }
+  if (refine_focal && poses != PoseChoice::kOn) {
+    Fail("--refine-intrinsics", "focal", "refines the focal length with the poses", "add --refine-poses on");
+  }
   if (refine_poses_from < 1 || refine_poses_from > 6) {
     Fail("--refine-poses-from", std::to_string(refine_poses_from), "must be a level, 1 (the first) to 6");
   }
@@ -89,6 +92,7 @@ HierarchyOptions ReconstructOptions::Hierarchy(const Scene& scene, const LevelCh
   h.exposures = SolvesExposures(exposure, scene) ? train : 0;
   h.poses = RefinesPoses(poses, scene, solver.type) ? train : 0;
   h.refine_poses_from = refine_poses_from - 1;
+  h.refine_focal = h.poses > 0 && refine_focal;
   return h;
 }
 

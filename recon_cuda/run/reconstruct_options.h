@@ -67,6 +67,9 @@ struct ReconstructOptions {
   // the first, as the log numbers them) fit the volume on the imported poses, the others refine them.
   PoseChoice poses = PoseChoice::kAuto;
   int refine_poses_from = 1;
+  // With refined poses, also each training photo's focal length (--refine-intrinsics focal): a
+  // scale of fx and fy (PoseParam's value 3), its own per photo; false: the imported intrinsics.
+  bool refine_focal = false;
   // View-dependent colour: spherical harmonics of this degree (0, 1 or 2) beyond each cell's
   // colour (ray_types.h ShParam); 0: none.
   int sh_degree = 0;

@@ -17,12 +17,14 @@ namespace perf::recon {
 // import: it is more than refinement of a good registration.
 inline constexpr double kLargeRotationDegrees = 1.0;
 inline constexpr double kLargeCentreFraction = 0.02;  // of the camera's distance to the box centre
+inline constexpr double kLargeFocalChange = 0.02;     // of the focal length (--refine-intrinsics focal)
 
 struct PoseCorrection {
   std::string name;
   double rotation_degrees = 0;  // the angle between the imported and the refined camera
   double centre_shift = 0;      // world units
   double centre_fraction = 0;   // centre_shift over the imported camera's distance to the box centre
+  double focal_change = 0;      // the refined focal length over the imported one, minus 1
   bool large = false;
   nlohmann::json ToJson() const;
 };

@@ -66,7 +66,10 @@ struct LevelProblem {
   // Everything but the pose corrections is held: a fit of the cameras against a frozen volume
   // (run/pose_fit.h).
   bool fixed_volume = false;
-  HeldKinds Held() const { return {fixed_shells, fixed_poses, fixed_volume}; }
+  // The photos' focal lengths (PoseParam's value 3) are held at the imported ones
+  // (HierarchyOptions::refine_focal is off).
+  bool fixed_focal = true;
+  HeldKinds Held() const { return {fixed_shells, fixed_poses, fixed_volume, fixed_focal}; }
 };
 
 // Whether the level's fourth residual is the alpha one (ResidualSettings::use_alpha).

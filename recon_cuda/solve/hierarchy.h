@@ -43,6 +43,7 @@ struct HierarchyOptions {
   // 0: none. The corrections carry over from level to level.
   int poses = 0;
   int refine_poses_from = 0;
+  bool refine_focal = false;  // with poses: their focal lengths too (LevelProblem::fixed_focal)
   bool fixed_background = false;              // the shells are constants in `background`
   std::array<float, 3> background{1, 1, 1};  // (scene.json's background)
   bool pyramid = true;  // coarse levels fit downscaled photos (PyramidFactor)

@@ -21,7 +21,7 @@ void SolvePoseBlocks(int photos, std::span<const double> blocks, const float* r,
       const bool fa = free[ia] != 0.f;
       for (int c = 0; c < kPoseSolved; ++c) {
         const bool fc = free[base + PoseValueOf(c)] != 0.f;
-        b(a, c) = a == c ? std::max(diag[ia], floor) : (fa && fc ? blocks[kPoseBlock * k + kPoseSolved * a + c] : 0.0);
+        b(a, c) = a == c ? std::max(diag[ia], floor) : (fa && fc ? blocks[kPoseBlock * k + PoseBlockEntry(std::min(a, c), std::max(a, c))] : 0.0);
       }
       rhs(a) = fa ? r[ia] : 0.0;
     }

@@ -1,7 +1,7 @@
-// Block-Jacobi preconditioning of the photos' pose corrections (pose.h): a photo's 6 pose values
+// Block-Jacobi preconditioning of the photos' pose corrections (pose.h): a photo's 7 pose values
 // are coupled through every one of its rays (a rotation and a sideways shift move its pixels
 // alike), so the Jacobi preconditioner's diagonal leaves CG to find their correlations one
-// iteration at a time; the exact 6 x 6 block of J^T J per photo, inverted, gives the pose part of
+// iteration at a time; the exact 7 x 7 block of J^T J per photo, inverted, gives the pose part of
 // each CG step the Gauss-Newton step of the photo alone. The volume keeps the diagonal.
 #pragma once
 

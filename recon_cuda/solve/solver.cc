@@ -124,7 +124,8 @@ nlohmann::json SolverSummary::ToJson() const {
             {"shell_opacity", smoothness.shell_opacity},
             {"exposure", smoothness.exposure},
             {"pose_rotation", smoothness.pose_rotation},
-            {"pose_centre", smoothness.pose_centre}}},
+            {"pose_centre", smoothness.pose_centre},
+            {"pose_focal", smoothness.pose_focal}}},
           {"report", BriefReport()}};
 }
 
@@ -162,6 +163,7 @@ SmoothnessWeights CalibrateSmoothness(const SolverOptions& o, Backend* b) {
   if (poses) {
     w.pose_rotation = static_cast<float>(o.pose_prior * mean(ParamKind::kPoseRotation, 3.0 * shape.poses));
     w.pose_centre = static_cast<float>(o.pose_prior * mean(ParamKind::kPoseCentre, 3.0 * shape.poses));
+    w.pose_focal = static_cast<float>(o.pose_prior * mean(ParamKind::kPoseFocal, 1.0 * shape.poses));
   }
   return w;
 }

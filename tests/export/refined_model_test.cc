@@ -20,7 +20,7 @@ namespace {
 namespace fs = std::filesystem;
 
 // A scene of the model's images as perf import keeps them: every third held out, one excluded;
-// each image refined by a small turn and shift of its own.
+// each image refined by a small turn and shift of its own, every fourth its focal length too.
 Scene SceneOf(const fs::path& model, const colmap::Reconstruction& rec) {
   Scene s;
   s.source.type = "colmap";
@@ -36,6 +36,7 @@ Scene SceneOf(const fs::path& model, const colmap::Reconstruction& rec) {
                             si.world_from_cam.leftCols<3>();
     refined.col(3) += Eigen::Vector3d(0.01 * k, -0.005, 0.002 * k);
     si.refined_world_from_cam = refined;
+    if (k % 4 == 1) si.refined_focal_scale = 1.0 + 0.001 * k;
     s.images.push_back(si);
     ++k;
   }
@@ -63,7 +64,11 @@ TEST(RefinedModel, CarriesTheRefinedPosesAndKeepsTheRest) {
   const colmap::Reconstruction back = colmap::ReadReconstruction(ws / "sparse_refined");
   ASSERT_EQ(back.images.size(), rec.images.size());
   EXPECT_EQ(back.points3D.size(), rec.points3D.size());
-  EXPECT_EQ(back.cameras.size(), rec.cameras.size());
+  // A photo with a refined focal length gets its own camera, the imported one's with f scaled.
+  size_t focal = 0;
+  for (const SceneImage& si : scene.images) focal += si.refined_focal_scale && si.split != Split::kExcluded;
+  ASSERT_GT(focal, 0u);
+  EXPECT_EQ(back.cameras.size(), rec.cameras.size() + focal);
   for (const SceneImage& si : scene.images) {
     const colmap::Image* im = nullptr;
     for (const auto& [id, b] : back.images) im = b.name == si.name ? &b : im;
@@ -71,6 +76,12 @@ TEST(RefinedModel, CarriesTheRefinedPosesAndKeepsTheRest) {
     const Eigen::Matrix<double, 3, 4> want = si.split == Split::kExcluded ? si.world_from_cam : *si.refined_world_from_cam;
     EXPECT_LT((WorldFromCam(*im) - want).norm(), 1e-9) << si.name;
     EXPECT_EQ(im->points2D.size(), rec.images.at(im->image_id).points2D.size());
+    const colmap::Camera& was = rec.cameras.at(rec.images.at(im->image_id).camera_id);
+    const colmap::Camera& now = back.cameras.at(im->camera_id);
+    const double scale = si.refined_focal_scale && si.split != Split::kExcluded ? *si.refined_focal_scale : 1.0;
+    EXPECT_EQ(im->camera_id != was.camera_id, scale != 1.0) << si.name;
+    EXPECT_NEAR(now.params[0], was.params[0] * scale, 1e-9) << si.name;
+    EXPECT_EQ(now.params.back(), was.params.back()) << si.name;  // the rest kept
   }
   // A model from another source is not written, and says why.
   Scene nerf = scene;

@@ -238,14 +238,14 @@ TEST(CpuBackendTest, PosesMatchTheDenseJacobian) {
       int exercised = 0;
       for (int64_t i = p.shape.PoseStart(); i < p.shape.ParamCount(); ++i) {
         SCOPED_TRACE(i);
-        const bool pad = (i - p.shape.PoseStart()) % 4 == 3;
+        const bool pad = (i - p.shape.PoseStart()) % kPoseValues == 7;
         EXPECT_EQ(pad, o.g[i] == 0.f && o.d[i] == 0.f && o.out[i] == 0.f);
         EXPECT_NEAR(o.d[i], want.diag[i], 2e-3 * std::abs(want.diag[i]) + 1e-4);
         EXPECT_NEAR(o.g[i], want.jtr[i], 2e-3 * std::abs(want.jtr[i]) + 1e-4);
         EXPECT_NEAR(o.out[i], want.jtjp[i], 2e-3 * std::abs(want.jtjp[i]) + 1e-3);
         exercised += std::abs(want.diag[i]) > 1e-2 ? 1 : 0;
       }
-      EXPECT_GE(exercised, 6 * p.shape.poses - 2);
+      EXPECT_GE(exercised, kPoseSolved * p.shape.poses - 2);
     }
   }
   const DenseJacobian without(unposed, unposed.x, seed, 0.1);

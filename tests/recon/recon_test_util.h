@@ -103,15 +103,16 @@ struct TinyProblem {
   // Refines every camera's pose (VolumeShape::poses) from random corrections of up to `rotation`
   // rad and `centre` box units per axis; camera k in slot (k + 1) % cameras as for exposures
   // (the slots are shared: RaySet::exposure_slot). After AddExposures when both are wanted.
-  void AddPoses(uint32_t seed, float rotation = 0.02f, float centre = 0.02f) {
+  // Pose corrections up to `rotation` rad, `centre` box units and a focal log scale up to `focal`.
+  void AddPoses(uint32_t seed, float rotation = 0.02f, float centre = 0.02f, float focal = 0.02f) {
     std::mt19937 rng(seed);
-    std::uniform_real_distribution<float> w(-rotation, rotation), c(-centre, centre);
+    std::uniform_real_distribution<float> w(-rotation, rotation), c(-centre, centre), f(-focal, focal);
     const int cameras = static_cast<int>(rays.cameras.size());
     shape = shape.WithPoses(cameras);
     rays.exposure_slot.clear();
     for (int k = 0; k < cameras; ++k) rays.exposure_slot.push_back((k + 1) % cameras);
     for (int k = 0; k < cameras; ++k) {
-      for (int v = 0; v < kPoseValues; ++v) x.push_back(v % 4 == 3 ? 0.f : v < 4 ? w(rng) : c(rng));
+      for (int v = 0; v < kPoseValues; ++v) x.push_back(v == 7 ? 0.f : v == 3 ? f(rng) : v < 3 ? w(rng) : c(rng));
     }
     EXPECT_EQ(static_cast<int64_t>(x.size()), shape.ParamCount());
   }
@@ -125,7 +126,7 @@ struct TinyProblem {
 
 // A direction for J^T J p checks: standard normal entries, except the padding zeros that never
 // move (the spherical harmonics' stride beyond their bands, the fourth value of each exposure
-// group), which stay 0.
+// group, the last of each pose group), which stay 0.
 inline std::vector<float> RandomDirection(const VolumeShape& shape, uint32_t seed) {
   std::mt19937 rng(seed);
   std::normal_distribution<float> normal;
@@ -136,8 +137,11 @@ inline std::vector<float> RandomDirection(const VolumeShape& shape, uint32_t see
     for (int64_t c = 0; c < shape.StoredCells(); ++c)
       for (int k = 3 * ShBands(shape.sh_degree); k < stride; ++k) p[shape.ShStart() + stride * c + k] = 0;
   }
-  for (int64_t i = shape.ExposureStart(); i < shape.ParamCount(); ++i) {
+  for (int64_t i = shape.ExposureStart(); i < shape.PoseStart(); ++i) {
     if ((i - shape.ExposureStart()) % 4 == 3) p[i] = 0;
+  }
+  for (int64_t i = shape.PoseStart(); i < shape.ParamCount(); ++i) {
+    if ((i - shape.PoseStart()) % kPoseValues == 7) p[i] = 0;
   }
   return p;
 }
@@ -155,6 +159,11 @@ inline VolumeView<double> DoubleView(const TinyProblem& p, const std::vector<dou
   vol.size = {p.geometry.box.size.x, p.geometry.box.size.y, p.geometry.box.size.z};
   vol.shell_center = {p.geometry.shell_center.x, p.geometry.shell_center.y, p.geometry.shell_center.z};
   for (int k = 0; k < p.shape.num_shells; ++k) vol.shell_radii[k] = p.geometry.shell_radii[k];
+  if (p.shape.bricks) {  // a brick-sparse x
+    vol.brick_slot = p.shape.bricks->slot.data();
+    vol.active_bricks = p.shape.bricks->ActiveBricks();
+  }
+  EXPECT_EQ(static_cast<int64_t>(x.size()), p.shape.ParamCount());
   return vol;
 }
 
@@ -166,6 +175,14 @@ inline BoxFrame<double> DoubleBox(const TinyProblem& p) {
   return box;
 }
 
+// The optical axis of ray i's camera in the box frame (pose.h BoxForward), in double.
+inline Vec3<double> DoubleForward(const TinyProblem& p, int64_t i) {
+  const PinholeCamera<float>& cf = p.rays.cameras[p.rays.pixels[i].camera];
+  PinholeCamera<double> cam{cf.fx, cf.fy, cf.cx, cf.cy, {}};
+  for (int k = 0; k < 12; ++k) cam.world_from_cam[k] = cf.world_from_cam[k];
+  return BoxForward(cam, DoubleBox(p));
+}
+
 // Ray i of the problem at x, as the backends march it: through its pixel (jittered for `jit`),
 // then moved by its photo's pose correction when the problem refines poses.
 inline BoxRay<double> DoubleRay(const TinyProblem& p, const VolumeView<double>& vol, int64_t i, const Jitter& jit) {
@@ -175,7 +192,7 @@ inline BoxRay<double> DoubleRay(const TinyProblem& p, const VolumeView<double>& 
   for (int k = 0; k < 12; ++k) cam.world_from_cam[k] = cf.world_from_cam[k];
   BoxRay<double> ray = PixelBoxRay(cam, DoubleBox(p), vol.n, px.x, px.y, jit);
   const int64_t pose = p.shape.poses > 0 ? PoseParamOfSlot(vol, p.rays.exposure_slot[px.camera]) : -1;
-  if (pose >= 0) ApplyPose(vol, vol.params + pose, &ray);
+  if (pose >= 0) ApplyPose(vol, vol.params + pose, DoubleForward(p, i), &ray);
   return ray;
 }
 
@@ -238,7 +255,7 @@ struct DenseJacobian {
       // The pose's columns by central differences of the residuals (pose.h derives them).
       const int64_t pose = p.shape.poses > 0 ? PoseParamOfSlot(vol, p.rays.exposure_slot[px.camera]) : -1;
       for (int v = 0; pose >= 0 && v < kPoseValues; ++v) {
-        if (v % 4 == 3) continue;
+        if (v == 7) continue;
         const double saved = x[pose + v], h = 1e-6;
         double r_at[2][4];
         for (int side = 0; side < 2; ++side) {

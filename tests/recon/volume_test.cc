@@ -249,7 +249,7 @@ TEST(VolumeTest, ACorrectedCameraShootsThePosedRays) {
   const float c = 0.6f, s = 0.8f;
   g.box = {{0.2f, -0.1f, 0.05f}, {{c, 0, -s, 0, 1, 0, s, 0, c}}, {2.0f, 1.6f, 1.4f}};
   const PinholeCamera<float> cam{40, 42, 16, 12, {0.8f, 0.f, -0.6f, 3.f, 0.f, 1.f, 0.f, -0.5f, 0.6f, 0.f, 0.8f, 1.f}};
-  const float pose[kPoseValues] = {0.03f, -0.02f, 0.05f, 0, 0.04f, 0.01f, -0.03f, 0};
+  const float pose[kPoseValues] = {0.03f, -0.02f, 0.05f, 0.04f, 0.04f, 0.01f, -0.03f, 0};
   const PinholeCamera<float> moved = CorrectedCamera(cam, pose, g);
   VolumeView<float> vol{};
   vol.n = 8;
@@ -257,7 +257,7 @@ TEST(VolumeTest, ACorrectedCameraShootsThePosedRays) {
   const Jitter none{0, 0, false, false};
   for (const auto& [px, py] : {std::pair{0, 0}, std::pair{31, 5}, std::pair{12, 23}}) {
     BoxRay<float> want = PixelBoxRay(cam, g.box, vol.n, px, py, none);
-    ApplyPose(vol, pose, &want);
+    ApplyPose(vol, pose, BoxForward(cam, g.box), &want);
     const BoxRay<float> got = PixelBoxRay(moved, g.box, vol.n, px, py, none);
     for (int a = 0; a < 3; ++a) {
       EXPECT_NEAR(got.origin[a], want.origin[a], 1e-5f);

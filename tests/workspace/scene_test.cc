@@ -41,7 +41,12 @@ Scene MakeScene() {
     if (i == 2) im.excluded_because = "pose looks wrong: 18.2 units from the cameras' centre";
     im.world_from_cam.leftCols<3>() = Eigen::AngleAxisd(0.1 * i + 0.2, Eigen::Vector3d::UnitY()).toRotationMatrix();
     im.world_from_cam.col(3) = Eigen::Vector3d(i, 2.0 / 7.0, -1e-9);
-    if (i == 1) im.alpha_path = "alpha/dir/img_1.png";
+    if (i == 1) {
+      im.alpha_path = "alpha/dir/img_1.png";
+      im.refined_world_from_cam = im.world_from_cam;
+      im.refined_world_from_cam->col(3).x() += 0.125;
+      im.refined_focal_scale = 1.0 + 1.0 / 3.0 / 100;
+    }
     s.images.push_back(im);
   }
   return s;
@@ -71,7 +76,10 @@ TEST(Scene, JsonRoundTripIsExact) {
     EXPECT_EQ(back.images[i].split, s.images[i].split);
     EXPECT_EQ(back.images[i].excluded_because, s.images[i].excluded_because);
     EXPECT_EQ(back.images[i].world_from_cam, s.images[i].world_from_cam);
+    EXPECT_EQ(back.images[i].refined_world_from_cam, s.images[i].refined_world_from_cam);
+    EXPECT_EQ(back.images[i].refined_focal_scale, s.images[i].refined_focal_scale);
   }
+  EXPECT_TRUE(back.images[1].refined_focal_scale.has_value());
 }
 
 TEST(Scene, FileRoundTripAndMissingFile) {
@@ -122,6 +130,8 @@ INSTANTIATE_TEST_SUITE_P(
         Corruption{"images[2].excluded_because", [](nlohmann::json& j) { j["images"][2]["excluded_because"] = 5; }},
         Corruption{"images[0].world_from_cam", [](nlohmann::json& j) { j["images"][0]["world_from_cam"][0][0] = 5.0; }},
         Corruption{"images", [](nlohmann::json& j) { j["images"] = nlohmann::json::array(); }},
+        Corruption{"images[1].refined_focal_scale", [](nlohmann::json& j) { j["images"][1]["refined_focal_scale"] = 0.0; }},
+        Corruption{"images[0].refined_focal_scale", [](nlohmann::json& j) { j["images"][0]["refined_focal_scale"] = "x"; }},
         // Paths that would read or write outside the workspace, and more shells than it solves.
         Corruption{"images[0].path", [](nlohmann::json& j) { j["images"][0]["path"] = "images/../../x.png"; }},
         Corruption{"images[1].path", [](nlohmann::json& j) { j["images"][1]["path"] = "/tmp/x.png"; }},
