@@ -48,13 +48,13 @@ void AddPoseOptions(CLI::App* cmd, recon::ReconstructOptions& o) {
   AddChoiceOption(cmd, "--refine-poses", &o.poses,
                   {{"auto", PoseChoice::kAuto}, {"on", PoseChoice::kOn}, {"off", PoseChoice::kOff}},
                   "Refine every training photo's camera (a rotation and a centre correction) with the volume in "
-                  "Gauss-Newton (auto: off)");
+                  "Gauss-Newton (auto: for COLMAP photos, not for NeRF json scenes)");
   cmd->add_option("--refine-poses-from", o.refine_poses_from,
                   "With --refine-poses: the first level that refines them, 1 to 6 (earlier levels hold the "
                   "imported poses)")
       ->capture_default_str();
   AddChoiceOption(cmd, "--refine-intrinsics", &o.refine_focal, {{"off", false}, {"focal", true}},
-                  "With --refine-poses on: also refine each training photo's focal length (off: the imported one)");
+                  "With refined poses: also refine each training photo's focal length (off: the imported one)");
   cmd->add_option("--pose-prior", o.solver.pose_prior,
                   "Weight of the prior that keeps the refined cameras near the imported ones, relative to the photos")
       ->capture_default_str();

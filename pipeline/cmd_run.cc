@@ -43,9 +43,9 @@ void AddRunCommand(CLI::App& app) {
   using recon::PoseChoice;
   AddChoiceOption(cmd, "--refine-poses", &o.poses,
                   {{"auto", PoseChoice::kAuto}, {"on", PoseChoice::kOn}, {"off", PoseChoice::kOff}},
-                  "Refine every training photo's camera with the volume (auto: off)");
+                  "Refine every training photo's camera with the volume (auto: for COLMAP photos)");
   AddChoiceOption(cmd, "--refine-intrinsics", &o.refine_focal, {{"off", false}, {"focal", true}},
-                  "With --refine-poses on: also refine each training photo's focal length (off: the imported one)");
+                  "With refined poses: also refine each training photo's focal length (off: the imported one)");
   cmd->add_flag("--keep-bad-poses", o.keep_bad_poses,
                 "Train and score on COLMAP photos whose pose looks wrong too (by default they are left out and named)");
   cmd->add_option("--log-level", args->log_level, "info (progress and summary) or quiet (errors only)")

@@ -41,7 +41,7 @@ void ReconstructOptions::Check() const {
   if (poses == PoseChoice::kOn && solver.type == SolverType::kAdam) {
     Fail("--refine-poses", "on", "refines poses in Gauss-Newton only", "use --solver gn, or --refine-poses off");
   }
-  if (refine_focal && poses != PoseChoice::kOn) {
+  if (refine_focal && poses == PoseChoice::kOff) {
     Fail("--refine-intrinsics", "focal", "refines the focal length with the poses", "add --refine-poses on");
   }
   if (refine_poses_from < 1 || refine_poses_from > 6) {
@@ -92,7 +92,14 @@ HierarchyOptions ReconstructOptions::Hierarchy(const Scene& scene, const LevelCh
   h.exposures = SolvesExposures(exposure, scene) ? train : 0;
   h.poses = RefinesPoses(poses, scene, solver.type) ? train : 0;
   h.refine_poses_from = refine_poses_from - 1;
-  h.refine_focal = h.poses > 0 && refine_focal;
+  if (refine_focal && h.poses == 0) {
+    Fail("--refine-intrinsics", "focal",
+         StrCat("refines the focal length with the poses, which this run does not refine (--refine-poses auto "
+                "refines them for COLMAP photos with Gauss-Newton; this scene is from ",
+                scene.source.type, ")"),
+         "add --refine-poses on");
+  }
+  h.refine_focal = refine_focal;
   return h;
 }
 
@@ -104,8 +111,9 @@ bool SolvesExposures(ExposureChoice exposure, const Scene& scene) {
   return exposure == ExposureChoice::kOn || (exposure == ExposureChoice::kAuto && scene.source.type == "colmap");
 }
 
-bool RefinesPoses(PoseChoice poses, const Scene&, SolverType solver) {
-  return poses == PoseChoice::kOn && solver == SolverType::kGaussNewton;
+bool RefinesPoses(PoseChoice poses, const Scene& scene, SolverType solver) {
+  if (solver != SolverType::kGaussNewton) return false;
+  return poses == PoseChoice::kOn || (poses == PoseChoice::kAuto && scene.source.type == "colmap");
 }
 
 void SetHierarchyBackground(BackgroundChoice background, const Scene& scene, HierarchyOptions* options) {

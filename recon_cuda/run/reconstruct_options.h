@@ -32,7 +32,7 @@ enum class BackgroundChoice { kAuto, kFixed, kLearn };
 enum class ExposureChoice { kAuto, kOn, kOff };
 
 // Camera refinement (--refine-poses): solve a rotation and a centre correction for every training
-// photo with the volume (pose.h), from level refine_poses_from on, or not. kAuto: see PosesRefined.
+// photo with the volume (pose.h), from level refine_poses_from on, or not. kAuto: see RefinesPoses.
 enum class PoseChoice { kAuto, kOn, kOff };
 
 // The grid's smoothness weight chosen where the background is learned (--smooth-grid's default
@@ -115,8 +115,9 @@ bool FixedBackground(BackgroundChoice background, const Scene& scene);
 // Whether `exposure` solves the photos' exposures for this scene (kAuto: COLMAP photos).
 bool SolvesExposures(ExposureChoice exposure, const Scene& scene);
 
-// Whether `poses` refines the training photos' poses for this scene with this solver (kAuto: off
-// until measurements choose otherwise; Adam never refines them).
+// Whether `poses` refines the training photos' poses for this scene with this solver (kAuto: for
+// photos from COLMAP, real captures whose registration refinement improves, not for NeRF json
+// scenes, whose poses are exact (docs/tuning.md "Camera refinement"); Adam never refines them).
 bool RefinesPoses(PoseChoice poses, const Scene& scene, SolverType solver);
 
 // The hierarchy's background as perf reconstruct sets it: fixed or not (FixedBackground), and

