@@ -258,8 +258,11 @@ TEST(LegoPoses, FocalRefinementRecoversWrongFocalLengths) {
               off.test_psnr, poses.test_psnr, focal.test_psnr, 100 * median, off.levels.back().train_psnr,
               poses.levels.back().train_psnr, focal.levels.back().train_psnr, off.solve_seconds, poses.solve_seconds,
               focal.solve_seconds);
-  EXPECT_LT(median, 0.5 * error);
-  EXPECT_GT(focal.levels.back().train_psnr, poses.levels.back().train_psnr);
+  // Measured 2026-12-03: 3 % -> 1.46 %; train PSNR 24.02 / 27.16 / 28.46 dB; held-out 26.52 / 25.95 /
+  // 24.39 dB (exact held-out focal lengths take the neighbours' corrections). The rest of the
+  // error trades against the camera's distance (a dolly zoom), where the pose prior holds it.
+  EXPECT_LT(median, 0.6 * error);
+  EXPECT_GT(focal.levels.back().train_psnr, poses.levels.back().train_psnr + 0.5);
 }
 
 }  // namespace
