@@ -24,6 +24,7 @@ void AddRenderCommand(CLI::App& app);
 void AddExportCommand(CLI::App& app);
 void AddEvalCommand(CLI::App& app);
 void AddRunCommand(CLI::App& app);
+void AddViewCommand(CLI::App& app);
 
 // -j,--threads: `all_cores` (0, or -1 for colmap) or 1 to 8x the cores; anything else is exit 2.
 void AddThreadsOption(CLI::App* cmd, int* threads, int all_cores);

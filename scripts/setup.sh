@@ -19,6 +19,8 @@ PACKAGES=(
   colmap                                 # photos -> sparse model (perf sfm), model_converter in tests
   libopenmpi-dev openmpi-bin             # ranks across processes and nodes (mpirun perf reconstruct)
   clang                                  # libFuzzer target for the binary readers (optional)
+  libcpp-httplib-dev libjs-three         # perf view: its HTTP server and the page's three.js
+  chromium                               # perf view's page tests (headless)
 )
 
 missing=()

@@ -1,0 +1,123 @@
+// perf view's page as a person sees it, in Debian's headless Chromium: `perf view` over a workspace
+// that `perf run` made from the shipped example; the DOM once the page settled (a frustum per
+// photo, the held-out table as report.json has it, the mesh loaded) and a screenshot of the mesh
+// alone (the canvas drew it). Ctrl-C stops the server cleanly. Skips where chromium is missing.
+#include <gtest/gtest.h>
+#include <signal.h>
+
+#include <chrono>
+#include <cstdio>
+#include <nlohmann/json.hpp>
+#include <regex>
+#include <thread>
+
+#include "common/atomic_file.h"
+#include "tests/test_util.h"
+#include "workspace/image_io.h"
+#include "workspace/scene.h"
+
+namespace perf {
+namespace {
+
+namespace fs = std::filesystem;
+using test::RunCommand;
+
+constexpr const char* kChromium = "/usr/bin/chromium";
+
+std::string Chromium(const std::string& args) {
+  // SwiftShader: WebGL without a GPU. The budget lets the page's fetches and frames run.
+  return std::string(kChromium) + " --headless=new --no-sandbox --disable-dev-shm-usage --use-angle=swiftshader "
+                                  "--enable-unsafe-swiftshader --hide-scrollbars --virtual-time-budget=30000 " + args;
+}
+
+// `perf view WS --port 0` in the background; its pid and port from what it prints.
+struct ViewProcess {
+  int pid = 0, port = 0;
+  fs::path log;
+  ViewProcess(const fs::path& ws, const fs::path& dir) : log(dir / "view.log") {
+    const auto started = RunCommand(test::PerfBinary() + " view " + ws.string() + " --port 0 > " + log.string() +
+                                    " 2>&1 & echo $!");
+    pid = std::stoi(started.output);
+    const std::regex url(R"(http://127\.0\.0\.1:(\d+)/)");
+    for (int i = 0; i < 100 && port == 0; ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      std::smatch m;
+      const std::string text = fs::exists(log) ? ReadFileToString(log) : "";
+      if (std::regex_search(text, m, url)) port = std::stoi(m[1]);
+    }
+  }
+  // Ctrl-C; true when it exited within 5 s.
+  bool Interrupt() {
+    ::kill(pid, SIGINT);
+    for (int i = 0; i < 50; ++i) {
+      if (::kill(pid, 0) != 0) return true;
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+    return false;
+  }
+  ~ViewProcess() {
+    if (pid > 0 && ::kill(pid, 0) == 0) ::kill(pid, SIGKILL);
+  }
+};
+
+std::string Attribute(const std::string& dom, const std::string& name) {
+  std::smatch m;
+  const std::regex re(name + R"(=\"([^\"]*)\")");
+  return std::regex_search(dom, m, re) ? m[1].str() : "";
+}
+
+TEST(ViewPage, ShowsTheCamerasTheScoresAndTheMesh) {
+  if (!fs::exists(kChromium)) GTEST_SKIP() << "chromium is not installed (scripts/setup.sh installs it)";
+  const fs::path example = fs::path(PERF_SOURCE_DIR) / "examples" / "bonsai_mini";
+  test::TempDir dir;
+  const fs::path ws = dir / "ws";
+  const auto run = RunCommand(test::PerfBinary() + " run --colmap " + (example / "sparse" / "0").string() +
+                              " --images " + (example / "images").string() + " --workspace " + ws.string() +
+                              " --preset preview --max-size 96 --levels 2 --iterations 3 --log-level quiet");
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  ASSERT_TRUE(fs::exists(ws / "mesh.glb"));
+
+  ViewProcess view(ws, dir.path());
+  ASSERT_GT(view.port, 0) << ReadFileToString(view.log);
+  const std::string url = "http://127.0.0.1:" + std::to_string(view.port) + "/";
+  EXPECT_NE(ReadFileToString(view.log).find("ssh -L " + std::to_string(view.port)), std::string::npos);
+
+  const auto dom = RunCommand(Chromium("--dump-dom " + url) + " 2>/dev/null");
+  ASSERT_EQ(dom.exit_code, 0) << dom.output;
+  EXPECT_EQ(Attribute(dom.output, "data-ready"), "1") << dom.output.substr(0, 2000);
+  const Scene scene = ReadScene(ws / "scene.json");
+  EXPECT_EQ(Attribute(dom.output, "data-cameras"), std::to_string(scene.images.size()));
+  EXPECT_EQ(Attribute(dom.output, "data-mesh"), "loaded");
+  EXPECT_NE(Attribute(dom.output, "data-iterations"), "");
+  const nlohmann::json report = nlohmann::json::parse(ReadFileToString(ws / "report.json"));
+  EXPECT_EQ(Attribute(dom.output, "data-views"), std::to_string(report["test_views"].size()));
+  for (const auto& v : report["test_views"]) {  // the table's rows as report.json has them
+    char row[256];
+    std::snprintf(row, sizeof(row), "<td>%s</td><td>%.2f</td><td>%.3f</td>", v["name"].get<std::string>().c_str(),
+                  v["psnr"].get<double>(), v["ssim"].get<double>());
+    EXPECT_NE(dom.output.find(row), std::string::npos) << row;
+  }
+
+  // The mesh alone: the canvas (the top-left 60 % of the page) differs from its background.
+  const fs::path shot = dir / "mesh.png";
+  const auto taken = RunCommand(Chromium("--window-size=1200,800 --screenshot=" + shot.string() + " '" + url +
+                                         "?layers=mesh'") + " 2>/dev/null");
+  ASSERT_EQ(taken.exit_code, 0) << taken.output;
+  const Image image = ReadImage(shot);
+  int drawn = 0, canvas = 0;
+  for (int y = 80; y < std::min(image.height, 560); ++y) {
+    for (int x = 20; x < image.width * 55 / 100; ++x) {
+      const float* p = &image.pixels[(static_cast<size_t>(y) * image.width + x) * image.channels];
+      const float d = std::abs(p[0] - 0x20 / 255.f) + std::abs(p[1] - 0x23 / 255.f) + std::abs(p[2] - 0x2a / 255.f);
+      ++canvas;
+      drawn += d > 0.15f;
+    }
+  }
+  EXPECT_GT(drawn, canvas / 100) << drawn << " of " << canvas << " pixels drawn";
+
+  EXPECT_TRUE(view.Interrupt());
+  EXPECT_NE(ReadFileToString(view.log).find("stopped"), std::string::npos) << ReadFileToString(view.log);
+}
+
+}  // namespace
+}  // namespace perf

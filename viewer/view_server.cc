@@ -1,0 +1,222 @@
+#include "viewer/view_server.h"
+
+#include <algorithm>
+#include <fstream>
+#include <mutex>
+#include <nlohmann/json.hpp>
+
+#include "common/atomic_file.h"
+#include "common/errors.h"
+#include "sfm_import/colmap_model.h"
+#include "viewer/page_assets.h"
+#include "viewer/view_files.h"
+#include "workspace/scene.h"
+
+// Last: glibc's <resolv.h>, which it includes, defines _res, a parameter name in Eigen.
+#include <httplib.h>
+
+namespace perf::viewer {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// The most sparse points the page gets (every k-th beyond it): enough to see the scene.
+constexpr size_t kMaxPoints = 50000;
+// A request larger than this is refused (the page sends none with a body).
+constexpr size_t kMaxPayload = 64 * 1024;
+
+void NotFound(httplib::Response& res, const std::string& what) {
+  res.status = 404;
+  res.set_content(nlohmann::json{{"missing", what}}.dump(), "application/json");
+}
+
+// The file's whole text, or nullopt when it is not there (a run still writing it: next poll).
+std::optional<std::string> ReadIfThere(const fs::path& file) {
+  std::error_code ec;
+  if (!fs::is_regular_file(file, ec)) return std::nullopt;
+  try {
+    return ReadFileToString(file);
+  } catch (const Error&) {
+    return std::nullopt;
+  }
+}
+
+// The sparse points of the scene's COLMAP model (read-only), as {"xyz": [...], "rgb": [...]}.
+nlohmann::json SparsePoints(const fs::path& workspace) {
+  nlohmann::json out = {{"xyz", nlohmann::json::array()}, {"rgb", nlohmann::json::array()}, {"count", 0}};
+  try {
+    const Scene scene = ReadScene(workspace / "scene.json");
+    if (scene.source.type != "colmap") return out;
+    const colmap::Reconstruction rec = colmap::ReadReconstruction(scene.source.path);
+    const size_t step = std::max<size_t>(1, (rec.points3D.size() + kMaxPoints - 1) / kMaxPoints);
+    size_t k = 0, kept = 0;
+    for (const auto& [id, p] : rec.points3D) {
+      if (k++ % step != 0) continue;
+      for (double v : p.xyz) out["xyz"].push_back(v);
+      for (uint8_t v : p.rgb) out["rgb"].push_back(v);
+      ++kept;
+    }
+    out["count"] = kept;
+    out["total"] = rec.points3D.size();
+  } catch (const Error& e) {
+    out["error"] = e.what();
+  }
+  return out;
+}
+
+}  // namespace
+
+struct ViewServer::Impl {
+  ViewOptions o;
+  httplib::Server server;
+  int port = 0;
+  std::once_flag points_once;
+  std::string points;
+
+  void Routes();
+  void ServeJson(const char* route, fs::path file);
+  void ServeLibrary(const char* route, fs::path file);
+};
+
+void ViewServer::Impl::ServeJson(const char* route, fs::path file) {
+  server.Get(route, [file = o.workspace / file](const httplib::Request&, httplib::Response& res) {
+    const std::optional<std::string> text = ReadIfThere(file);
+    if (!text) return NotFound(res, file.filename().string());
+    res.set_header("Cache-Control", "no-store");
+    res.set_content(*text, "application/json");
+  });
+}
+
+void ViewServer::Impl::ServeLibrary(const char* route, fs::path file) {
+  server.Get(route, [file = o.three_dir / file](const httplib::Request&, httplib::Response& res) {
+    const std::optional<std::string> text = ReadIfThere(file);
+    if (!text) return NotFound(res, file.string() + " (install Debian's libjs-three: scripts/setup.sh)");
+    res.set_content(*text, "text/javascript");
+  });
+}
+
+void ViewServer::Impl::Routes() {
+  const auto page = [](std::string_view body, const char* type) {
+    return [body, type](const httplib::Request&, httplib::Response& res) {
+      res.set_content(std::string(body), type);
+    };
+  };
+  server.Get("/", page(kIndexHtml, "text/html; charset=utf-8"));
+  server.Get("/view.js", page(kViewJs, "text/javascript"));
+  server.Get("/view.css", page(kViewCss, "text/css"));
+  ServeLibrary("/lib/three.min.js", "build/three.min.js");
+  ServeLibrary("/lib/OrbitControls.js", "examples/js/controls/OrbitControls.js");
+  ServeLibrary("/lib/GLTFLoader.js", "examples/js/loaders/GLTFLoader.js");
+  ServeJson("/api/scene", "scene.json");
+  ServeJson("/api/report", "report.json");
+  ServeJson("/api/recon", fs::path("recon") / "recon.json");
+  ServeJson("/api/export", "export.json");
+  ServeJson("/api/run", "run.json");
+  server.Get("/api/status", [this](const httplib::Request&, httplib::Response& res) {
+    res.set_header("Cache-Control", "no-store");
+    res.set_content(nlohmann::json{{"workspace", o.workspace.filename().string()}, {"live", false}}.dump(),
+                    "application/json");
+  });
+  // The solve's log from byte `from` on, whole lines only; X-Next-Offset says where to go on.
+  server.Get("/api/log", [this](const httplib::Request& req, httplib::Response& res) {
+    uint64_t from = 0;
+    if (req.has_param("from")) {
+      const std::string v = req.get_param_value("from");
+      if (v.empty() || v.size() > 18 || !std::all_of(v.begin(), v.end(), ::isdigit)) {
+        res.status = 400;
+        return res.set_content("from: expected a byte offset", "text/plain");
+      }
+      from = std::stoull(v);
+    }
+    std::string text;
+    std::ifstream in(o.workspace / "recon" / "log.jsonl", std::ios::binary);
+    if (in) {
+      in.seekg(0, std::ios::end);
+      const uint64_t size = static_cast<uint64_t>(std::max<std::streamoff>(0, in.tellg()));
+      if (from < size) {
+        in.seekg(static_cast<std::streamoff>(from));
+        text.resize(static_cast<size_t>(std::min<uint64_t>(size - from, 8u << 20)));
+        in.read(text.data(), static_cast<std::streamsize>(text.size()));
+        text.resize(static_cast<size_t>(in.gcount()));
+        text.resize(text.rfind('\n') == std::string::npos ? 0 : text.rfind('\n') + 1);
+      }
+    }
+    res.set_header("Cache-Control", "no-store");
+    res.set_header("X-Next-Offset", std::to_string(from + text.size()));
+    res.set_content(text, "application/x-ndjson");
+  });
+  server.Get("/api/points", [this](const httplib::Request&, httplib::Response& res) {
+    std::call_once(points_once, [this] { points = SparsePoints(o.workspace).dump(); });
+    res.set_content(points, "application/json");
+  });
+  server.Get(R"(/files/(.+))", [this](const httplib::Request& req, httplib::Response& res) {
+    const std::optional<fs::path> file = ServableFile(o.workspace, req.matches[1].str());
+    if (!file) return NotFound(res, "file");
+    const std::optional<std::string> bytes = ReadIfThere(*file);
+    if (!bytes) return NotFound(res, "file");
+    res.set_content(*bytes, ContentTypeOf(*file));
+  });
+  const auto refuse = [](const httplib::Request&, httplib::Response& res) {
+    res.status = 405;
+    res.set_content("perf view only reads", "text/plain");
+  };
+  server.Post(R"(/.*)", refuse);
+  server.Put(R"(/.*)", refuse);
+  server.Delete(R"(/.*)", refuse);
+  server.set_error_handler([](const httplib::Request&, httplib::Response& res) {
+    if (res.body.empty()) res.set_content(std::to_string(res.status), "text/plain");
+  });
+  server.set_exception_handler([](const httplib::Request&, httplib::Response& res, std::exception_ptr) {
+    res.status = 500;
+    res.set_content("internal error", "text/plain");
+  });
+}
+
+ViewServer::ViewServer(ViewOptions options) : impl_(std::make_unique<Impl>()) {
+  impl_->o = std::move(options);
+  if (!fs::is_regular_file(impl_->o.workspace / "scene.json")) {
+    throw InputError(impl_->o.workspace.string(), "scene.json", "(missing)", "not a PERF workspace",
+                     "run perf import (or perf run) first");
+  }
+  // SO_REUSEADDR only: httplib's default adds SO_REUSEPORT, with which a second perf view on a busy
+  // port would bind too and share its requests with the first.
+  impl_->server.set_socket_options([](socket_t sock) {
+    int yes = 1;
+    setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof(yes));
+  });
+  impl_->server.set_payload_max_length(kMaxPayload);
+  impl_->server.set_read_timeout(5, 0);
+  impl_->server.set_write_timeout(5, 0);
+  impl_->Routes();
+}
+
+ViewServer::~ViewServer() { Stop(); }
+
+int ViewServer::Bind() {
+  Impl& m = *impl_;
+  const bool ok = m.o.port == 0 ? (m.port = m.server.bind_to_any_port(m.o.host)) > 0
+                                : m.server.bind_to_port(m.o.host, m.o.port) && (m.port = m.o.port) > 0;
+  if (!ok) {
+    throw IoError(StrCat(m.o.host, ":", m.o.port), "cannot listen there (in use, or not this machine's address)",
+                  "pass another --port, or --port 0 for a free one");
+  }
+  return m.port;
+}
+
+void ViewServer::Serve() { impl_->server.listen_after_bind(); }
+
+void ViewServer::Stop() {
+  if (impl_ && impl_->server.is_running()) impl_->server.stop();
+}
+
+std::string ViewServer::Url() const {
+  const std::string host = impl_->o.host.find(':') != std::string::npos ? "[" + impl_->o.host + "]" : impl_->o.host;
+  return StrCat("http://", host == "0.0.0.0" ? "127.0.0.1" : host, ":", impl_->port, "/");
+}
+
+bool IsLoopback(const std::string& host) {
+  return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;
+}
+
+}  // namespace perf::viewer

@@ -1,0 +1,46 @@
+// `perf view`: one page over a workspace, served on a local port (cpp-httplib), that shows the
+// box, the shells, every camera with its photo, the mesh and the sparse points, the held-out views
+// next to their photos, masks and cut-outs with their scores, the PSNR curve and the stage times.
+// The server only reads the workspace, answers a fixed set of routes (viewer/view_files.h for the
+// files) and holds no lock: a solve writing the workspace is never blocked by it.
+#pragma once
+
+#include <atomic>
+#include <filesystem>
+#include <memory>
+#include <string>
+
+namespace perf::viewer {
+
+struct ViewOptions {
+  std::filesystem::path workspace;
+  std::string host = "127.0.0.1";
+  int port = 8765;  // 0: a free port the system picks
+  // Where Debian's libjs-three put three.js (build/three.min.js and examples/js/...).
+  std::filesystem::path three_dir = PERF_THREE_DIR;
+};
+
+class ViewServer {
+ public:
+  explicit ViewServer(ViewOptions options);
+  ~ViewServer();
+  ViewServer(const ViewServer&) = delete;
+  ViewServer& operator=(const ViewServer&) = delete;
+
+  // Binds host:port (throws IoError naming them when it cannot); returns the port bound.
+  int Bind();
+  // Serves until Stop() (from another thread); returns when the last request is answered.
+  void Serve();
+  void Stop();
+  // "http://127.0.0.1:8765/"
+  std::string Url() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Whether `host` is only reachable from this machine (127.0.0.0/8, ::1, localhost).
+bool IsLoopback(const std::string& host);
+
+}  // namespace perf::viewer
