@@ -1,8 +1,11 @@
 #include "viewer/view_server.h"
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <fstream>
 #include <mutex>
+#include <thread>
 #include <nlohmann/json.hpp>
 
 #include "common/atomic_file.h"
@@ -73,6 +76,8 @@ struct ViewServer::Impl {
   int port = 0;
   std::once_flag points_once;
   std::string points;
+  // Stop() may come before Serve() listens (httplib's stop() is a no-op until then).
+  std::atomic<bool> stop_requested{false}, serving{false};
 
   void Routes();
   void ServeJson(const char* route, fs::path file);
@@ -204,10 +209,18 @@ int ViewServer::Bind() {
   return m.port;
 }
 
-void ViewServer::Serve() { impl_->server.listen_after_bind(); }
+void ViewServer::Serve() {
+  impl_->serving = true;
+  if (!impl_->stop_requested) impl_->server.listen_after_bind();
+  impl_->serving = false;
+}
 
 void ViewServer::Stop() {
-  if (impl_ && impl_->server.is_running()) impl_->server.stop();
+  if (!impl_) return;
+  impl_->stop_requested = true;
+  // Serve() may be between its check and the listening loop: wait until it listens or returns.
+  while (impl_->serving && !impl_->server.is_running()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  impl_->server.stop();
 }
 
 std::string ViewServer::Url() const {

@@ -85,7 +85,7 @@ function drawScene(scene3, sc, points, onMesh) {
   const shellGroup = layer('shells', scene3);
   for (const radius of sc.shells.radii) {
     const s = new THREE.LineSegments(new THREE.WireframeGeometry(new THREE.SphereBufferGeometry(radius, 24, 12)),
-                                     new THREE.LineBasicMaterial({ color: 0x495057, transparent: true, opacity: 0.35 }));
+                                     new THREE.LineBasicMaterial({ color: 0x495057, transparent: true, opacity: 0.2 }));
     s.position.set(...sc.shells.center);
     shellGroup.add(s);
   }
@@ -153,10 +153,13 @@ function startViewer(sc, points, onMesh) {
   mean.divideScalar(Math.max(1, sc.images.length));
   let dir = mean.clone().sub(frame.centre);
   if (dir.length() < 1e-9) dir = new THREE.Vector3(1, 1, 1);
-  const distances = sc.images.map((im) => new THREE.Vector3(im.world_from_cam[0][3], im.world_from_cam[1][3], im.world_from_cam[2][3]).distanceTo(frame.centre));
-  const reach = Math.max(frame.extent, ...distances);
+  // Far enough to see the box and the cameras it was fitted from (left-out ones may be far off).
+  const distances = sc.images.filter((im) => im.split !== 'excluded').map((im) =>
+    new THREE.Vector3(im.world_from_cam[0][3], im.world_from_cam[1][3], im.world_from_cam[2][3]).distanceTo(frame.centre));
+  distances.sort((a, b) => a - b);
+  const reach = Math.max(frame.extent, distances.length ? distances[Math.floor(distances.length * 0.9)] : 0);
   const onlyMesh = only === 'mesh';
-  camera.position.copy(frame.centre).add(dir.normalize().multiplyScalar(onlyMesh ? frame.extent * 1.6 : reach * 2.2));
+  camera.position.copy(frame.centre).add(dir.normalize().multiplyScalar(onlyMesh ? frame.extent * 1.6 : reach * 2.7));
   // Up: the cameras' mean up (-y of each camera in the world).
   const up = new THREE.Vector3();
   for (const im of sc.images) up.add(new THREE.Vector3(-im.world_from_cam[0][1], -im.world_from_cam[1][1], -im.world_from_cam[2][1]));
