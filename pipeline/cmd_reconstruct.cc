@@ -12,6 +12,7 @@
 #include "recon_cuda/backends/nccl_comm.h"
 #endif
 #include "recon_cuda/run/render_views.h"
+#include "viewer/live_view.h"
 
 namespace perf {
 
@@ -68,6 +69,8 @@ void AddReconstructCommand(CLI::App& app) {
     std::string workspace;
     std::string solver = "gn";
     bool no_aux = false, no_alpha = false, no_pyramid = false, no_hold = false, no_grow = false, quiet = false;
+    bool view = false;
+    viewer::ViewOptions view_options;
   };
   auto args = std::make_shared<Args>();
   recon::ReconstructOptions& o = args->o;
@@ -166,6 +169,12 @@ void AddReconstructCommand(CLI::App& app) {
                 "Let CG move parameters at a bound of their range that the gradient pushes out (plain projected GN)");
   AddMinBoxOpacityOption(cmd, &o.min_box_opacity, "Previews and held-out PSNR");
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
+  cmd->add_flag("--view", args->view,
+                "Serve perf view's page while solving (iteration, ETA, the PSNR curve, a view rendered each "
+                "iteration); it stops with the solve");
+  cmd->add_option("--view-port", args->view_options.port, "With --view: the page's port (0: a free one)")
+      ->check(CLI::Range(0, 65535))
+      ->capture_default_str();
   cmd->callback([args]() {
     recon::ReconstructOptions& o = args->o;
     o.workspace = args->workspace;
@@ -191,11 +200,21 @@ void AddReconstructCommand(CLI::App& app) {
     std::unique_ptr<WorkspaceLock> lock;
     if (root) lock = LockWorkspace(o.workspace, "reconstruct");
     Progress progress("reconstruct", args->quiet || !root);
+    std::unique_ptr<viewer::LiveView> live;
+    if (args->view && root) {
+      args->view_options.workspace = o.workspace;
+      live = std::make_unique<viewer::LiveView>(args->view_options);
+      live->Stage("reconstruct");
+      o.preview_every = 1;
+      std::cout << "perf reconstruct: the solve's page is at " << live->Url() << "\n" << std::flush;
+    }
     o.on_event = [&](const recon::ReconstructOptions::Event& e) {
       if (StopRequested().load()) {
+        if (live) live->End("stopped");
         throw Interrupted("the workspace is consistent; run the same command with --resume to go on");
       }
       ShowReconstructEvent(progress, e);
+      if (live && e.message.empty()) live->Iteration(e.level, e.levels, e.iteration, e.iterations);
     };
     const StopOnCtrlC ctrl_c;
     const recon::ReconstructResult r = recon::Reconstruct(o);

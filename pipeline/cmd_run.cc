@@ -2,13 +2,16 @@
 #include <CLI/CLI.hpp>
 #include <atomic>
 #include <csignal>
+#include <chrono>
 #include <iostream>
+#include <thread>
 
 #include "common/comm.h"
 #include "common/errors.h"
 #include "pipeline/cli_choice.h"
 #include "pipeline/commands.h"
 #include "pipeline/run_pipeline.h"
+#include "viewer/live_view.h"
 
 namespace perf {
 
@@ -16,6 +19,8 @@ void AddRunCommand(CLI::App& app) {
   struct Args {
     RunOptions o;
     std::string images, colmap, nerf, workspace, log_json, log_level = "info";
+    bool view = false;
+    viewer::ViewOptions view_options;
   };
   auto args = std::make_shared<Args>();
   RunOptions& o = args->o;
@@ -48,6 +53,12 @@ void AddRunCommand(CLI::App& app) {
                   "With refined poses: also refine each training photo's focal length (off: the imported one)");
   cmd->add_flag("--keep-bad-poses", o.keep_bad_poses,
                 "Train and score on COLMAP photos whose pose looks wrong too (by default they are left out and named)");
+  cmd->add_flag("--view", args->view,
+                "Serve perf view's page while the run goes (stage, iteration, ETA, the PSNR curve, a view rendered "
+                "each iteration); it stays up after the run until Ctrl-C");
+  cmd->add_option("--view-port", args->view_options.port, "With --view: the page's port (0: a free one)")
+      ->check(CLI::Range(0, 65535))
+      ->capture_default_str();
   cmd->add_option("--log-level", args->log_level, "info (progress and summary) or quiet (errors only)")
       ->capture_default_str();
   cmd->add_option("--log-json", args->log_json, "Append JSON lines of stage events to this file (for scripts)");
@@ -70,8 +81,31 @@ void AddRunCommand(CLI::App& app) {
     std::unique_ptr<WorkspaceLock> lock;
     if (root) lock = LockWorkspace(o.workspace, "run", true);
     const StopOnCtrlC ctrl_c;
-    const RunResult r = RunPipeline(o);
+    std::unique_ptr<viewer::LiveView> live;
+    if (args->view && root) {
+      args->view_options.workspace = o.workspace;
+      live = std::make_unique<viewer::LiveView>(args->view_options);
+      o.live = live.get();
+      std::cout << "perf run: the run's page is at " << live->Url() << " (from another machine: ssh -L "
+                << live->port() << ":127.0.0.1:" << live->port() << " THIS_HOST)\n"
+                << std::flush;
+    }
+    RunResult r;
+    try {
+      r = RunPipeline(o);
+    } catch (const Interrupted&) {
+      if (live) {  // the page polls every 2 s: it says the run stopped before the server goes
+        live->End("stopped");
+        std::this_thread::sleep_for(std::chrono::milliseconds(2500));
+      }
+      throw;
+    }
     if (!o.quiet) std::cout << RunSummary(o, r);  // rank 0's (the others are quiet)
+    if (live) {
+      live->End("finished");
+      std::cout << "perf run: done; the page stays at " << live->Url() << " until Ctrl-C\n" << std::flush;
+      while (!StopRequested().load()) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
   });
 }
 

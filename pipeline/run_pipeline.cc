@@ -19,6 +19,7 @@
 #include "recon_cuda/run/reconstruct.h"
 #include "sfm_import/colmap_runner.h"
 #include "sfm_import/importer.h"
+#include "viewer/live_view.h"
 
 namespace perf {
 
@@ -96,6 +97,7 @@ class Runner {
     s.name = name;
     const auto start = WallClock::now();
     log_.Write({{"stage", name}, {"event", "start"}});
+    if (o_.live != nullptr) o_.live->Stage(name);
     try {
       body(&s);
     } catch (const Interrupted&) {
@@ -179,6 +181,7 @@ class Runner {
       CheckStop();
       ShowReconstructEvent(progress, e);
       if (!e.message.empty()) return;
+      if (o_.live != nullptr) o_.live->Iteration(e.level, e.levels, e.iteration, e.iterations);
       log_.Write({{"stage", "reconstruct"}, {"event", "iteration"}, {"level", e.level}, {"iteration", e.iteration},
                   {"iterations", e.iterations}, {"cost", e.cost}, {"train_psnr", e.train_psnr}});
     };
@@ -269,6 +272,7 @@ recon::ReconstructOptions RunOptions::ReconstructStage(const PresetSettings& pre
   ro.exposure = exposure;
   ro.poses = poses;
   ro.refine_focal = refine_focal;
+  ro.preview_every = live != nullptr ? 1 : 0;  // the live page shows the newest
   ro.resume = fresh && !force;
   return ro;
 }

@@ -23,6 +23,9 @@
 namespace perf {
 
 struct PresetSettings;
+namespace viewer {
+class LiveView;
+}
 
 struct RunOptions {
   std::filesystem::path images, colmap, nerf, workspace;
@@ -39,6 +42,9 @@ struct RunOptions {
   bool quiet = false;
   std::filesystem::path log_json;  // JSON lines of stage events for scripts (empty: none)
   const std::atomic<bool>* stop = nullptr;  // set (by a signal handler) to stop at a safe point
+  // --view: the live page, told each stage and iteration; the solve also renders a preview each
+  // iteration for it. nullptr: no page.
+  viewer::LiveView* live = nullptr;
   // Under mpirun (comm.h): rank 0 runs every stage; the other ranks wait for its import and join
   // only the reconstruction, each fitting its share of the photos. nullptr: one process.
   Communicator* comm = nullptr;

@@ -10,7 +10,7 @@ namespace fs = std::filesystem;
 namespace {
 
 // Folders whose files the page shows, and single files it loads.
-constexpr std::array<std::string_view, 5> kFolders = {"images", "masks", "foreground", "renders", "alpha"};
+constexpr std::array<std::string_view, 6> kFolders = {"images", "masks", "foreground", "renders", "alpha", "preview"};
 constexpr std::array<std::string_view, 2> kFiles = {"mesh.glb", "mesh.png"};
 constexpr std::array<std::string_view, 4> kExtensions = {".png", ".jpg", ".jpeg", ".glb"};
 

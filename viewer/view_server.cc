@@ -76,6 +76,7 @@ struct ViewServer::Impl {
   int port = 0;
   std::once_flag points_once;
   std::string points;
+  std::function<std::string()> live;  // set before Bind
   // Stop() may come before Serve() listens (httplib's stop() is a no-op until then).
   std::atomic<bool> stop_requested{false}, serving{false};
 
@@ -119,9 +120,10 @@ void ViewServer::Impl::Routes() {
   ServeJson("/api/export", "export.json");
   ServeJson("/api/run", "run.json");
   server.Get("/api/status", [this](const httplib::Request&, httplib::Response& res) {
+    nlohmann::json status{{"workspace", o.workspace.filename().string()}, {"live", live != nullptr}};
+    if (live) status.update(nlohmann::json::parse(live(), nullptr, false));
     res.set_header("Cache-Control", "no-store");
-    res.set_content(nlohmann::json{{"workspace", o.workspace.filename().string()}, {"live", false}}.dump(),
-                    "application/json");
+    res.set_content(status.dump(), "application/json");
   });
   // The solve's log from byte `from` on, whole lines only; X-Next-Offset says where to go on.
   server.Get("/api/log", [this](const httplib::Request& req, httplib::Response& res) {
@@ -180,7 +182,7 @@ void ViewServer::Impl::Routes() {
 
 ViewServer::ViewServer(ViewOptions options) : impl_(std::make_unique<Impl>()) {
   impl_->o = std::move(options);
-  if (!fs::is_regular_file(impl_->o.workspace / "scene.json")) {
+  if (impl_->o.require_scene && !fs::is_regular_file(impl_->o.workspace / "scene.json")) {
     throw InputError(impl_->o.workspace.string(), "scene.json", "(missing)", "not a PERF workspace",
                      "run perf import (or perf run) first");
   }
@@ -227,6 +229,8 @@ std::string ViewServer::Url() const {
   const std::string host = impl_->o.host.find(':') != std::string::npos ? "[" + impl_->o.host + "]" : impl_->o.host;
   return StrCat("http://", host == "0.0.0.0" ? "127.0.0.1" : host, ":", impl_->port, "/");
 }
+
+void ViewServer::SetLiveStatus(std::function<std::string()> status) { impl_->live = std::move(status); }
 
 bool IsLoopback(const std::string& host) {
   return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;

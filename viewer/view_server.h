@@ -7,6 +7,7 @@
 
 #include <atomic>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <string>
 
@@ -18,6 +19,9 @@ struct ViewOptions {
   int port = 8765;  // 0: a free port the system picks
   // Where Debian's libjs-three put three.js (build/three.min.js and examples/js/...).
   std::filesystem::path three_dir = PERF_THREE_DIR;
+  // The workspace must have its scene.json already (perf view); a live page (perf run --view)
+  // starts before the import writes it and shows it once it is there.
+  bool require_scene = true;
 };
 
 class ViewServer {
@@ -34,6 +38,9 @@ class ViewServer {
   void Stop();
   // "http://127.0.0.1:8765/"
   std::string Url() const;
+  // A running command's state for /api/status (live_view.h): a JSON object's text, merged into
+  // the status; called from the server's threads.
+  void SetLiveStatus(std::function<std::string()> status);
 
  private:
   struct Impl;

@@ -192,11 +192,15 @@ struct GeometryVisitor {
     const T start = march.t_min + T(k) * march.delta;
     const T rest = march.t_max - start;
     const bool last = rest < march.delta && rest > 0;
-    const T u = jit.enabled ? Uniform01<T>(jit.seed, jit.ray, static_cast<uint32_t>(k)) : T(0.5);
-    T dt[6], dlen[6];
-    for (int i = 0; i < 6; ++i) {
-      dt[i] = last ? (1 - u) * ends.d_min[i] + u * ends.d_max[i] : ends.d_min[i];
-      dlen[i] = last ? ends.d_max[i] - ends.d_min[i] : T(0);
+    T dt[6], dlen[6] = {};
+    if (last) {
+      const T u = jit.enabled ? Uniform01<T>(jit.seed, jit.ray, static_cast<uint32_t>(k)) : T(0.5);
+      for (int i = 0; i < 6; ++i) {
+        dt[i] = (1 - u) * ends.d_min[i] + u * ends.d_max[i];
+        dlen[i] = ends.d_max[i] - ends.d_min[i];
+      }
+    } else {
+      for (int i = 0; i < 6; ++i) dt[i] = ends.d_min[i];
     }
     // The sample's values and their gradient in grid units (clamped axes do not move).
     const Vec3<T> g = ray.GridPoint(st.t);
@@ -240,18 +244,16 @@ struct GeometryVisitor {
         for (int a = 0; a < 3; ++a) dv[ch][a] += dw[a] * cv[ch];
       }
     }
-    // d g_b / d o_a = S_b (delta_ab + d_b dt/do_a), d g_b / d d_a = S_b (t delta_ab + d_b dt/dd_a).
+    // d g_b / d o_a = S_b (delta_ab + d_b dt/do_a), d g_b / d d_a = S_b (t delta_ab + d_b dt/dd_a):
+    // with G_b = dv_b S_b, d value / d o_a = G_a + (G . d) dt/do_a, and t G_a for d_a.
     const T s[3] = {T(vol.n) / vol.size.x, T(vol.n) / vol.size.y, T(vol.n) / vol.size.z};
     T dval[4][6];
     for (int ch = 0; ch < 4; ++ch) {
-      for (int i = 0; i < 6; ++i) {
-        const int a = i % 3;
-        T sum = 0;
-        for (int b = 0; b < 3; ++b) {
-          const T own = b == a ? (i < 3 ? T(1) : st.t) : T(0);
-          sum += dv[ch][b] * s[b] * (own + ray.dir[b] * dt[i]);
-        }
-        dval[ch][i] = sum;
+      const T g[3] = {dv[ch][0] * s[0], dv[ch][1] * s[1], dv[ch][2] * s[2]};
+      const T along = g[0] * ray.dir[0] + g[1] * ray.dir[1] + g[2] * ray.dir[2];
+      for (int a = 0; a < 3; ++a) {
+        dval[ch][a] = g[a] + along * dt[a];
+        dval[ch][3 + a] = st.t * g[a] + along * dt[3 + a];
       }
     }
     for (int c = 0; c < 3; ++c)

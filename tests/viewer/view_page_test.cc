@@ -24,10 +24,11 @@ using test::RunCommand;
 
 constexpr const char* kChromium = "/usr/bin/chromium";
 
-std::string Chromium(const std::string& args) {
+std::string Chromium(const std::string& args, int budget_ms = 30000) {
   // SwiftShader: WebGL without a GPU. The budget lets the page's fetches and frames run.
   return std::string(kChromium) + " --headless=new --no-sandbox --disable-dev-shm-usage --use-angle=swiftshader "
-                                  "--enable-unsafe-swiftshader --hide-scrollbars --virtual-time-budget=30000 " + args;
+                                  "--enable-unsafe-swiftshader --hide-scrollbars --virtual-time-budget=" +
+         std::to_string(budget_ms) + " " + args;
 }
 
 // `perf view WS --port 0` in the background; its pid and port from what it prints.
@@ -117,6 +118,57 @@ TEST(ViewPage, ShowsTheCamerasTheScoresAndTheMesh) {
 
   EXPECT_TRUE(view.Interrupt());
   EXPECT_NE(ReadFileToString(view.log).find("stopped"), std::string::npos) << ReadFileToString(view.log);
+}
+
+// `perf run --view` on a small capture: the page follows the solve (its iteration counter advances
+// and it shows the newest preview), says when the run finished, and Ctrl-C then ends the command.
+TEST(ViewPage, FollowsALiveRun) {
+  if (!fs::exists(kChromium)) GTEST_SKIP() << "chromium is not installed (scripts/setup.sh installs it)";
+  const fs::path example = fs::path(PERF_SOURCE_DIR) / "examples" / "bonsai_mini";
+  test::TempDir dir;
+  const fs::path log = dir / "run.log";
+  const auto started = RunCommand(test::PerfBinary() + " run --colmap " + (example / "sparse" / "0").string() +
+                                  " --images " + (example / "images").string() + " --workspace " + (dir / "ws").string() +
+                                  " --preset preview --max-size 96 --levels 2 --iterations 8 --view --view-port 0 > " +
+                                  log.string() + " 2>&1 & echo $!");
+  const int pid = std::stoi(started.output);
+  int port = 0;
+  const std::regex url(R"(page is at http://127\.0\.0\.1:(\d+)/)");
+  for (int i = 0; i < 100 && port == 0; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    std::smatch m;
+    const std::string text = fs::exists(log) ? ReadFileToString(log) : "";
+    if (std::regex_search(text, m, url)) port = std::stoi(m[1]);
+  }
+  ASSERT_GT(port, 0) << ReadFileToString(log);
+  const std::string page = "http://127.0.0.1:" + std::to_string(port) + "/";
+  // Looks at the page now and then while the solve goes on.
+  std::vector<int> seen;
+  bool preview = false, finished = false;
+  for (int look = 0; look < 40 && !finished; ++look) {
+    const auto dom = RunCommand(Chromium("--dump-dom " + page, 5000) + " 2>/dev/null");
+    const std::string state = Attribute(dom.output, "data-state");
+    const std::string it = Attribute(dom.output, "data-iterations");
+    if (state == "running" && !it.empty()) seen.push_back(std::stoi(it));
+    preview = preview || dom.output.find("src=\"/files/preview/") != std::string::npos;
+    finished = state == "finished";
+    if (finished) {
+      EXPECT_NE(dom.output.find("finished; the server stays up"), std::string::npos);
+    }
+  }
+  EXPECT_TRUE(finished) << ReadFileToString(log);
+  ASSERT_GE(seen.size(), 2u) << "the page never saw the solve running twice";
+  EXPECT_GT(seen.back(), seen.front()) << "the iteration counter did not advance";
+  EXPECT_TRUE(preview);
+  EXPECT_NE(ReadFileToString(log).find("the page stays at"), std::string::npos);
+  ::kill(pid, SIGINT);
+  bool exited = false;
+  for (int i = 0; i < 50 && !exited; ++i) {
+    exited = ::kill(pid, 0) != 0;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  EXPECT_TRUE(exited);
+  if (!exited) ::kill(pid, SIGKILL);
 }
 
 }  // namespace

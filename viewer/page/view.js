@@ -324,10 +324,58 @@ async function pollLog() {
   }
 }
 
+// A running command's page (perf run --view): its state every 2 s, and the newest preview.
+const live = { started: false, state: '' };
+function describe(s) {
+  const eta = s.eta_seconds >= 0 ? `, this level's ETA ${s.eta_seconds < 90 ? Math.round(s.eta_seconds) + ' s'
+                                                                            : Math.round(s.eta_seconds / 60) + ' min'}` : '';
+  if (s.state === 'stopped') return 'stopped (Ctrl-C): run the same command again to resume';
+  if (s.state === 'finished') return 'finished; the server stays up until Ctrl-C';
+  if (s.stage === 'reconstruct' && s.levels > 0) {
+    return `reconstruct: level ${s.level + 1}/${s.levels}, iteration ${s.iteration}/${s.iterations}${eta}`;
+  }
+  return s.stage ? `${s.stage}...` : 'starting';
+}
+async function pollStatus() {
+  const s = await getJson('/api/status');
+  if (!s) {
+    $('live-status').textContent = 'the run\'s server is gone (the run ended)';
+    return;
+  }
+  $('live-status').textContent = describe(s);
+  $('live-status').className = s.state === 'stopped' ? 'stopped' : '';
+  $('status').textContent = s.state === 'running' ? 'solving' : s.state;
+  document.body.dataset.state = s.state;
+  document.body.dataset.liveIteration = s.iteration;
+  if (s.preview && $('preview').dataset.src !== s.preview) {
+    $('preview').dataset.src = s.preview;
+    $('preview').src = fileUrl(s.preview);
+  }
+  if (s.state !== live.state && (s.state === 'finished' || s.state === 'stopped')) {
+    const [sc, report, run] = await Promise.all([getJson('/api/scene'), getJson('/api/report'), getJson('/api/run')]);
+    if (sc) fillScores(sc, report);
+    fillStages(run);
+  }
+  live.state = s.state;
+}
+function startLive() {
+  if (live.started) return;
+  live.started = true;
+  $('live').hidden = false;
+  pollStatus();
+  setInterval(pollStatus, 2000);
+}
+
 async function main() {
   const [sc, report, run, points, status] = await Promise.all(
     [getJson('/api/scene'), getJson('/api/report'), getJson('/api/run'), getJson('/api/points'), getJson('/api/status')]);
+  if (status && status.live) startLive();
   if (!sc) {
+    if (status && status.live) {  // the import has not written it yet
+      $('status').textContent = 'waiting for the import...';
+      setTimeout(main, 2000);
+      return;
+    }
     $('status').textContent = 'scene.json could not be read';
     $('status').className = 'error';
     document.body.dataset.ready = '1';
