@@ -232,7 +232,8 @@ EvalResult RunEval(const EvalOptions& o) {
     const recon::RenderOutput render =
         recon::RenderAsShot(l.backend.get(), LoadedCheckpoint::kParams, v, o.min_box_opacity, exposures);
     const Image image = recon::ToImage(render);
-    const ImageScores s = ScoreImage(image, v.image, Binarize(recon::OpacityImage(render), o.mask_threshold));
+    Image mask = Binarize(recon::OpacityImage(render), o.mask_threshold);
+    const ImageScores s = ScoreImage(image, v.image, mask);
     r.views.push_back({v.name, s});
     r.mean.psnr += s.psnr;
     r.mean.ssim += s.ssim;
@@ -242,7 +243,7 @@ EvalResult RunEval(const EvalOptions& o) {
       r.mean.ssim_masked += s.ssim_masked;
       ++masked_views;
     }
-    if (static_cast<int>(strip.size()) < kStripViews) strip.push_back({v.name, v.image, image, s});
+    if (static_cast<int>(strip.size()) < kStripViews) strip.push_back({v.name, v.image, image, std::move(mask), s});
     Progress(o, "views", static_cast<int>(r.views.size()), static_cast<int>(test.size()));
   }
   if (!r.views.empty()) {
@@ -263,7 +264,8 @@ EvalResult RunEval(const EvalOptions& o) {
   if (o.html) {
     const fs::path log = o.workspace / "recon" / "log.jsonl";
     const std::string log_text = fs::exists(log) ? ReadFileToString(log) : std::string();
-    WriteFileAtomically(o.workspace / "report.html", ReportHtml(report, strip, log_text));
+    const Scene cameras = recon::WithRefinedPoses(scene, exposures);  // imported, and refined where solved
+    WriteFileAtomically(o.workspace / "report.html", ReportHtml(report, strip, log_text, &cameras));
   }
   return r;
 }

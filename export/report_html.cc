@@ -5,6 +5,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
 #include <sstream>
@@ -38,12 +39,14 @@ std::string Fixed(double v, int digits) {
   return s.str();
 }
 
-// An RGB [0, 1] image as a PNG data URI, scaled down to kThumbHeight (OpenCV's imencode).
+// An RGB (or one-channel) [0, 1] image as a PNG data URI, scaled down to kThumbHeight (OpenCV's
+// imencode).
 std::string ThumbnailUri(const Image& im) {
-  const cv::Mat rgb(im.height, im.width, CV_32FC3, const_cast<float*>(im.pixels.data()));
+  const bool grey = im.channels == 1;
+  const cv::Mat rgb(im.height, im.width, grey ? CV_32FC1 : CV_32FC3, const_cast<float*>(im.pixels.data()));
   cv::Mat bgr8;
-  rgb.convertTo(bgr8, CV_8UC3, 255.0);
-  cv::cvtColor(bgr8, bgr8, cv::COLOR_RGB2BGR);
+  rgb.convertTo(bgr8, grey ? CV_8UC1 : CV_8UC3, 255.0);
+  if (!grey) cv::cvtColor(bgr8, bgr8, cv::COLOR_RGB2BGR);
   if (bgr8.rows > kThumbHeight) {
     const int w = std::max(1, static_cast<int>(std::lround(bgr8.cols * double(kThumbHeight) / bgr8.rows)));
     cv::resize(bgr8, bgr8, cv::Size(w, kThumbHeight), 0, 0, cv::INTER_AREA);
@@ -145,7 +148,59 @@ std::string PsnrPlotSvg(const std::string& log_jsonl) {
   return s.str();
 }
 
-std::string ReportHtml(const nlohmann::json& report, const std::vector<ReportStripView>& strip, const std::string& log_jsonl) {
+std::string CamerasPlotSvg(const Scene& scene) {
+  // Centres (imported and refined) in the box frame; the plot's axes are the two box axes with
+  // the largest spread of the centres, seen from the third.
+  const Eigen::Matrix3d rt = scene.box.rotation.transpose();
+  const auto local = [&](const Eigen::Vector3d& p) { return Eigen::Vector3d(rt * (p - scene.box.center)); };
+  Eigen::Vector3d spread = Eigen::Vector3d::Zero(), mean = Eigen::Vector3d::Zero();
+  for (const SceneImage& im : scene.images) mean += local(im.world_from_cam.col(3));
+  mean /= std::max<size_t>(1, scene.images.size());
+  for (const SceneImage& im : scene.images) spread += (local(im.world_from_cam.col(3)) - mean).cwiseAbs2();
+  int up = 0;
+  spread.minCoeff(&up);
+  const int ax = (up + 1) % 3, ay = (up + 2) % 3;
+  // The extent: the box and the training and held-out cameras (left-out ones may be far: clamped).
+  double extent = 0.5 * std::max(scene.box.size[ax], scene.box.size[ay]);
+  for (const SceneImage& im : scene.images) {
+    if (im.split == Split::kExcluded) continue;
+    const Eigen::Vector3d c = local(im.world_from_cam.col(3));
+    extent = std::max({extent, std::abs(c[ax]), std::abs(c[ay])});
+  }
+  extent *= 1.15;
+  const double size = 360, half = size / 2;
+  const auto X = [&](double v) { return half + std::clamp(v / extent, -1.0, 1.0) * (half - 6); };
+  const auto Y = [&](double v) { return half - std::clamp(v / extent, -1.0, 1.0) * (half - 6); };
+  std::ostringstream s;
+  s << "<svg id=\"cameras-plot\" xmlns=\"http://www.w3.org/2000/svg\" width=\"" << size << "\" height=\"" << size
+    << "\" style=\"background:#f7f7f7\">\n";
+  const double bx = scene.box.size[ax] / 2, by = scene.box.size[ay] / 2;
+  s << "<rect x=\"" << Fixed(X(-bx), 1) << "\" y=\"" << Fixed(Y(by), 1) << "\" width=\"" << Fixed(X(bx) - X(-bx), 1)
+    << "\" height=\"" << Fixed(Y(-by) - Y(by), 1) << "\" fill=\"none\" stroke=\"#4477aa\"/>\n";
+  const double arrow = 0.08 * extent;
+  for (const SceneImage& im : scene.images) {
+    const char* colour = im.split == Split::kTrain ? "#888888" : im.split == Split::kTest ? "#ee7733" : "#cc3311";
+    const char* split = SplitName(im.split);
+    const Eigen::Vector3d c = local(im.world_from_cam.col(3));
+    const Eigen::Vector3d d = rt * im.world_from_cam.col(2);  // the optical axis
+    s << "<g class=\"cam " << split << "\"><title>" << Escape(im.name) << " (" << split << ")</title>"
+      << "<line x1=\"" << Fixed(X(c[ax]), 1) << "\" y1=\"" << Fixed(Y(c[ay]), 1) << "\" x2=\""
+      << Fixed(X(c[ax] + arrow * d[ax]), 1) << "\" y2=\"" << Fixed(Y(c[ay] + arrow * d[ay]), 1) << "\" stroke=\""
+      << colour << "\"/><circle cx=\"" << Fixed(X(c[ax]), 1) << "\" cy=\"" << Fixed(Y(c[ay]), 1)
+      << "\" r=\"3\" fill=\"" << colour << "\"/></g>\n";
+    if (im.refined_world_from_cam) {
+      const Eigen::Vector3d r = local(im.refined_world_from_cam->col(3));
+      s << "<line class=\"refined\" x1=\"" << Fixed(X(c[ax]), 1) << "\" y1=\"" << Fixed(Y(c[ay]), 1) << "\" x2=\""
+        << Fixed(X(r[ax]), 1) << "\" y2=\"" << Fixed(Y(r[ay]), 1) << "\" stroke=\"#228833\" stroke-width=\"2\"/>\n";
+    }
+  }
+  s << "<text x=\"6\" y=\"14\" font-size=\"11\" fill=\"#444\">box blue; training grey, held-out orange,</text>\n"
+       "<text x=\"6\" y=\"27\" font-size=\"11\" fill=\"#444\">left out red; refined moves green</text>\n</svg>\n";
+  return s.str();
+}
+
+std::string ReportHtml(const nlohmann::json& report, const std::vector<ReportStripView>& strip,
+                       const std::string& log_jsonl, const Scene* scene) {
   std::ostringstream h;
   h << "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>PERF report</title>\n"
     << "<style>body{font-family:sans-serif;margin:2em;max-width:1100px}table{border-collapse:collapse}"
@@ -192,18 +247,24 @@ std::string ReportHtml(const nlohmann::json& report, const std::vector<ReportStr
       << "</td></tr>\n<tr><td>mean per image</td><td>" << Fixed(m["mean_iou"].get<double>(), 4)
       << "</td><td></td><td></td></tr></table>\n";
   }
+  if (scene != nullptr && !scene->images.empty()) {
+    h << "<h2>Cameras</h2>\n" << CamerasPlotSvg(*scene);
+  }
   const std::string plot = PsnrPlotSvg(log_jsonl);
   if (!plot.empty()) h << "<h2>PSNR during the solve</h2>\n" << plot;
   if (!strip.empty()) {
-    h << "<h2>Held-out renders (left) and photos (right)</h2>\n<div class=\"strip\">\n";
+    h << "<h2>Held-out renders, photos and our masks</h2>\n<div class=\"strip\">\n";
     for (const ReportStripView& v : strip) {
       h << "<figure><img src=\"" << ThumbnailUri(v.render) << "\" alt=\"render\"><img src=\"" << ThumbnailUri(v.photo)
-        << "\" alt=\"photo\"><figcaption>" << Escape(v.name) << ": " << Fixed(v.scores.psnr, 2) << " dB, SSIM "
-        << Fixed(v.scores.ssim, 3) << "</figcaption></figure>\n";
+        << "\" alt=\"photo\">";
+      if (!v.mask.pixels.empty()) h << "<img src=\"" << ThumbnailUri(v.mask) << "\" alt=\"mask\">";
+      h << "<figcaption>" << Escape(v.name) << ": " << Fixed(v.scores.psnr, 2) << " dB, SSIM " << Fixed(v.scores.ssim, 3)
+        << "</figcaption></figure>\n";
     }
     h << "</div>\n";
   }
-  h << "<h2>Details</h2>\n<pre>" << Escape(report.dump(2).substr(0, 4000)) << "</pre>\n</body></html>\n";
+  h << "<p>Every figure, per view and per setting: <a href=\"report.json\">report.json</a> beside this file; "
+       "<code>perf view</code> shows the workspace in 3-D.</p>\n</body></html>\n";
   return h.str();
 }
 

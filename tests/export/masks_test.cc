@@ -343,4 +343,54 @@ TEST(Report, AViewWithoutAMaskSaysSo) {
 }
 
 }  // namespace
+// report.html plots the cameras (one marker per photo by split, a refined camera's move), shows
+// each held-out view's mask beside its render and photo, and links report.json instead of
+// dumping it.
+TEST(Report, PlotsTheCamerasShowsMasksAndLinksTheJson) {
+  Scene scene;
+  scene.box.size = {2, 2, 1};
+  const auto add = [&](const char* name, Split split, double angle, bool refined) {
+    SceneImage im;
+    im.name = name;
+    im.split = split;
+    const Eigen::Vector3d c(4 * std::cos(angle), 4 * std::sin(angle), 0.5);
+    im.world_from_cam.col(3) = c;
+    im.world_from_cam.col(2) = -c.normalized();  // looking at the box
+    if (refined) {
+      im.refined_world_from_cam = im.world_from_cam;
+      im.refined_world_from_cam->col(3) += Eigen::Vector3d(0.2, 0, 0);
+    }
+    scene.images.push_back(im);
+  };
+  add("a.png", Split::kTrain, 0.0, true);
+  add("b.png", Split::kTrain, 1.0, false);
+  add("c.png", Split::kTest, 2.0, false);
+  add("d.png", Split::kExcluded, 3.0, false);
+  const std::string svg = CamerasPlotSvg(scene);
+  const auto count = [](const std::string& text, const std::string& what) {
+    size_t n = 0;
+    for (size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1)) ++n;
+    return n;
+  };
+  EXPECT_EQ(count(svg, "<g class=\"cam train\">"), 2u);
+  EXPECT_EQ(count(svg, "<g class=\"cam test\">"), 1u);
+  EXPECT_EQ(count(svg, "<g class=\"cam excluded\">"), 1u);
+  EXPECT_EQ(count(svg, "class=\"refined\""), 1u);
+  EXPECT_EQ(count(svg, "<rect"), 1u);
+
+  const nlohmann::json scores = {{"psnr", 21.5}, {"ssim", 0.5}, {"psnr_masked", 23.25}, {"ssim_masked", 0.6},
+                                 {"mask_coverage", 0.3}};
+  nlohmann::json view = scores;
+  view["name"] = "c.png";
+  const nlohmann::json report = {{"mean", scores}, {"test_views", {view}}};
+  ReportStripView strip{"c.png", Image(8, 6, 3), Image(8, 6, 3), Image(8, 6, 1), {}};
+  strip.mask.pixels[5] = 1.f;
+  const std::string html = ReportHtml(report, {strip}, "", &scene);
+  EXPECT_NE(html.find("id=\"cameras-plot\""), std::string::npos);
+  EXPECT_NE(html.find("alt=\"mask\""), std::string::npos);
+  EXPECT_NE(html.find("href=\"report.json\""), std::string::npos);
+  EXPECT_EQ(html.find("<pre>"), std::string::npos);  // no raw dump
+  EXPECT_EQ(ReportHtml(report, {}, "").find("cameras-plot"), std::string::npos);  // no scene: no plot
+}
+
 }  // namespace perf::exporter
