@@ -169,12 +169,7 @@ void AddReconstructCommand(CLI::App& app) {
                 "Let CG move parameters at a bound of their range that the gradient pushes out (plain projected GN)");
   AddMinBoxOpacityOption(cmd, &o.min_box_opacity, "Previews and held-out PSNR");
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
-  cmd->add_flag("--view", args->view,
-                "Serve perf view's page while solving (iteration, ETA, the PSNR curve, a view rendered each "
-                "iteration); it stops with the solve");
-  cmd->add_option("--view-port", args->view_options.port, "With --view: the page's port (0: a free one)")
-      ->check(CLI::Range(0, 65535))
-      ->capture_default_str();
+  AddLiveViewOptions(cmd, &args->view, &args->view_options.port, &o.preview_image, "it stops with the solve");
   cmd->callback([args]() {
     recon::ReconstructOptions& o = args->o;
     o.workspace = args->workspace;
@@ -200,14 +195,9 @@ void AddReconstructCommand(CLI::App& app) {
     std::unique_ptr<WorkspaceLock> lock;
     if (root) lock = LockWorkspace(o.workspace, "reconstruct");
     Progress progress("reconstruct", args->quiet || !root);
-    std::unique_ptr<viewer::LiveView> live;
-    if (args->view && root) {
-      args->view_options.workspace = o.workspace;
-      live = std::make_unique<viewer::LiveView>(args->view_options);
-      live->Stage("reconstruct");
-      o.preview_every = 1;
-      std::cout << "perf reconstruct: the solve's page is at " << live->Url() << "\n" << std::flush;
-    }
+    const std::unique_ptr<viewer::LiveView> live =
+        StartLiveView(args->view, root, args->view_options, o.workspace, "reconstruct");
+    if (live) o.preview_every = 1;
     o.on_event = [&](const recon::ReconstructOptions::Event& e) {
       if (StopRequested().load()) {
         if (live) live->End("stopped");

@@ -53,12 +53,8 @@ void AddRunCommand(CLI::App& app) {
                   "With refined poses: also refine each training photo's focal length (off: the imported one)");
   cmd->add_flag("--keep-bad-poses", o.keep_bad_poses,
                 "Train and score on COLMAP photos whose pose looks wrong too (by default they are left out and named)");
-  cmd->add_flag("--view", args->view,
-                "Serve perf view's page while the run goes (stage, iteration, ETA, the PSNR curve, a view rendered "
-                "each iteration); it stays up after the run until Ctrl-C");
-  cmd->add_option("--view-port", args->view_options.port, "With --view: the page's port (0: a free one)")
-      ->check(CLI::Range(0, 65535))
-      ->capture_default_str();
+  AddLiveViewOptions(cmd, &args->view, &args->view_options.port, &args->o.view_image,
+                     "it stays up after the run until Ctrl-C");
   cmd->add_option("--log-level", args->log_level, "info (progress and summary) or quiet (errors only)")
       ->capture_default_str();
   cmd->add_option("--log-json", args->log_json, "Append JSON lines of stage events to this file (for scripts)");
@@ -81,15 +77,8 @@ void AddRunCommand(CLI::App& app) {
     std::unique_ptr<WorkspaceLock> lock;
     if (root) lock = LockWorkspace(o.workspace, "run", true);
     const StopOnCtrlC ctrl_c;
-    std::unique_ptr<viewer::LiveView> live;
-    if (args->view && root) {
-      args->view_options.workspace = o.workspace;
-      live = std::make_unique<viewer::LiveView>(args->view_options);
-      o.live = live.get();
-      std::cout << "perf run: the run's page is at " << live->Url() << " (from another machine: ssh -L "
-                << live->port() << ":127.0.0.1:" << live->port() << " THIS_HOST)\n"
-                << std::flush;
-    }
+    const std::unique_ptr<viewer::LiveView> live = StartLiveView(args->view, root, args->view_options, o.workspace, "run");
+    o.live = live.get();
     RunResult r;
     try {
       r = RunPipeline(o);

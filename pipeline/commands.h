@@ -14,6 +14,10 @@
 namespace CLI {
 class App;
 }
+namespace perf::viewer {
+class LiveView;
+struct ViewOptions;
+}
 
 namespace perf {
 
@@ -49,6 +53,15 @@ const std::atomic<bool>& StopRequested();
 
 // --device and -j,--threads: the same for every command that runs a backend.
 void AddDeviceOptions(CLI::App* cmd, recon::DeviceChoice* device, int* threads);
+
+// --view, --view-port, --view-image: perf view's page while the command runs (viewer/live_view.h);
+// `after` says what becomes of the page when the command ends.
+void AddLiveViewOptions(CLI::App* cmd, bool* view, int* port, std::string* image, const std::string& after);
+
+// The page for `command` over `workspace` when `view` (rank 0 only; nullptr otherwise): bound,
+// serving, at stage `command`, and its URL and ssh -L line printed.
+std::unique_ptr<viewer::LiveView> StartLiveView(bool view, bool root, viewer::ViewOptions options,
+                                                const std::filesystem::path& workspace, const std::string& command);
 
 // --min-box-opacity: the render rule (recon_cuda/core/render_rule.h) for what `use` names.
 void AddMinBoxOpacityOption(CLI::App* cmd, float* min_box_opacity, const std::string& use);

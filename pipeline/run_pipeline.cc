@@ -273,6 +273,7 @@ recon::ReconstructOptions RunOptions::ReconstructStage(const PresetSettings& pre
   ro.poses = poses;
   ro.refine_focal = refine_focal;
   ro.preview_every = live != nullptr ? 1 : 0;  // the live page shows the newest
+  ro.preview_image = view_image;
   ro.resume = fresh && !force;
   return ro;
 }

@@ -45,6 +45,7 @@ struct RunOptions {
   // --view: the live page, told each stage and iteration; the solve also renders a preview each
   // iteration for it. nullptr: no page.
   viewer::LiveView* live = nullptr;
+  std::string view_image;  // --view-image: the photo the live page's renders show (empty: the first held-out one)
   // Under mpirun (comm.h): rank 0 runs every stage; the other ranks wait for its import and join
   // only the reconstruction, each fitting its share of the photos. nullptr: one process.
   Communicator* comm = nullptr;

@@ -108,6 +108,7 @@ void LevelMonitor::LevelDone(const HierarchyLevel& h, const SolverSummary& summa
   if (h.level == 0) CheckBox(h, x);
   if (!grow_faces_.empty()) {  // this fit is discarded (before_level ends the hierarchy here)
     result.solve_seconds += EndLevelClock();
+    preview_seconds_ = 0;
     return;
   }
   lr_.iterations = summary.iterations;
@@ -146,6 +147,7 @@ void LevelMonitor::LevelDone(const HierarchyLevel& h, const SolverSummary& summa
   if (run_.previous) run_.previous->Discard();
   lr_.seconds = EndLevelClock();
   run_.log.Write(LevelLine(summary));
+  preview_seconds_ = 0;
   run_.Say(StrCat("level ", h.level + 1, "/", run_.levels, " done in ", lr_.seconds, " s: ", summary.BriefReport(),
                   run_.test_views == 0 ? std::string() : StrCat("; held-out PSNR ", lr_.test_psnr, " dB")));
   result.levels.push_back(lr_);
@@ -227,13 +229,18 @@ double LevelMonitor::HeldOutPsnr(VecId params, const PhotoCorrections& exposures
 
 void LevelMonitor::WritePreview(const HierarchyLevel& h, int iteration, const PhotoCorrections& exposures) {
   const auto t0 = WallClock::now();
-  // Rank 0's first held-out view (its share starts with the split's first image), else training view.
-  const PosedImage& view = run_.test.empty() ? run_.train.front() : run_.test.front();
-  const RenderOutput r = RenderAsShot(run_.backend.get(), h.params, view, o_.min_box_opacity, exposures);
+  // The chosen photo where rank 0 holds it, else rank 0's first held-out view (its share starts
+  // with the split's first image), else its first training view.
+  const PosedImage* view = run_.test.empty() ? &run_.train.front() : &run_.test.front();
+  for (const auto* views : {&run_.test, &run_.train}) {
+    for (const PosedImage& v : *views) view = !o_.preview_image.empty() && v.name == o_.preview_image ? &v : view;
+  }
+  const RenderOutput r = RenderAsShot(run_.backend.get(), h.params, *view, o_.min_box_opacity, exposures);
   const fs::path p = o_.workspace / "preview" / StrCat("recon_l", h.level, "_i", iteration + 1, ".png");
   EnsureWritableDirectory(p.parent_path());
   WriteImage(p, ToImage(r), PixelFormat::kUInt8);
   eval_seconds_ += SecondsSince(t0);
+  preview_seconds_ += SecondsSince(t0);
 }
 
 json LevelMonitor::LevelLine(const SolverSummary& summary) {
@@ -245,6 +252,7 @@ json LevelMonitor::LevelLine(const SolverSummary& summary) {
                {"cost", lr_.cost},
                {"train_psnr", lr_.train_psnr},
                {"test_psnr", lr_.test_psnr},
+               {"preview_seconds", preview_seconds_},
                {"status", lr_.status}});
   if (run_.ranks != nullptr) {
     // Every rank's seconds in its own passes and in the sums (waiting for the slowest included).

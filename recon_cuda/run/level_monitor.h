@@ -55,6 +55,7 @@ class LevelMonitor {
   double elapsed_ = 0;  // solver time so far (excludes held-out evaluation and previews)
   WallClock::time_point t_level_ = WallClock::now();
   double eval_seconds_ = 0;  // held-out evaluation and previews within the level
+  double preview_seconds_ = 0;  // the previews alone within the level (what --view adds)
   LevelReport lr_;
   double level_start_elapsed_ = 0, iter_time_ = 0;  // for the log's elapsed solver time
   int held_out_iteration_ = -1;  // the iteration whose held-out PSNR was logged last

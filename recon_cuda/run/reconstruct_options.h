@@ -87,6 +87,7 @@ struct ReconstructOptions {
   OccupancyOptions occupancy;  // which bricks a sparse level keeps
   bool resume = false;          // continue after the last checkpoint instead of starting over
   int preview_every = 0;        // write a held-out preview every K iterations (0: never)
+  std::string preview_image;    // the photo the previews show (scene.json name); empty: the first held-out one
   int eval_every = 0;           // held-out PSNR every K iterations (0: at the end of each level)
   float min_box_opacity = kDefaultMinBoxOpacity; // the render rule (render_rule.h), for previews and held-out PSNR
 

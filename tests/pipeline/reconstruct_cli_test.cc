@@ -7,6 +7,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "common/atomic_file.h"
 #include "recon_cuda/data/checkpoint.h"
 #include "tests/pipeline/synthetic_workspace.h"
 #include "tests/test_util.h"
@@ -241,6 +242,13 @@ TEST_F(ReconstructCli, BadInputsAreNamed) {
     EXPECT_EQ(r.exit_code, 2) << choice << ": " << r.output;
     EXPECT_NE(r.output.find(choice.substr(0, choice.find(' '))), std::string::npos) << r.output;
   }
+  // A preview photo that is not in the capture is named before anything is written.
+  const std::string log_before = ReadFileToString(ws_ / "recon" / "log.jsonl");
+  r = RunCommand(Perf("reconstruct " + ws_.string() + " --levels 1 --start-resolution 8 --view-image nosuch.png"));
+  EXPECT_NE(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("--view-image"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("nosuch.png"), std::string::npos) << r.output;
+  EXPECT_EQ(ReadFileToString(ws_ / "recon" / "log.jsonl"), log_before);
   r = RunCommand(Perf("render " + ws_.string() + " --split val"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("--split"), std::string::npos) << r.output;

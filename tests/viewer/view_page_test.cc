@@ -31,15 +31,13 @@ std::string Chromium(const std::string& args, int budget_ms = 30000) {
          std::to_string(budget_ms) + " " + args;
 }
 
-// `perf view WS --port 0` in the background; its pid and port from what it prints.
-struct ViewProcess {
+// A perf command in the background (`args` end with a --port 0 or --view-port 0), its output in
+// `log`, and the port it printed in a line matching `url` (0 when none came within 10 s).
+struct Background {
   int pid = 0, port = 0;
   fs::path log;
-  ViewProcess(const fs::path& ws, const fs::path& dir) : log(dir / "view.log") {
-    const auto started = RunCommand(test::PerfBinary() + " view " + ws.string() + " --port 0 > " + log.string() +
-                                    " 2>&1 & echo $!");
-    pid = std::stoi(started.output);
-    const std::regex url(R"(http://127\.0\.0\.1:(\d+)/)");
+  Background(const std::string& args, const fs::path& log_file, const std::regex& url) : log(log_file) {
+    pid = std::stoi(RunCommand(test::PerfBinary() + " " + args + " > " + log.string() + " 2>&1 & echo $!").output);
     for (int i = 0; i < 100 && port == 0; ++i) {
       std::this_thread::sleep_for(std::chrono::milliseconds(100));
       std::smatch m;
@@ -47,6 +45,8 @@ struct ViewProcess {
       if (std::regex_search(text, m, url)) port = std::stoi(m[1]);
     }
   }
+  std::string Url() const { return "http://127.0.0.1:" + std::to_string(port) + "/"; }
+  std::string Output() const { return fs::exists(log) ? ReadFileToString(log) : ""; }
   // Ctrl-C; true when it exited within 5 s.
   bool Interrupt() {
     ::kill(pid, SIGINT);
@@ -56,7 +56,7 @@ struct ViewProcess {
     }
     return false;
   }
-  ~ViewProcess() {
+  ~Background() {
     if (pid > 0 && ::kill(pid, 0) == 0) ::kill(pid, SIGKILL);
   }
 };
@@ -78,10 +78,10 @@ TEST(ViewPage, ShowsTheCamerasTheScoresAndTheMesh) {
   ASSERT_EQ(run.exit_code, 0) << run.output;
   ASSERT_TRUE(fs::exists(ws / "mesh.glb"));
 
-  ViewProcess view(ws, dir.path());
-  ASSERT_GT(view.port, 0) << ReadFileToString(view.log);
-  const std::string url = "http://127.0.0.1:" + std::to_string(view.port) + "/";
-  EXPECT_NE(ReadFileToString(view.log).find("ssh -L " + std::to_string(view.port)), std::string::npos);
+  Background view("view " + ws.string() + " --port 0", dir / "view.log", std::regex(R"(http://127\.0\.0\.1:(\d+)/)"));
+  ASSERT_GT(view.port, 0) << view.Output();
+  const std::string url = view.Url();
+  EXPECT_NE(view.Output().find("ssh -L " + std::to_string(view.port)), std::string::npos);
 
   const auto dom = RunCommand(Chromium("--dump-dom " + url) + " 2>/dev/null");
   ASSERT_EQ(dom.exit_code, 0) << dom.output;
@@ -117,7 +117,7 @@ TEST(ViewPage, ShowsTheCamerasTheScoresAndTheMesh) {
   EXPECT_GT(drawn, canvas / 100) << drawn << " of " << canvas << " pixels drawn";
 
   EXPECT_TRUE(view.Interrupt());
-  EXPECT_NE(ReadFileToString(view.log).find("stopped"), std::string::npos) << ReadFileToString(view.log);
+  EXPECT_NE(view.Output().find("stopped"), std::string::npos) << view.Output();
 }
 
 // `perf run --view` on a small capture: the page follows the solve (its iteration counter advances
@@ -126,22 +126,12 @@ TEST(ViewPage, FollowsALiveRun) {
   if (!fs::exists(kChromium)) GTEST_SKIP() << "chromium is not installed (scripts/setup.sh installs it)";
   const fs::path example = fs::path(PERF_SOURCE_DIR) / "examples" / "bonsai_mini";
   test::TempDir dir;
-  const fs::path log = dir / "run.log";
-  const auto started = RunCommand(test::PerfBinary() + " run --colmap " + (example / "sparse" / "0").string() +
-                                  " --images " + (example / "images").string() + " --workspace " + (dir / "ws").string() +
-                                  " --preset preview --max-size 96 --levels 2 --iterations 8 --view --view-port 0 > " +
-                                  log.string() + " 2>&1 & echo $!");
-  const int pid = std::stoi(started.output);
-  int port = 0;
-  const std::regex url(R"(page is at http://127\.0\.0\.1:(\d+)/)");
-  for (int i = 0; i < 100 && port == 0; ++i) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-    std::smatch m;
-    const std::string text = fs::exists(log) ? ReadFileToString(log) : "";
-    if (std::regex_search(text, m, url)) port = std::stoi(m[1]);
-  }
-  ASSERT_GT(port, 0) << ReadFileToString(log);
-  const std::string page = "http://127.0.0.1:" + std::to_string(port) + "/";
+  Background run("run --colmap " + (example / "sparse" / "0").string() + " --images " + (example / "images").string() +
+                     " --workspace " + (dir / "ws").string() +
+                     " --preset preview --max-size 96 --levels 2 --iterations 8 --view --view-port 0",
+                 dir / "run.log", std::regex(R"(its page is at http://127\.0\.0\.1:(\d+)/)"));
+  ASSERT_GT(run.port, 0) << run.Output();
+  const std::string page = run.Url();
   // Looks at the page now and then while the solve goes on.
   std::vector<int> seen;
   bool preview = false, finished = false;
@@ -156,19 +146,12 @@ TEST(ViewPage, FollowsALiveRun) {
       EXPECT_NE(dom.output.find("finished; the server stays up"), std::string::npos);
     }
   }
-  EXPECT_TRUE(finished) << ReadFileToString(log);
+  EXPECT_TRUE(finished) << run.Output();
   ASSERT_GE(seen.size(), 2u) << "the page never saw the solve running twice";
   EXPECT_GT(seen.back(), seen.front()) << "the iteration counter did not advance";
   EXPECT_TRUE(preview);
-  EXPECT_NE(ReadFileToString(log).find("the page stays at"), std::string::npos);
-  ::kill(pid, SIGINT);
-  bool exited = false;
-  for (int i = 0; i < 50 && !exited; ++i) {
-    exited = ::kill(pid, 0) != 0;
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
-  EXPECT_TRUE(exited);
-  if (!exited) ::kill(pid, SIGKILL);
+  EXPECT_NE(run.Output().find("the page stays at"), std::string::npos);
+  EXPECT_TRUE(run.Interrupt());
 }
 
 }  // namespace
