@@ -59,12 +59,12 @@ struct BlockJ {
 inline constexpr int kPoseRowValues = 4 * kPoseSolved;
 inline void PackPoseRow(const PoseRow<float>& row, float* out) {
   for (int r = 0; r < 4; ++r)
-    for (int j = 0; j < kPoseSolved; ++j) out[kPoseSolved * r + j] = row.j[r][PoseValueOf(j)];
+    for (int j = 0; j < kPoseSolved; ++j) out[kPoseSolved * r + j] = row.j[r][j];
 }
 inline PoseRow<float> UnpackPoseRow(const float* in) {
   PoseRow<float> row;
   for (int r = 0; r < 4; ++r) {
-    for (int j = 0; j < kPoseSolved; ++j) row.j[r][PoseValueOf(j)] = in[kPoseSolved * r + j];
+    for (int j = 0; j < kPoseSolved; ++j) row.j[r][j] = in[kPoseSolved * r + j];
     row.j[r][7] = 0;
   }
   return row;

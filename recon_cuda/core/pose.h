@@ -388,11 +388,10 @@ PERF_HD_INLINE void AddDiagPose(const PoseRow<T>& row, int64_t param, const T* g
 }
 
 // The pose block of J^T J (block-Jacobi preconditioning, solve/pose_blocks.h): per photo the
-// products of its 7 solved values (PoseParam order without the padding: rotation, focal, centre),
-// the upper triangle row by row (28 values, a multiple of 4 for the CUDA group sums).
+// products of its 7 solved values, the first 7 of PoseParam order (rotation, focal, centre; the
+// padding last), the upper triangle row by row (28 values, a multiple of 4 for the CUDA group sums).
 inline constexpr int kPoseSolved = 7;
 inline constexpr int kPoseBlock = kPoseSolved * (kPoseSolved + 1) / 2;
-PERF_HD_INLINE int PoseValueOf(int a) { return a; }  // solved value a in PoseParam order
 // Where entry (a, b), a <= b, of the upper triangle is.
 PERF_HD_INLINE int PoseBlockEntry(int a, int b) { return a * kPoseSolved - a * (a - 1) / 2 + (b - a); }
 
@@ -402,8 +401,8 @@ PERF_HD_INLINE void AddPoseBlock(const PoseRow<T>& row, const T* g2, Acc* block)
   int e = 0;
   for (int a = 0; a < kPoseSolved; ++a) {
     for (int b = a; b < kPoseSolved; ++b, ++e) {
-      T s = row.j[3][PoseValueOf(a)] * row.j[3][PoseValueOf(b)];
-      for (int r = 0; r < 3; ++r) s += g2[r] * row.j[r][PoseValueOf(a)] * row.j[r][PoseValueOf(b)];
+      T s = row.j[3][a] * row.j[3][b];
+      for (int r = 0; r < 3; ++r) s += g2[r] * row.j[r][a] * row.j[r][b];
       block[e] += s;
     }
   }

@@ -20,8 +20,9 @@ namespace perf::recon {
 // no neighbours: their weight is a prior's, the residual sqrt(w) x_i (gain 1, offset 0), which
 // fixes the gauge (all gains against all colours) and keeps the transforms near the identity.
 // The photos' pose corrections have a prior of the same form toward the imported pose, one
-// weight for the rotations, one for the centres and one for the focal lengths: it holds the set of cameras where the photos
-// do not say otherwise, and fixes the gauge (all cameras moving together against the volume).
+// weight for the rotations, one for the centres and one for the focal lengths: it holds the set
+// of cameras where the photos do not say otherwise, and fixes the gauge (all cameras moving
+// together against the volume).
 struct SmoothnessWeights {
   float grid_colour = 0, grid_density = 0, shell_colour = 0, shell_opacity = 0, exposure = 0;
   float pose_rotation = 0, pose_centre = 0, pose_focal = 0;

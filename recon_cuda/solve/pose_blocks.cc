@@ -17,11 +17,12 @@ void SolvePoseBlocks(int photos, std::span<const double> blocks, const float* r,
     Eigen::Matrix<double, kPoseSolved, kPoseSolved> b;
     Eigen::Matrix<double, kPoseSolved, 1> rhs;
     for (int a = 0; a < kPoseSolved; ++a) {
-      const int64_t ia = base + PoseValueOf(a);
+      const int64_t ia = base + a;
       const bool fa = free[ia] != 0.f;
       for (int c = 0; c < kPoseSolved; ++c) {
-        const bool fc = free[base + PoseValueOf(c)] != 0.f;
-        b(a, c) = a == c ? std::max(diag[ia], floor) : (fa && fc ? blocks[kPoseBlock * k + PoseBlockEntry(std::min(a, c), std::max(a, c))] : 0.0);
+        const bool fc = free[base + c] != 0.f;
+        const double jtj = blocks[kPoseBlock * k + PoseBlockEntry(std::min(a, c), std::max(a, c))];
+        b(a, c) = a == c ? std::max(diag[ia], floor) : (fa && fc ? jtj : 0.0);
       }
       rhs(a) = fa ? r[ia] : 0.0;
     }
@@ -31,7 +32,7 @@ void SolvePoseBlocks(int photos, std::span<const double> blocks, const float* r,
                                                        : Eigen::Matrix<double, kPoseSolved, 1>(
                                                              rhs.array() / b.diagonal().array());
     for (int a = 0; a < kPoseSolved; ++a) {
-      const int64_t ia = base + PoseValueOf(a);
+      const int64_t ia = base + a;
       z[ia] = free[ia] != 0.f ? static_cast<float>(x(a)) : 0.f;
     }
   }
