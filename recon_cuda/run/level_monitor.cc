@@ -229,13 +229,8 @@ double LevelMonitor::HeldOutPsnr(VecId params, const PhotoCorrections& exposures
 
 void LevelMonitor::WritePreview(const HierarchyLevel& h, int iteration, const PhotoCorrections& exposures) {
   const auto t0 = WallClock::now();
-  // The chosen photo where rank 0 holds it, else rank 0's first held-out view (its share starts
-  // with the split's first image), else its first training view.
-  const PosedImage* view = run_.test.empty() ? &run_.train.front() : &run_.test.front();
-  for (const auto* views : {&run_.test, &run_.train}) {
-    for (const PosedImage& v : *views) view = !o_.preview_image.empty() && v.name == o_.preview_image ? &v : view;
-  }
-  const RenderOutput r = RenderAsShot(run_.backend.get(), h.params, *view, o_.min_box_opacity, exposures);
+  // Rank 0's (its share starts with each split's first image; ReconstructRun::preview).
+  const RenderOutput r = RenderAsShot(run_.backend.get(), h.params, *run_.preview, o_.min_box_opacity, exposures);
   const fs::path p = o_.workspace / "preview" / StrCat("recon_l", h.level, "_i", iteration + 1, ".png");
   EnsureWritableDirectory(p.parent_path());
   WriteImage(p, ToImage(r), PixelFormat::kUInt8);

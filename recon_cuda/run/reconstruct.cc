@@ -209,15 +209,16 @@ class Reconstruction {
     run_.train = LoadImages(run_.scene, o_.workspace, Split::kTrain, {}, share);
     run_.test = LoadImages(run_.scene, o_.workspace, Split::kTest, {}, share);
     run_.test_views = static_cast<int64_t>(SplitViews(run_.scene, Split::kTest).size());
-    if (!o_.preview_image.empty() && run_.root) {
-      bool found = false;
-      for (const auto* views : {&run_.test, &run_.train}) {
-        for (const PosedImage& v : *views) found = found || v.name == o_.preview_image;
+    run_.preview = run_.test.empty() ? (run_.train.empty() ? nullptr : &run_.train.front()) : &run_.test.front();
+    for (const auto* views : {&run_.test, &run_.train}) {
+      for (const PosedImage& v : *views) {
+        if (v.name == o_.preview_image) run_.preview = &v;
       }
-      if (!found && comm.size() == 1) {
-        throw InputError((o_.workspace / "scene.json").string(), "--view-image", o_.preview_image,
-                         "no training or held-out photo of that name", "use an image name from scene.json");
-      }
+    }
+    const bool chosen = run_.preview != nullptr && run_.preview->name == o_.preview_image;
+    if (!o_.preview_image.empty() && !chosen && run_.root && comm.size() == 1) {
+      throw InputError((o_.workspace / "scene.json").string(), "--view-image", o_.preview_image,
+                       "no training or held-out photo of that name", "use an image name from scene.json");
     }
     if (start_level == 0 && run_.root) run_.previous.emplace(o_.workspace);
     if (run_.root) run_.log = JsonLog(o_.workspace / "recon" / "log.jsonl", start_level > 0, "reconstruction log");

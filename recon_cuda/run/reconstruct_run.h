@@ -37,6 +37,9 @@ struct ReconstructRun {
   std::vector<ViewFrustum> train_views;             // every rank's
   std::vector<std::string> train_names;             // every rank's, scene.json order
   std::vector<PosedImage> train, test;              // this rank's share
+  // The photo previews render (in this rank's share): ReconstructOptions::preview_image where
+  // the share holds it, else the first held-out view, else the first training view.
+  const PosedImage* preview = nullptr;
   int64_t test_views = 0;                           // every rank's
   std::optional<PreviousRun> previous;  // a fresh start's: the earlier run's files, aside
   JsonLog log;                          // rank 0's recon/log.jsonl
