@@ -45,17 +45,11 @@ void AddSolverOptions(CLI::App* cmd, recon::SolverOptions* solver) {
 
 // --refine-poses and its settings.
 void AddPoseOptions(CLI::App* cmd, recon::ReconstructOptions& o) {
-  using recon::PoseChoice;
-  AddChoiceOption(cmd, "--refine-poses", &o.poses,
-                  {{"auto", PoseChoice::kAuto}, {"on", PoseChoice::kOn}, {"off", PoseChoice::kOff}},
-                  "Refine every training photo's camera (a rotation and a centre correction) with the volume in "
-                  "Gauss-Newton (auto: for COLMAP photos, not for NeRF json scenes)");
+  AddCameraRefinementOptions(cmd, &o.poses, &o.refine_focal);
   cmd->add_option("--refine-poses-from", o.refine_poses_from,
                   "With --refine-poses: the first level that refines them, 1 to 6 (earlier levels hold the "
                   "imported poses)")
       ->capture_default_str();
-  AddChoiceOption(cmd, "--refine-intrinsics", &o.refine_focal, {{"off", false}, {"focal", true}},
-                  "With refined poses: also refine each training photo's focal length (off: the imported one)");
   cmd->add_option("--pose-prior", o.solver.pose_prior,
                   "Weight of the prior that keeps the refined cameras near the imported ones, relative to the photos")
       ->capture_default_str();

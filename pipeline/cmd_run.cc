@@ -45,12 +45,7 @@ void AddRunCommand(CLI::App& app) {
   AddChoiceOption(cmd, "--exposure", &o.exposure,
                   {{"auto", ExposureChoice::kAuto}, {"on", ExposureChoice::kOn}, {"off", ExposureChoice::kOff}},
                   "Solve each photo's exposure (gain and offset per channel; auto: for COLMAP photos)");
-  using recon::PoseChoice;
-  AddChoiceOption(cmd, "--refine-poses", &o.poses,
-                  {{"auto", PoseChoice::kAuto}, {"on", PoseChoice::kOn}, {"off", PoseChoice::kOff}},
-                  "Refine every training photo's camera with the volume (auto: for COLMAP photos)");
-  AddChoiceOption(cmd, "--refine-intrinsics", &o.refine_focal, {{"off", false}, {"focal", true}},
-                  "With refined poses: also refine each training photo's focal length (off: the imported one)");
+  AddCameraRefinementOptions(cmd, &o.poses, &o.refine_focal);
   cmd->add_flag("--keep-bad-poses", o.keep_bad_poses,
                 "Train and score on COLMAP photos whose pose looks wrong too (by default they are left out and named)");
   AddLiveViewOptions(cmd, &args->view, &args->view_options.port, &args->o.view_image,

@@ -62,6 +62,16 @@ void AddDeviceOptions(CLI::App* cmd, recon::DeviceChoice* device, int* threads) 
   AddThreadsOption(cmd, threads, 0);
 }
 
+void AddCameraRefinementOptions(CLI::App* cmd, recon::PoseChoice* poses, bool* refine_focal) {
+  using recon::PoseChoice;
+  AddChoiceOption(cmd, "--refine-poses", poses,
+                  {{"auto", PoseChoice::kAuto}, {"on", PoseChoice::kOn}, {"off", PoseChoice::kOff}},
+                  "Refine every training photo's camera (a rotation and a centre correction) with the volume in "
+                  "Gauss-Newton (auto: for COLMAP photos, not for NeRF json scenes)");
+  AddChoiceOption(cmd, "--refine-intrinsics", refine_focal, {{"off", false}, {"focal", true}},
+                  "With refined poses: also refine each training photo's focal length (off: the imported one)");
+}
+
 void AddLiveViewOptions(CLI::App* cmd, bool* view, int* port, std::string* image, const std::string& after) {
   cmd->add_flag("--view", *view,
                 StrCat("Serve perf view's page while the command runs (stage, iteration, ETA, the PSNR curve, a photo's "

@@ -10,6 +10,7 @@
 
 #include "common/workspace_lock.h"
 #include "recon_cuda/backends/make_backend.h"
+#include "recon_cuda/run/reconstruct_options.h"
 
 namespace CLI {
 class App;
@@ -53,6 +54,10 @@ const std::atomic<bool>& StopRequested();
 
 // --device and -j,--threads: the same for every command that runs a backend.
 void AddDeviceOptions(CLI::App* cmd, recon::DeviceChoice* device, int* threads);
+
+// --refine-poses and --refine-intrinsics: camera refinement, the same for perf run and perf
+// reconstruct.
+void AddCameraRefinementOptions(CLI::App* cmd, recon::PoseChoice* poses, bool* refine_focal);
 
 // --view, --view-port, --view-image: perf view's page while the command runs (viewer/live_view.h);
 // `after` says what becomes of the page when the command ends.

@@ -295,10 +295,7 @@ void RunOptions::Check() const {
   if (levels < 0 || levels > 6) throw InputError(kCommandLine, "--levels", StrCat(levels), "must be 1 to 6");
   if (iterations < 0) throw InputError(kCommandLine, "--iterations", StrCat(iterations), "must be >= 0");
   if (max_resolution < 0) throw InputError(kCommandLine, "--max-resolution", StrCat(max_resolution), "must be >= 0");
-  if (refine_focal && poses == recon::PoseChoice::kOff) {
-    throw InputError(kCommandLine, "--refine-intrinsics", "focal", "refines the focal length with the poses",
-                     "add --refine-poses on");
-  }
+  recon::CheckCameraRefinement(poses, refine_focal);  // before the import, not only at the reconstruction
   for (const fs::path* p : {&images, &colmap, &nerf}) {
     if (!p->empty() && !fs::exists(*p)) throw IoError(p->string(), "does not exist", "check the path");
   }

@@ -41,9 +41,7 @@ void ReconstructOptions::Check() const {
   if (poses == PoseChoice::kOn && solver.type == SolverType::kAdam) {
     Fail("--refine-poses", "on", "refines poses in Gauss-Newton only", "use --solver gn, or --refine-poses off");
   }
-  if (refine_focal && poses == PoseChoice::kOff) {
-    Fail("--refine-intrinsics", "focal", "refines the focal length with the poses", "add --refine-poses on");
-  }
+  CheckCameraRefinement(poses, refine_focal);
   if (refine_poses_from < 1 || refine_poses_from > 6) {
     Fail("--refine-poses-from", std::to_string(refine_poses_from), "must be a level, 1 (the first) to 6");
   }
@@ -105,6 +103,12 @@ HierarchyOptions ReconstructOptions::Hierarchy(const Scene& scene, const LevelCh
 
 bool FixedBackground(BackgroundChoice background, const Scene& scene) {
   return background == BackgroundChoice::kAuto ? EveryImageHasAlpha(scene) : background == BackgroundChoice::kFixed;
+}
+
+void CheckCameraRefinement(PoseChoice poses, bool refine_focal) {
+  if (refine_focal && poses == PoseChoice::kOff) {
+    Fail("--refine-intrinsics", "focal", "refines the focal length with the poses", "add --refine-poses on");
+  }
 }
 
 bool SolvesExposures(ExposureChoice exposure, const Scene& scene) {

@@ -113,6 +113,10 @@ struct ReconstructOptions {
 // Whether `background` fixes the shells for this scene.
 bool FixedBackground(BackgroundChoice background, const Scene& scene);
 
+// Throws InputError (naming --refine-intrinsics) when the focal length is asked for with the poses
+// off: it is refined with them.
+void CheckCameraRefinement(PoseChoice poses, bool refine_focal);
+
 // Whether `exposure` solves the photos' exposures for this scene (kAuto: COLMAP photos).
 bool SolvesExposures(ExposureChoice exposure, const Scene& scene);
 
