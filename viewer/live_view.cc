@@ -36,9 +36,9 @@ std::string NewestPreview(const fs::path& workspace) {
 LiveView::LiveView(ViewOptions options) : server_(Live(options)) {
   const fs::path workspace = options.workspace;
   server_.SetLiveStatus([this, workspace] {
-    nlohmann::json j = nlohmann::json::parse(StatusJson());
+    nlohmann::json j = Status();
     j["preview"] = NewestPreview(workspace);
-    return j.dump();
+    return j;
   });
   port_ = server_.Bind();
   thread_ = std::thread([this] { server_.Serve(); });
@@ -75,12 +75,10 @@ void LiveView::End(const std::string& state) {
   eta_seconds_ = -1;
 }
 
-std::string LiveView::StatusJson() const {
+nlohmann::json LiveView::Status() const {
   std::lock_guard<std::mutex> lock(mu_);
-  return nlohmann::json{{"state", state_},       {"stage", stage_},           {"level", level_},
-                        {"levels", levels_},     {"iteration", iteration_},   {"iterations", iterations_},
-                        {"eta_seconds", eta_seconds_}}
-      .dump();
+  return {{"state", state_},   {"stage", stage_},         {"level", level_},          {"levels", levels_},
+          {"iteration", iteration_}, {"iterations", iterations_}, {"eta_seconds", eta_seconds_}};
 }
 
 }  // namespace perf::viewer

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <memory>
 #include <mutex>
+#include <nlohmann/json_fwd.hpp>
 #include <string>
 #include <thread>
 
@@ -33,7 +34,7 @@ class LiveView {
   void End(const std::string& state);
 
  private:
-  std::string StatusJson() const;
+  nlohmann::json Status() const;
 
   ViewServer server_;
   int port_ = 0;

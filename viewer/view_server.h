@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <functional>
 #include <memory>
+#include <nlohmann/json_fwd.hpp>
 #include <string>
 
 namespace perf::viewer {
@@ -38,9 +39,9 @@ class ViewServer {
   void Stop();
   // "http://127.0.0.1:8765/"
   std::string Url() const;
-  // A running command's state for /api/status (live_view.h): a JSON object's text, merged into
-  // the status; called from the server's threads.
-  void SetLiveStatus(std::function<std::string()> status);
+  // A running command's state for /api/status (live_view.h): a JSON object merged into the
+  // status; called from the server's threads.
+  void SetLiveStatus(std::function<nlohmann::json()> status);
 
  private:
   struct Impl;
