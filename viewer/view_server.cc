@@ -76,7 +76,7 @@ struct ViewServer::Impl {
   int port = 0;
   std::once_flag points_once;
   std::string points;
-  std::function<std::string()> live;  // set before Bind
+  std::function<nlohmann::json()> live;  // set before Bind
   // Stop() may come before Serve() listens (httplib's stop() is a no-op until then).
   std::atomic<bool> stop_requested{false}, serving{false};
 
@@ -121,7 +121,7 @@ void ViewServer::Impl::Routes() {
   ServeJson("/api/run", "run.json");
   server.Get("/api/status", [this](const httplib::Request&, httplib::Response& res) {
     nlohmann::json status{{"workspace", o.workspace.filename().string()}, {"live", live != nullptr}};
-    if (live) status.update(nlohmann::json::parse(live(), nullptr, false));
+    if (live) status.update(live());
     res.set_header("Cache-Control", "no-store");
     res.set_content(status.dump(), "application/json");
   });
@@ -168,6 +168,18 @@ void ViewServer::Impl::Routes() {
     res.status = 405;
     res.set_content("perf view only reads", "text/plain");
   };
+  // A Content-Length that is not a count of bytes is a malformed request, whatever the method
+  // (httplib 0.11 answered some GETs carrying "-5" with the page).
+  server.set_pre_routing_handler([](const httplib::Request& req, httplib::Response& res) {
+    if (!req.has_header("Content-Length")) return httplib::Server::HandlerResponse::Unhandled;
+    const std::string v = req.get_header_value("Content-Length");
+    if (!v.empty() && v.size() <= 18 && v.find_first_not_of("0123456789") == std::string::npos) {
+      return httplib::Server::HandlerResponse::Unhandled;
+    }
+    res.status = 400;
+    res.set_content("bad Content-Length", "text/plain");
+    return httplib::Server::HandlerResponse::Handled;
+  });
   server.Post(R"(/.*)", refuse);
   server.Put(R"(/.*)", refuse);
   server.Delete(R"(/.*)", refuse);
@@ -230,7 +242,7 @@ std::string ViewServer::Url() const {
   return StrCat("http://", host == "0.0.0.0" ? "127.0.0.1" : host, ":", impl_->port, "/");
 }
 
-void ViewServer::SetLiveStatus(std::function<std::string()> status) { impl_->live = std::move(status); }
+void ViewServer::SetLiveStatus(std::function<nlohmann::json()> status) { impl_->live = std::move(status); }
 
 bool IsLoopback(const std::string& host) {
   return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;
