@@ -22,6 +22,10 @@ namespace {
 void AddSolverOptions(CLI::App* cmd, recon::SolverOptions* solver) {
   cmd->add_option("--max-cg-iterations", solver->max_cg_iterations, "PCG iterations per Gauss-Newton step at most")
       ->capture_default_str();
+  cmd->add_option("--jtj-ray-stride", solver->jtj_ray_stride,
+                  "Subsampled Gauss-Newton: PCG multiplies by J^T J on every k-th ray only (the gradient keeps all "
+                  "rays; 1: exact)")
+      ->capture_default_str();
   cmd->add_option("--smooth-grid", solver->smooth_grid,
                   "Smoothness between neighbouring grid cells, relative to the photos (1: a pair as stiff as the mean "
                   "cell's data; 0: off; default: 0.3 where the background is learned, 0 where it is fixed)");

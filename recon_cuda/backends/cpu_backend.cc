@@ -114,9 +114,11 @@ class CpuBackend final : public Backend {
     vectors_.arena().execute([&] {
       tbb::parallel_for(int64_t{0}, static_cast<int64_t>(blocks_.size()), [&](int64_t b) {
         BlockJ& block = blocks_[b];
+        const int64_t first_ray = jtj_.FirstFrom(b * kBlockRays);
         uint32_t first = 0, kept = 0;
         for (size_t r = 0; r < block.end.size(); ++r) {
-          const BoxRay<float> ray = TrainingRayOf(vol, b * kBlockRays + static_cast<int64_t>(r), lin_seed_).ray;
+          const int64_t i = first_ray + static_cast<int64_t>(r) * jtj_.stride;
+          const BoxRay<float> ray = TrainingRayOf(vol, i, lin_seed_).ray;
           for (uint32_t j = first; j < block.end[r]; ++j) {
             const SampleJ& sj = block.samples[j];
             if (SkippableSample(TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(sj.t)), sj.sp, pf)) continue;
@@ -141,8 +143,8 @@ class CpuBackend final : public Backend {
     vectors_.AdamStep(x, g, m, v, s, t, level_.shape);
   }
 
-  PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset) override {
-    PERF_CHECK(subset.Valid());
+  PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset, RaySubset jtj) override {
+    PERF_CHECK(subset.Valid() && jtj.Valid());
     const auto t0 = WallClock::now();
     const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, vec(x).data());
     const bool want_diag = diag != kNoVector;
@@ -150,9 +152,9 @@ class CpuBackend final : public Backend {
     const uint64_t pass = BeginPass();
     PassStats stats = ForBlocks(want_diag ? 2 : 1, pass, [&](int64_t block, int64_t begin, int64_t end, Scratch& s) {
       BlockJ* out = record ? &blocks_[block] : nullptr;
-      if (out) out->Clear(end - begin, level_.shape);
-      return want_diag ? LinearizeBlock<true>(vol, seed, subset, begin, end, s, out)
-                       : LinearizeBlock<false>(vol, seed, subset, begin, end, s, out);
+      if (out) out->Clear(jtj.CountIn(begin, end), level_.shape);
+      return want_diag ? LinearizeBlock<true>(vol, seed, subset, jtj, begin, end, s, out)
+                       : LinearizeBlock<false>(vol, seed, subset, jtj, begin, end, s, out);
     });
     if (want_diag) {
       ReduceInterleaved(pass, g, diag);
@@ -166,6 +168,7 @@ class CpuBackend final : public Backend {
     }
     lin_x_ = x;
     lin_seed_ = seed;
+    jtj_ = jtj;
     linearized_ = true;
     recorded_ = record;
     stats.seconds = SecondsSince(t0);
@@ -182,7 +185,8 @@ class CpuBackend final : public Backend {
     PassStats stats = ForBlocks(1, pass, [&](int64_t block, int64_t begin, int64_t end, Scratch& s) {
       BlockStats bs;
       AddSink sink{s.acc.data()};
-      for (int64_t i = begin; i < end; ++i) {
+      int64_t r = 0;  // the ray's index in the block's record
+      for (int64_t i = jtj_.FirstFrom(begin); i < end; i += jtj_.stride, ++r) {
         const TrainingRay tr = TrainingRayOf(vol, i, lin_seed_);
         const BoxRay<float>& ray = tr.ray;
         const SampleJ* samples;
@@ -193,7 +197,6 @@ class CpuBackend final : public Backend {
         int count;
         if (recorded_) {
           const BlockJ& b = blocks_[block];
-          const int64_t r = i - begin;
           const uint32_t first = r == 0 ? 0 : b.end[r - 1];
           samples = b.samples.data() + first;
           count = static_cast<int>(b.end[r] - first);
@@ -266,8 +269,7 @@ class CpuBackend final : public Backend {
     PERF_CHECK(subset.Valid());
     PassStats stats = ForBlocks(0, 0, [&](int64_t, int64_t begin, int64_t end, Scratch&) {
       BlockStats bs;
-      int64_t i = begin + ((subset.offset - begin % subset.stride) + subset.stride) % subset.stride;
-      for (; i < end; i += subset.stride) {
+      for (int64_t i = subset.FirstFrom(begin); i < end; i += subset.stride) {
         const TrainingRay tr = TrainingRayOf(vol, i, seed);
         const RayOutput<float> fwd =
             Forward(vol, tr.ray, tr.jit, &level_.rays->colours[3 * i], weight_, level_.residuals.stop_transmittance,
@@ -321,10 +323,12 @@ class CpuBackend final : public Backend {
   const std::vector<float>& vec(VecId v) const { return vectors_[v]; }
 
   template <bool kDiag>
-  BlockStats LinearizeBlock(const VolumeView<float>& vol, uint32_t seed, RaySubset subset, int64_t begin,
-                            int64_t end, Scratch& s, BlockJ* out) const {
+  BlockStats LinearizeBlock(const VolumeView<float>& vol, uint32_t seed, RaySubset subset, RaySubset jtj,
+                            int64_t begin, int64_t end, Scratch& s, BlockJ* record) const {
     BlockStats bs;
+    int64_t r_out = 0;  // the next recorded ray's index in the block's record
     for (int64_t i = begin; i < end; ++i) {
+      BlockJ* out = record && jtj.Contains(i) ? record : nullptr;
       const TrainingRay tr = TrainingRayOf(vol, i, seed);
       const BoxRay<float>& ray = tr.ray;
       const Jitter& jit = tr.jit;
@@ -341,7 +345,7 @@ class CpuBackend final : public Backend {
                                 AddSink{s.acc.data(), kDiag ? 1 : 0, 0},
                                 AddSink{kDiag ? s.acc.data() : nullptr, 1, 4},
                                 out,
-                                out ? &out->shells[(i - begin) * level_.shape.num_shells] : nullptr};
+                                out ? &out->shells[r_out * level_.shape.num_shells] : nullptr};
       VolumeU(e, r, v.r);
       GainSquared(e, v.g2);
       v.sh = ShOfRay(vol, ray);
@@ -355,7 +359,7 @@ class CpuBackend final : public Backend {
           AddDiagPose(row, tr.pose, v.g2, v.d);
           AddPoseBlock(row, v.g2, &s.pose_blocks[kPoseBlock * ((tr.pose - vol.PoseStart()) / kPoseValues)]);
         }
-        if (out) PackPoseRow(row, &out->pose[kPoseRowValues * (i - begin)]);
+        if (out) PackPoseRow(row, &out->pose[kPoseRowValues * r_out]);
       } else {
         Backward(vol, ray, jit, fwd, v, s.record.data());
       }
@@ -363,9 +367,10 @@ class CpuBackend final : public Backend {
       ScatterJtuExposure(e, r, v.g);
       if constexpr (kDiag) AddDiagExposure(e, v.d);
       if (out) {
-        out->end[i - begin] = static_cast<uint32_t>(out->samples.size());
-        for (int c = 0; c < 3; ++c) out->h[3 * (i - begin) + c] = fwd.h[c];
-        out->scale[i - begin] = scale;
+        out->end[r_out] = static_cast<uint32_t>(out->samples.size());
+        for (int c = 0; c < 3; ++c) out->h[3 * r_out + c] = fwd.h[c];
+        out->scale[r_out] = scale;
+        ++r_out;
       }
       bs.Add(fwd, robust_, subset.Contains(i));
     }
@@ -480,6 +485,7 @@ class CpuBackend final : public Backend {
   float robust_ = 0;               // ResidualSettings::robust_scale
   VecId lin_x_ = kNoVector;
   uint32_t lin_seed_ = 0;
+  RaySubset jtj_;  // the last Linearize's rays of MultiplyJtJ (the recorded ones)
   uint64_t pass_ = 0;
 };
 

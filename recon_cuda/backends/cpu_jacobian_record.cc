@@ -13,7 +13,8 @@ namespace perf::recon::cpu {
 // early termination only shortens it; a sparse grid's march counted sample by sample, plus an
 // eighth for the jittered samples that land differently, on every 4th ray of a block and scaled
 // to the block: an estimate, and a quarter of a march) times the per-sample record, plus the
-// shell records and, when poses are refined, the pose rows.
+// shell records and, when poses are refined, the pose rows; of the recorded rays (every
+// p.jtj_ray_stride-th) only.
 void BlockJ::Clear(int64_t rays, const VolumeShape& shape) {
   samples.clear();
   end.assign(rays, 0);
@@ -64,8 +65,10 @@ int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, const C
   });
   int64_t samples = 0;
   for (int64_t c : per_block) samples += c;
-  return samples * static_cast<int64_t>(sizeof(SampleJ)) +
-         n * (static_cast<int64_t>(sizeof(uint32_t) + 4 * sizeof(float)) +
+  // Only every jtj_ray_stride-th ray is recorded.
+  const int64_t stride = std::max(1, p.jtj_ray_stride), recorded = (n + stride - 1) / stride;
+  return samples / stride * static_cast<int64_t>(sizeof(SampleJ)) +
+         recorded * (static_cast<int64_t>(sizeof(uint32_t) + 4 * sizeof(float)) +
               p.shape.num_shells * static_cast<int64_t>(sizeof(ShellJ)) +
               (p.shape.poses > 0 ? kPoseRowValues * static_cast<int64_t>(sizeof(float)) : 0));
 }

@@ -149,7 +149,7 @@ struct RecordOnly {
 // checked against `count` photos, or nullptr when the level solves none (count 0).
 const int32_t* PhotoSlots(const LevelProblem& p, int count);
 
-// Bytes of the Jacobian record of `p`'s rays, in blocks of `block_rays` rays (an estimate made by
+// Bytes of the Jacobian record of `p`'s rays (every p.jtj_ray_stride-th), in blocks of `block_rays` rays (an estimate made by
 // marching the rays, on the arena of `vectors`).
 int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, const CpuVectors& vectors);
 

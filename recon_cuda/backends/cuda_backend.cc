@@ -241,8 +241,8 @@ class CudaBackend final : public Backend {
     cuda::AdamStep(ptr(x), ptr(g), ptr(m), ptr(v), AdamCoefficientsAt(s, t), n(), level_.shape.Layout());
   }
 
-  PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset) override {
-    PERF_CHECK(subset.Valid());
+  PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset, RaySubset jtj) override {
+    PERF_CHECK(subset.Valid() && jtj.Valid());
     const auto t0 = WallClock::now();
     const cuda::RayStats r =
         cuda::Linearize(Input(x, seed), ptr(g), diag == kNoVector ? nullptr : ptr(diag),
@@ -251,6 +251,7 @@ class CudaBackend final : public Backend {
     blocks_fresh_ = diag != kNoVector && pose_blocks_.size() > 0;
     lin_x_ = x;
     lin_seed_ = seed;
+    jtj_ = jtj;
     linearized_ = true;
     restrict_to_ = nullptr;
     return ToPassStats(r, t0);
@@ -260,7 +261,8 @@ class CudaBackend final : public Backend {
     PERF_CHECK_MSG(linearized_, "MultiplyJtJ before Linearize");
     const auto t0 = WallClock::now();
     const cuda::RayStats r =
-        cuda::MultiplyJtJ(Input(lin_x_, lin_seed_), ptr(p), restrict_to_, ptr(out), n(), scratch_->Stats());
+        cuda::MultiplyJtJ(Input(lin_x_, lin_seed_), ptr(p), restrict_to_, ptr(out), n(), jtj_.stride, jtj_.offset,
+                          scratch_->Stats());
     return ToPassStats(r, t0);
   }
 
@@ -404,6 +406,7 @@ class CudaBackend final : public Backend {
   bool linearized_ = false;
   VecId lin_x_ = kNoVector;
   uint32_t lin_seed_ = 0;
+  RaySubset jtj_;  // the last Linearize's rays of MultiplyJtJ
   const float* restrict_to_ = nullptr;  // RestrictJacobian's free vector until the next Linearize
 };
 

@@ -67,10 +67,11 @@ size_t StatsTempBytes(int64_t blocks);
 // photos' pose blocks (pose.h AddPoseBlock), needed with diag when the rays refine poses.
 RayStats Linearize(const PassInput& in, float* g, float* diag, float* pose_blocks, int64_t params, int stride,
                    int offset, const StatsScratch& s);
-// out = J^T J p at in.vol (the linearisation point) and in.seed; p, out: [ParamCount].
-// free: nullptr, or the parameters the product is needed on (backend.h RestrictJacobian).
-RayStats MultiplyJtJ(const PassInput& in, const float* p, const float* free, float* out, int64_t params,
-                     const StatsScratch& s);
+// out = J_S^T J_S p at in.vol (the linearisation point) and in.seed, S the rays offset, offset +
+// stride, ...; p, out: [ParamCount]. free: nullptr, or the parameters the product is needed on
+// (backend.h RestrictJacobian).
+RayStats MultiplyJtJ(const PassInput& in, const float* p, const float* free, float* out, int64_t params, int stride,
+                     int offset, const StatsScratch& s);
 // Rays offset, offset + stride, ... only.
 RayStats Cost(const PassInput& in, int stride, int offset, const StatsScratch& s);
 // Rows y0 .. y0 + rows - 1 of an image `width` pixels wide; colour: [rows, width, 3], opacity:

@@ -232,13 +232,16 @@ __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, flo
   WriteBlockStats(mine, partials);
 }
 
+// Thread j multiplies ray offset + j stride of `count` such rays.
 template <bool kPoses>
 __global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const float* p, const float* free,
-                                                          float* out, RayStats* partials) {
-  const int64_t i = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+                                                          float* out, int64_t stride, int64_t offset,
+                                                          int64_t count, RayStats* partials) {
+  const int64_t j = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   RayStats mine;
   ExposureSums eo, po;
-  if (i < in.rays.count) {
+  if (j < count) {
+    const int64_t i = offset + j * stride;
     const TrainingRay r = MakeRay(in, i);
     // The partials depend on the forward's transmittances and colours (and on whether the ray
     // has an alpha, not on its value); the exposure's on H; the robust row scale on the residual.
@@ -406,16 +409,18 @@ RayStats Linearize(const PassInput& in, float* g, float* diag, float* pose_block
   return Total(s, blocks);
 }
 
-RayStats MultiplyJtJ(const PassInput& in, const float* p, const float* free, float* out, int64_t params,
-                     const StatsScratch& s) {
+RayStats MultiplyJtJ(const PassInput& in, const float* p, const float* free, float* out, int64_t params, int stride,
+                     int offset, const StatsScratch& s) {
+  PERF_CHECK(stride >= 1 && offset >= 0 && offset < stride);
   PERF_CUDA_CHECK(cudaMemset(out, 0, params * sizeof(float)));
-  const int64_t blocks = PassBlocks(in.rays.count);
+  const int64_t count = in.rays.count > offset ? (in.rays.count - offset + stride - 1) / stride : 0;
+  const int64_t blocks = PassBlocks(count);
   if (blocks == 0) return {};
   PERF_CHECK(blocks <= s.capacity);
   if (in.rays.pose_slot) {
-    JtJpKernel<true><<<GridFor(blocks), kRayThreads>>>(in, p, free, out, s.partials);
+    JtJpKernel<true><<<GridFor(blocks), kRayThreads>>>(in, p, free, out, stride, offset, count, s.partials);
   } else {
-    JtJpKernel<false><<<GridFor(blocks), kRayThreads>>>(in, p, free, out, s.partials);
+    JtJpKernel<false><<<GridFor(blocks), kRayThreads>>>(in, p, free, out, stride, offset, count, s.partials);
   }
   PERF_CUDA_CHECK_LAUNCH("JtJpKernel");
   return Total(s, blocks);

@@ -65,9 +65,10 @@ void DistributedBackend::Sum(PassStats* s) {
   s->subset_cost = v[4];
 }
 
-PassStats DistributedBackend::Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset) {
-  PERF_CHECK(subset.Valid());
-  PassStats s = inner_->Linearize(x, seed, g, diag, Local(subset));
+PassStats DistributedBackend::Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset,
+                                        RaySubset jtj) {
+  PERF_CHECK(subset.Valid() && jtj.Valid());
+  PassStats s = inner_->Linearize(x, seed, g, diag, Local(subset), Local(jtj));
   if (g != kNoVector) Sum(g);
   if (diag != kNoVector) Sum(diag);
   Sum(&s);

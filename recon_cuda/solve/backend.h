@@ -69,6 +69,9 @@ struct LevelProblem {
   // The photos' focal lengths (PoseParam's value 3) are held at the imported ones
   // (HierarchyOptions::refine_focal is off).
   bool fixed_focal = true;
+  // MultiplyJtJ will run on every k-th ray (SolverOptions::jtj_ray_stride): what the CPU
+  // backend's Jacobian record is sized for.
+  int jtj_ray_stride = 1;
   HeldKinds Held() const { return {fixed_shells, fixed_poses, fixed_volume, fixed_focal}; }
 };
 
@@ -92,6 +95,13 @@ struct RaySubset {
   int offset = 0;
   bool Valid() const { return stride >= 1 && offset >= 0 && offset < stride; }
   bool Contains(int64_t i) const { return i % stride == offset; }
+  // The first ray of the subset at or after ray i >= 0.
+  int64_t FirstFrom(int64_t i) const { return i + ((offset - i % stride) + stride) % stride; }
+  // Rays of the subset in [begin, end).
+  int64_t CountIn(int64_t begin, int64_t end) const {
+    const int64_t first = FirstFrom(begin);
+    return first < end ? (end - first + stride - 1) / stride : 0;
+  }
 };
 
 struct PassStats {
@@ -218,9 +228,13 @@ class Backend {
   virtual void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) = 0;
 
   // Passes. `seed` fixes every ray's jitter; the same seed gives the same rays in every pass.
-  // g and diag: outputs, or kNoVector to skip (Adam needs no diagonal).
-  virtual PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset = {}) = 0;
-  // out = J^T J p, J at the last Linearize's x and seed (x must not have changed since).
+  // g and diag: outputs, or kNoVector to skip (Adam needs no diagonal). subset: the rays whose
+  // cost PassStats::subset_cost sums. jtj: the rays MultiplyJtJ multiplies until the next
+  // Linearize (subsampled Gauss-Newton; the CPU backend records only their partials).
+  virtual PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset = {},
+                              RaySubset jtj = {}) = 0;
+  // out = J_S^T J_S p, J_S the rows of the last Linearize's jtj rays at its x and seed (x must not
+  // have changed since); not scaled to all rays.
   virtual PassStats MultiplyJtJ(VecId p, VecId out) = 0;
   virtual PassStats Cost(VecId x, uint32_t seed, RaySubset subset = {}) = 0;
   // No jitter; where the box's opacity along a ray is below min_box_opacity the box is treated

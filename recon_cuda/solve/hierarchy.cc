@@ -57,6 +57,7 @@ std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geomet
     LevelProblem problem{h.shape, geometry, &rays, residuals, o.fixed_background};
     problem.fixed_poses = level < o.refine_poses_from;
     problem.fixed_focal = !o.refine_focal;
+    problem.jtj_ray_stride = o.solver.jtj_ray_stride;
     if (o.stop_when_out_of_memory && level > 0) {
       h.memory = backend->EstimateMemory(problem, RequiredVectors(o.solver.type));
       if (!h.memory.Fits()) {

@@ -66,6 +66,9 @@ void SolverOptions::Check() const {
   if (!(step_factor > 0 && step_factor < 1)) Fail("step_factor", StrCat(step_factor), "must be in (0, 1)");
   if (max_line_search_steps < 1) Fail("max_line_search_steps", std::to_string(max_line_search_steps), "must be >= 1");
   if (line_search_ray_stride < 1) Fail("line_search_ray_stride", std::to_string(line_search_ray_stride), "must be >= 1");
+  if (jtj_ray_stride < 1 || jtj_ray_stride > 64) {
+    Fail("jtj_ray_stride (--jtj-ray-stride)", std::to_string(jtj_ray_stride), "must be 1 to 64");
+  }
   if (!(pose_prior >= 0 && std::isfinite(pose_prior))) {
     Fail("pose_prior (--pose-prior)", StrCat(pose_prior), "must be finite and >= 0");
   }
@@ -185,6 +188,7 @@ int SolvePcg(const SolverOptions& o, Backend* b, const SmoothnessWeights& w, Sol
   int k = 0;
   while (k < o.max_cg_iterations) {
     b->MultiplyJtJ(kDir, kAp);
+    if (o.jtj_ray_stride > 1) b->Axpy(kAp, o.jtj_ray_stride - 1, kAp);  // the subset's product, scaled to all rays
     if (w.Any()) b->AddSmoothness(kDir, w, kAp, kNoVector);
     b->Multiply(kAp, kFree);  // the system of the free parameters only
     ++summary->jtj_passes;
@@ -241,7 +245,10 @@ void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const Iter
     const uint32_t seed = Hash(o.seed, static_cast<uint32_t>(it), 0u);
 
     auto t0 = WallClock::now();
-    PassStats lin = b->Linearize(kX, seed, kG, o.type == SolverType::kGaussNewton ? kDiag : kNoVector, ls_subset);
+    // Subsampled Gauss-Newton: J^T J p on every jtj_ray_stride-th ray, a different share each iteration.
+    const RaySubset jtj{o.jtj_ray_stride, it % o.jtj_ray_stride};
+    PassStats lin =
+        b->Linearize(kX, seed, kG, o.type == SolverType::kGaussNewton ? kDiag : kNoVector, ls_subset, jtj);
     ++summary->linearize_passes;
     if (o.type == SolverType::kGaussNewton) {
       if (it == 0) summary->smoothness = CalibrateSmoothness(o, b);

@@ -65,6 +65,9 @@ struct SolverOptions {
   // Evaluate the line search's costs on every k-th ray only (1: all rays); 4 scores as 1 at half
   // the line search's time (docs/tuning.md).
   int line_search_ray_stride = 4;
+  // Subsampled Gauss-Newton: PCG's J^T J p on every k-th ray only (a different k-th each
+  // iteration), scaled by k; the gradient, diagonal and line search keep all rays. 1: exact.
+  int jtj_ray_stride = 1;
 
   // Smoothness residuals (smoothness.h) between neighbouring grid cells and between neighbouring
   // shell texels, relative to the data: a kind's pair weight is this times the mean of

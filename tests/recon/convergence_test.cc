@@ -37,7 +37,10 @@ class ConvergenceTest : public ::testing::Test {
 };
 using SolverTest = ConvergenceTest;
 
-TEST_F(ConvergenceTest, GaussNewtonRecoversAKnownScene) {
+// Exact Gauss-Newton, and subsampled (J^T J p on every 4th ray, SolverOptions::jtj_ray_stride).
+class GaussNewtonTest : public ConvergenceTest, public ::testing::WithParamInterface<int> {};
+
+TEST_P(GaussNewtonTest, RecoversAKnownScene) {
   VolumeShape shape{16, 8, 2};
   std::vector<float> x = RandomStart(shape);
   const double start_psnr = [&] {
@@ -47,6 +50,7 @@ TEST_F(ConvergenceTest, GaussNewtonRecoversAKnownScene) {
   }();
   SolverOptions so;
   so.max_iterations = 15;
+  so.jtj_ray_stride = GetParam();
   for (int level = 0; level < 2; ++level) {
     SetLevel(shape, RequiredVectors(so.type));
     so.seed = 100 + level;
@@ -77,6 +81,8 @@ TEST_F(ConvergenceTest, GaussNewtonRecoversAKnownScene) {
   EXPECT_GT(psnr, 30.0);
   EXPECT_LT(start_psnr, 15.0);
 }
+
+INSTANTIATE_TEST_SUITE_P(JtJRayStride, GaussNewtonTest, ::testing::Values(1, 4));
 
 TEST_F(ConvergenceTest, AdamRunsOnTheSamePasses) {
   const VolumeShape shape{16, 8, 2};
@@ -110,6 +116,11 @@ TEST_F(SolverTest, OptionsAreChecked) {
   o = SolverOptions();
   o.damping = -1;
   EXPECT_THROW(o.Check(), InputError);
+  for (int stride : {0, 65}) {
+    o = SolverOptions();
+    o.jtj_ray_stride = stride;
+    EXPECT_THROW(o.Check(), InputError) << stride;
+  }
 }
 
 TEST_F(SolverTest, CallbackStopsAndSummaryReports) {

@@ -140,6 +140,67 @@ TEST(CpuBackendTest, JtJpMatchesTheDenseJacobianCachedAndRecomputed) {
   }
 }
 
+// Subsampled Gauss-Newton (SolverOptions::jtj_ray_stride): with jtj = every 3rd ray from an
+// offset, MultiplyJtJ is J_S^T J_S p over those rays' rows alone, recorded (only those rays are
+// kept) and recomputed, and after RestrictJacobian; the three offsets sum to the full product.
+TEST(CpuBackendTest, JtJpOnASubsetOfTheRaysUsesTheirRowsAlone) {
+  const TinyProblem p(3);
+  const uint32_t seed = 11;
+  const DenseJacobian j(p, p.x, seed, 0.1);
+  const std::vector<float> pv = test::RandomDirection(p.shape, 4);
+  const std::vector<double> jp = j.Jp(std::vector<double>(pv.begin(), pv.end()));
+  const std::vector<double> full = j.Jtu(jp);
+  constexpr int kStride = 3;
+  for (bool cache : {true, false}) {
+    SCOPED_TRACE(cache ? "recorded" : "recomputed");
+    std::vector<double> sum(full.size(), 0.0);
+    for (int offset = 0; offset < kStride; ++offset) {
+      std::vector<double> u = jp;
+      for (size_t r = 0; r < u.size(); ++r) {
+        if ((r / 4) % kStride != static_cast<size_t>(offset)) u[r] = 0;  // 4 rows a ray
+      }
+      const std::vector<double> want = j.Jtu(u);
+      auto b = Cpu(2, cache);
+      LevelProblem level = p.Level();
+      level.jtj_ray_stride = kStride;
+      b->SetLevel(level, kVectors);
+      b->Upload(kX, p.x);
+      b->Upload(kP, pv);
+      const PassStats lin = b->Linearize(kX, seed, kG, kD, RaySubset{}, RaySubset{kStride, offset});
+      EXPECT_EQ(lin.rays, static_cast<int64_t>(p.rays.size()));  // the gradient keeps every ray
+      const PassStats m = b->MultiplyJtJ(kP, kOut);
+      EXPECT_EQ(m.rays, RaySubset{kStride, offset}.CountIn(0, p.rays.size()));
+      std::vector<float> out(p.shape.ParamCount());
+      b->Download(kOut, out);
+      ExpectClose(out, want, "J_S^T J_S p");
+      for (size_t i = 0; i < sum.size(); ++i) sum[i] += out[i];
+      // The reduced system's product keeps its free entries (p zero where held).
+      std::vector<float> free(p.shape.ParamCount(), 1.f), held_p = pv;
+      for (size_t i = 0; i < free.size(); i += 5) free[i] = 0.f, held_p[i] = 0.f;
+      b->Upload(kG, free);
+      b->Upload(kP, held_p);
+      b->MultiplyJtJ(kP, kOut);
+      std::vector<float> before(p.shape.ParamCount()), after(p.shape.ParamCount());
+      b->Download(kOut, before);
+      b->RestrictJacobian(kG);
+      b->MultiplyJtJ(kP, kOut);
+      b->Download(kOut, after);
+      for (size_t i = 0; i < free.size(); ++i) {
+        if (free[i] != 0.f) ASSERT_NEAR(after[i], before[i], 1e-5f * (1 + std::abs(before[i]))) << "entry " << i;
+      }
+    }
+    ExpectClose(std::vector<float>(sum.begin(), sum.end()), full, "the offsets' sum");
+  }
+  // The record is sized for the recorded rays: about a quarter with every 4th.
+  auto b = Cpu(2);
+  LevelProblem level = p.Level();
+  const int64_t all = b->EstimateMemory(level, kVectors).jacobian_cache;
+  level.jtj_ray_stride = 4;
+  const int64_t quarter = b->EstimateMemory(level, kVectors).jacobian_cache;
+  EXPECT_GT(quarter, all / 5);
+  EXPECT_LT(quarter, all * 3 / 10);
+}
+
 // What the dense Jacobian says the passes must give: the cost, J^T r, diag(J^T J) and J^T J pv.
 struct DenseWant {
   double cost;

@@ -151,6 +151,13 @@ TEST_F(GpuParityTest, JtJpAtTheLinearisationPoint) {
   EXPECT_EQ(g.rays, c.rays);
   EXPECT_NEAR(static_cast<double>(g.samples), static_cast<double>(c.samples), 1e-3 * c.samples);
   ExpectClose(Get(gpu.get(), kOut), Get(cpu.get(), kOut), "J^T J p");
+  // Subsampled Gauss-Newton (SolverOptions::jtj_ray_stride): every 3rd ray from offset 2.
+  for (Backend* b : {cpu.get(), gpu.get()}) b->Linearize(kX, 11, kG, kD, RaySubset{}, RaySubset{3, 2});
+  const PassStats cs = cpu->MultiplyJtJ(kP, kOut);
+  const PassStats gs = gpu->MultiplyJtJ(kP, kOut);
+  EXPECT_EQ(gs.rays, cs.rays);
+  EXPECT_LT(cs.rays, c.rays / 2);
+  ExpectClose(Get(gpu.get(), kOut), Get(cpu.get(), kOut), "J^T J p on every 3rd ray");
 }
 
 // Per-photo exposures (issue 16): every pass with six photos' transforms. A photo's 432 rays fill
