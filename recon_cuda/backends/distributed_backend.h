@@ -67,7 +67,8 @@ class DistributedBackend final : public Backend {
     inner_->AdamStep(x, g, m, v, s, t);
   }
 
-  PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset, RaySubset jtj) override;
+  PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset = {},
+                      RaySubset jtj = {}) override;
   PassStats MultiplyJtJ(VecId p, VecId out) override;
   PassStats Cost(VecId x, uint32_t seed, RaySubset subset) override;
   RenderOutput Render(VecId x, const PinholeCamera<float>& camera, int width, int height,
