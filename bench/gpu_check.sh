@@ -102,10 +102,11 @@ fi
 # 4. memcheck on the small pass tests (~60 s; the sanitizer slows kernels 10-100x).
 SANITIZER=$(command -v compute-sanitizer || true)
 if [ -n "$SANITIZER" ]; then
-  filter='GpuParityTest.LinearizeCostGradientAndDiagonal:GpuParityTest.AlphaResidual'
-  filter+=':GpuParityTest.JtJpAtTheLinearisationPoint:GpuParityTest.RestrictedJtJpOnTheFreeEntries'
-  filter+=':GpuParityTest.CostOnSubsetsAndWithEarlyTermination:GpuParityTest.Render:GpuParityTest.VectorOperations'
-  step memcheck 180 env PERF_REQUIRE_GPU=1 "$SANITIZER" --tool memcheck --error-exitcode 86 \
+  # Every GPU case (2026-12-04 on the H200: under 20 s). API errors are not reported: two cases
+  # provoke a failed cudaMalloc on purpose. RequireGpuTest re-runs the binary, which the
+  # sanitizer's injection keeps on the device, so it is left out.
+  filter='GpuParityTest.*'
+  step memcheck 180 env PERF_REQUIRE_GPU=1 "$SANITIZER" --tool memcheck --report-api-errors no --error-exitcode 86 \
     "$HERE/bin/gpu_parity_test" --gtest_filter="$filter"
   grep -E 'ERROR SUMMARY' "$OUT/memcheck.log" | tee -a "$SUMMARY"
   [ "$STEP_RC" -eq 0 ] || fail "memcheck exit status $STEP_RC (86: errors found; memcheck.log)"

@@ -30,6 +30,7 @@ rm -rf "$STAGE"
 mkdir -p "$STAGE/bin"
 "$BUILD/perf_bench_prep" --workspace "$WS" --out "$STAGE/lego"
 cp "$BUILD/perf_bench_gpu" "$BUILD/tests/gpu_parity_test" "$STAGE/bin/"
+strip "$STAGE/bin/perf_bench_gpu" "$STAGE/bin/gpu_parity_test"  # symbols: ~1.5 MB of the 64 MiB
 cp -L "$(ldd "$BUILD/tests/gpu_parity_test" | awk '/libtbb/ {print $3}')" "$STAGE/bin/"
 cp bench/gpu_check.sh bench/decode_images.py "$STAGE/"
 commit=$(git rev-parse --short HEAD)
@@ -52,10 +53,20 @@ for b in "$STAGE"/bin/*; do
     bad=1
   fi
 done
-kib=$(du -sk "$STAGE" | cut -f1)
-if [ "$kib" -gt $((64 * 1024)) ]; then
-  echo "stage_gpu_run.sh: $STAGE is $((kib / 1024)) MiB, over the 64 MiB that may be carried" >&2
-  bad=1
-fi
 [ "$bad" -eq 0 ] || exit 1
-echo "staged $STAGE ($((kib / 1024)) MiB, commit $commit); on the GPU machine: bash $STAGE/gpu_check.sh"
+# What travels is one gzip'd tar beside the folder (the binaries' device code compresses; the
+# folder itself was 66 MiB on 2026-12-04): .data/gpu_pack/gpu_run.tgz, with the checkout under
+# the 64 MiB that may be carried.
+PACK=${PACK:-$(dirname "$STAGE")/gpu_pack}
+mkdir -p "$PACK"
+tar czf "$PACK/gpu_run.tgz.tmp" -C "$(dirname "$STAGE")" "$(basename "$STAGE")"
+mv "$PACK/gpu_run.tgz.tmp" "$PACK/gpu_run.tgz"
+kib=$(du -sk "$PACK/gpu_run.tgz" | cut -f1)
+tree_kib=$(git ls-files -z | xargs -0 du -ck | tail -n 1 | cut -f1)
+if [ $((kib + tree_kib)) -gt $((64 * 1024)) ]; then
+  echo "stage_gpu_run.sh: $PACK/gpu_run.tgz ($((kib / 1024)) MiB) and the checkout ($((tree_kib / 1024)) MiB) are over the 64 MiB that may be carried" >&2
+  exit 1
+fi
+echo "staged $STAGE, packed $PACK/gpu_run.tgz ($((kib / 1024)) MiB, commit $commit); carry $PACK, and there:"
+echo "  tar xzf $PACK/gpu_run.tgz -C $(dirname "$STAGE") && OUT=/tmp/gc bash $STAGE/gpu_check.sh; tar czf \$OUT/gpu_check.tgz -C /tmp/gc ."
+

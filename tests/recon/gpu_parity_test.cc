@@ -51,8 +51,9 @@ void QuantiseColours(RaySet* rays) {
   for (float& a : rays->alphas) a = std::round(std::clamp(a, 0.f, 1.f) * 255.f) / 255.f;
 }
 
-void ExpectClose(const std::vector<float>& gpu, const std::vector<float>& cpu, const char* what) {
-  test::ExpectAllClose(gpu, cpu, 1e-4, 1e-4, what);
+void ExpectClose(const std::vector<float>& gpu, const std::vector<float>& cpu, const char* what,
+                 double exercised = 0.1) {
+  test::ExpectAllClose(gpu, cpu, 1e-4, 1e-4, what, exercised);
 }
 
 void ExpectStatsClose(const PassStats& gpu, const PassStats& cpu, const char* what) {
@@ -204,7 +205,9 @@ TEST_F(GpuParityTest, ExposuresInEveryPass) {
     ExpectClose(head(gpu.get(), kG), head(cpu.get(), kG), "J^T r with exposures");
     expect_tail(kG, "J^T r's exposures");
     if (with_diag) {
-      ExpectClose(head(gpu.get(), kD), head(cpu.get(), kD), "diag with exposures");
+      // At degree 2 most of a cell's 28 diagonal entries are its bands' squares, below 1e-3 of the
+      // largest (the first GPU run: 721 of 15150 clearly non-zero), so 3 % must be.
+      ExpectClose(head(gpu.get(), kD), head(cpu.get(), kD), "diag with exposures", degree >= 2 ? 0.03 : 0.1);
       expect_tail(kD, "diag's exposures");
       EXPECT_NEAR(gpu->MaxAbsVolume(kD), cpu->MaxAbsVolume(kD), 1e-5 * cpu->MaxAbsVolume(kD));
       EXPECT_LT(cpu->MaxAbsVolume(kD), cpu->MaxAbs(kD));  // a photo's entries outweigh any cell's
@@ -222,7 +225,12 @@ TEST_F(GpuParityTest, ExposuresInEveryPass) {
     b->Axpy(kOut, 3.0, kP);  // far outside the exposures' range
     b->Project(kOut);
   }
-  EXPECT_EQ(tail(gpu.get(), kOut), tail(cpu.get(), kOut));
+  // The clamped entries exactly; the others (x + 3 p) to rounding: the device fuses the multiply-add.
+  const std::vector<float> projected_cpu = tail(cpu.get(), kOut), projected_gpu = tail(gpu.get(), kOut);
+  ASSERT_EQ(projected_gpu.size(), projected_cpu.size());
+  for (size_t i = 0; i < projected_cpu.size(); ++i) {
+    EXPECT_NEAR(projected_gpu[i], projected_cpu[i], 1e-6 * (1 + std::abs(projected_cpu[i]))) << "projected entry " << i;
+  }
   }
 }
 
@@ -289,7 +297,7 @@ TEST_F(GpuParityTest, Render) {
     int flipped = 0;  // pixels whose box opacity is within rounding of the rule's threshold
     for (size_t i = 0; i < c.opacity.size(); ++i) {
       EXPECT_NEAR(g.opacity[i], c.opacity[i], 1e-5) << i;
-      if (std::abs(c.opacity[i] - rule) < 1e-5f) {
+      if (rule > 0 && std::abs(c.opacity[i] - rule) < 1e-5f) {
         ++flipped;
         continue;
       }

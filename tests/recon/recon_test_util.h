@@ -309,11 +309,11 @@ struct DenseJacobian {
   std::vector<double> row_scales;  // [rays] the robust loss's (1 without)
 };
 
-// Every entry of `got` within scale_tol * max|want| + rel_tol * |want_i| of `want`, and more than a
-// tenth of the entries clearly non-zero (so the comparison exercised something).
+// Every entry of `got` within scale_tol * max|want| + rel_tol * |want_i| of `want`, and more than
+// `exercised` of the entries (a share) clearly non-zero (so the comparison exercised something).
 template <class G, class W>
 void ExpectAllClose(const std::vector<G>& got, const std::vector<W>& want, double scale_tol, double rel_tol,
-                    const char* what) {
+                    const char* what, double exercised = 0.1) {
   ASSERT_EQ(got.size(), want.size());
   double scale = 0;
   for (W v : want) scale = std::max(scale, std::abs(static_cast<double>(v)));
@@ -324,7 +324,8 @@ void ExpectAllClose(const std::vector<G>& got, const std::vector<W>& want, doubl
     ASSERT_NEAR(got[i], w, scale_tol * scale + rel_tol * std::abs(w)) << what << " entry " << i;
     if (std::abs(w) > 1e-3 * scale) ++nonzero;
   }
-  EXPECT_GT(nonzero, static_cast<int>(want.size() / 10)) << what << ": too few entries exercised";
+  EXPECT_GT(nonzero, static_cast<int>(exercised * static_cast<double>(want.size())))
+      << what << ": too few entries exercised";
 }
 
 // A TinyProblem (n a multiple of 8) with only some bricks stored: the sparse level and its x, and
