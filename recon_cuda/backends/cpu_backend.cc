@@ -28,9 +28,7 @@ constexpr int64_t kBlockRays = 1024;      // rays per task; fixes the cost's sum
 class CpuBackend final : public Backend {
  public:
   explicit CpuBackend(const CpuBackendOptions& o)
-      : options_(o),
-        threads_(o.threads > 0 ? o.threads : CoreCount()),
-        vectors_(threads_) {}
+      : options_(o), threads_(o.threads > 0 ? o.threads : CoreCount()), vectors_(threads_) {}
 
   BackendKind kind() const override { return BackendKind::kCpu; }
   std::string Describe() const override { return StrCat("cpu (", threads_, " thread", threads_ == 1 ? "" : "s", ")"); }
@@ -340,11 +338,8 @@ class CpuBackend final : public Backend {
       const RayExposure<float> e = ExposureOfRay(vol.ExposureStart(), ExposureSlotOf(rays_, i), xf, fwd.h, scale);
       float r[4];  // the weighted system's residuals
       ScaledResidual(e, fwd.residual, r);
-      LinearizeVisitor<kDiag> v{{},
-                                {},
-                                AddSink{s.acc.data(), kDiag ? 1 : 0, 0},
-                                AddSink{kDiag ? s.acc.data() : nullptr, 1, 4},
-                                out,
+      LinearizeVisitor<kDiag> v{{}, {}, AddSink{s.acc.data(), kDiag ? 1 : 0, 0},
+                                AddSink{kDiag ? s.acc.data() : nullptr, 1, 4}, out,
                                 out ? &out->shells[r_out * level_.shape.num_shells] : nullptr};
       VolumeU(e, r, v.r);
       GainSquared(e, v.g2);

@@ -169,7 +169,7 @@ TEST(CpuBackendTest, JtJpOnASubsetOfTheRaysUsesTheirRowsAlone) {
       const PassStats lin = b->Linearize(kX, seed, kG, kD, RaySubset{}, RaySubset{kStride, offset});
       EXPECT_EQ(lin.rays, static_cast<int64_t>(p.rays.size()));  // the gradient keeps every ray
       const PassStats m = b->MultiplyJtJ(kP, kOut);
-      EXPECT_EQ(m.rays, RaySubset{kStride, offset}.CountIn(0, p.rays.size()));
+      EXPECT_EQ(m.rays, (RaySubset{kStride, offset}.CountIn(0, p.rays.size())));
       std::vector<float> out(p.shape.ParamCount());
       b->Download(kOut, out);
       ExpectClose(out, want, "J_S^T J_S p");
