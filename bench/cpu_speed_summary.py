@@ -10,17 +10,13 @@ import re
 import sys
 
 
-def iterations(path):
-    rows = []
+def events(path):
     with open(path) as f:
-        for line in f:
-            line = line.strip()
-            if not line:
-                continue
-            e = json.loads(line)
-            if e.get("event") == "iteration":
-                rows.append(e)
-    return rows
+        return [json.loads(line) for line in f if line.strip()]
+
+
+def iterations(path):
+    return [e for e in events(path) if e.get("event") == "iteration"]
 
 
 def peak_mib(path):
@@ -89,7 +85,9 @@ def sh(out):
             if not os.path.exists(path):
                 break
             rows = iterations(path)
-            t.append({"solver_seconds": rows[-1]["elapsed"], "final_psnr": rows[-1].get("test_psnr")})
+            # Without --eval-every the held-out PSNR is only in the "level" events.
+            scored = [e for e in events(path) if e.get("test_psnr") is not None]
+            t.append({"solver_seconds": rows[-1]["elapsed"], "final_psnr": scored[-1]["test_psnr"] if scored else None})
         if len(t) == 2:
             res[side] = {"degree0": t[0], "degree1": t[1],
                          "ratio": t[1]["solver_seconds"] / t[0]["solver_seconds"]}
@@ -120,8 +118,9 @@ def main():
         show_pair(pair(a.out, a.pair[0], a.pair[1], a.tol))
     if a.sh:
         for side, r in sh(a.out).items():
-            print(f"== sh {side}: degree 0 {r['degree0']['solver_seconds']:.1f} s ({r['degree0']['final_psnr']:.2f} dB), "
-                  f"degree 1 {r['degree1']['solver_seconds']:.1f} s ({r['degree1']['final_psnr']:.2f} dB): {r['ratio']:.2f}x")
+            db = lambda d: f"{d['final_psnr']:.2f} dB" if d["final_psnr"] is not None else "no held-out PSNR"
+            print(f"== sh {side}: degree 0 {r['degree0']['solver_seconds']:.1f} s ({db(r['degree0'])}), "
+                  f"degree 1 {r['degree1']['solver_seconds']:.1f} s ({db(r['degree1'])}): {r['ratio']:.2f}x")
     if a.passes:
         for key, r in passes(a.out).items():
             print(f"== passes {key}: {json.dumps(r)[:400]}")
