@@ -224,8 +224,10 @@ class CpuBackend final : public Backend {
         GridSample<float>* w = s.weights.data();
         for (int j = 0; j < count; ++j) {
           w[j] = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(samples[j].t));
-          AddJpSample(pp, w[j], samples[j].sp, u, sh);
+          if (sh.degree == 0) AddJpSample(pp, w[j], samples[j].sp, u, sh);
+          else PrefetchCells(w[j], pp, sh);  // the bands lie apart from the cell: gather after
         }
+        if (sh.degree > 0) for (int j = 0; j < count; ++j) AddJpSample(pp, w[j], samples[j].sp, u, sh);
         if (pose_row) AddJpPose(pr, pp, tr.pose, u);
         FinishJp(e, pp, u);
         float uv[4];
