@@ -112,11 +112,10 @@ class CpuBackend final : public Backend {
     vectors_.arena().execute([&] {
       tbb::parallel_for(int64_t{0}, static_cast<int64_t>(blocks_.size()), [&](int64_t b) {
         BlockJ& block = blocks_[b];
-        const int64_t first_ray = jtj_.FirstFrom(b * kBlockRays);
+        const int64_t ray0 = jtj_.FirstFrom(b * kBlockRays);  // the block's first recorded ray
         uint32_t first = 0, kept = 0;
         for (size_t r = 0; r < block.end.size(); ++r) {
-          const int64_t i = first_ray + static_cast<int64_t>(r) * jtj_.stride;
-          const BoxRay<float> ray = TrainingRayOf(vol, i, lin_seed_).ray;
+          const BoxRay<float> ray = TrainingRayOf(vol, ray0 + static_cast<int64_t>(r) * jtj_.stride, lin_seed_).ray;
           for (uint32_t j = first; j < block.end[r]; ++j) {
             const SampleJ& sj = block.samples[j];
             if (SkippableSample(TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(sj.t)), sj.sp, pf)) continue;
