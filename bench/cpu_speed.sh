@@ -81,6 +81,13 @@ reconstruct() {
   cp "$ws/recon/log.jsonl" "$OUT/$tag.log.jsonl"
 }
 
+# side SIDE: the build (b) and the extra options (extra) of side base or new
+side() {
+  b=$B_BASE
+  extra=()
+  if [ "$1" = new ]; then b=$B_NEW; extra=($NEW_ARGS); fi
+}
+
 summary() {  # summary TAG...: time to quality and peaks from the kept logs
   python3 "$ROOT/bench/cpu_speed_summary.py" --out "$OUT" --tol "$TOL" "$@"
 }
@@ -105,8 +112,7 @@ for s in "${SCENARIOS[@]}"; do
     sh)
       import lego50 --nerf "$DATA/lego/transforms_train.json" --downscale 16
       for side in base new; do
-        b=$B_BASE; extra=()
-        [ $side = new ] && { b=$B_NEW; extra=($NEW_ARGS); }
+        side $side
         for d in 0 1; do
           ws=$(fresh lego50)
           echo "== sh $side degree $d"; reconstruct "sh$d-$side" "$b" "$ws" --levels 2 --iterations 8 --sh-degree $d "${extra[@]}"
@@ -118,7 +124,7 @@ for s in "${SCENARIOS[@]}"; do
       ck=$OUT/lego200-new-recon/level_2.perfvol
       [ -f "$ck" ] || { echo "passes: run lego200 first (needs $ck)" >&2; exit 2; }
       for side in base new; do
-        b=$B_BASE; [ $side = new ] && b=$B_NEW
+        side $side
         for mode in sparse dense; do
           flag=(); [ $mode = dense ] && flag=(--as-dense)
           echo "== passes $side $mode"
@@ -131,8 +137,7 @@ for s in "${SCENARIOS[@]}"; do
     bonsai)
       [ -d "$DATA/bonsai" ] || { echo "bonsai: $DATA/bonsai not found" >&2; exit 2; }
       for side in base new; do
-        b=$B_BASE; extra=()
-        [ $side = new ] && { b=$B_NEW; extra=($NEW_ARGS); }
+        side $side
         rm -rf "$OUT/run_bonsai"
         echo "== bonsai $side"
         /usr/bin/time -v -o "$OUT/bonsai-$side.time" "$b/perf" run --colmap "$DATA/bonsai/sparse/0" \

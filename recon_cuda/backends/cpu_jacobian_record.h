@@ -152,9 +152,10 @@ inline void PrefetchCells(const GridSample<float>& gs, const float* p, const Ray
   const int last = ShStride(sh.degree) - 1;  // a cell's bands may span two lines
   for (int q = 0; q < 8; ++q) {
     if (gs.cell[q] < 0) continue;
+    const float* bands = p + ShParam(sh.start, sh.degree, gs.cell[q], 0, 0);
     __builtin_prefetch(p + GridParam(gs.cell[q], 0));
-    __builtin_prefetch(p + ShParam(sh.start, sh.degree, gs.cell[q], 0, 0));
-    __builtin_prefetch(p + ShParam(sh.start, sh.degree, gs.cell[q], 0, 0) + last);
+    __builtin_prefetch(bands);
+    __builtin_prefetch(bands + last);
   }
 }
 
@@ -162,8 +163,8 @@ inline void PrefetchCells(const GridSample<float>& gs, const float* p, const Ray
 // checked against `count` photos, or nullptr when the level solves none (count 0).
 const int32_t* PhotoSlots(const LevelProblem& p, int count);
 
-// Bytes of the Jacobian record of `p`'s rays (every p.jtj_ray_stride-th), in blocks of `block_rays` rays (an estimate made by
-// marching the rays, on the arena of `vectors`).
+// Bytes of the Jacobian record of `p`'s rays (every p.jtj_ray_stride-th), in blocks of
+// `block_rays` rays (an estimate made by marching the rays, on the arena of `vectors`).
 int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, const CpuVectors& vectors);
 
 }  // namespace perf::recon::cpu

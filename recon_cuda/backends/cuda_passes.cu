@@ -374,6 +374,11 @@ int64_t KernelLocalMemoryBytes() {
 }
 
 int64_t PassBlocks(int64_t rays) { return (rays + kRayThreads - 1) / kRayThreads; }
+// The rays offset, offset + stride, ... of the pass's `rays` (one thread each).
+int64_t SubsetRays(int64_t rays, int stride, int offset) {
+  PERF_CHECK(stride >= 1 && offset >= 0 && offset < stride);
+  return rays > offset ? (rays - offset + stride - 1) / stride : 0;
+}
 
 size_t StatsTempBytes(int64_t blocks) {
   size_t bytes = 0;
@@ -411,9 +416,8 @@ RayStats Linearize(const PassInput& in, float* g, float* diag, float* pose_block
 
 RayStats MultiplyJtJ(const PassInput& in, const float* p, const float* free, float* out, int64_t params, int stride,
                      int offset, const StatsScratch& s) {
-  PERF_CHECK(stride >= 1 && offset >= 0 && offset < stride);
+  const int64_t count = SubsetRays(in.rays.count, stride, offset);
   PERF_CUDA_CHECK(cudaMemset(out, 0, params * sizeof(float)));
-  const int64_t count = in.rays.count > offset ? (in.rays.count - offset + stride - 1) / stride : 0;
   const int64_t blocks = PassBlocks(count);
   if (blocks == 0) return {};
   PERF_CHECK(blocks <= s.capacity);
@@ -427,8 +431,7 @@ RayStats MultiplyJtJ(const PassInput& in, const float* p, const float* free, flo
 }
 
 RayStats Cost(const PassInput& in, int stride, int offset, const StatsScratch& s) {
-  PERF_CHECK(stride >= 1 && offset >= 0 && offset < stride);
-  const int64_t count = in.rays.count > offset ? (in.rays.count - offset + stride - 1) / stride : 0;
+  const int64_t count = SubsetRays(in.rays.count, stride, offset);
   const int64_t blocks = PassBlocks(count);
   if (blocks == 0) return {};
   PERF_CHECK(blocks <= s.capacity);
