@@ -197,8 +197,8 @@ PERF_HD_INLINE bool ReachesStoredCell(const VolumeView<T>& vol, Vec3<T> g) {
 // brick-sparse grid cannot skip, with its step in *st; march.count (or -1) when none is left. A
 // sample whose trilinear support has no stored cell reads only zeros: it adds exact zeros to every
 // sum of Forward and Backward, so skipping it changes nothing. In an inactive brick's octant that
-// no stored cell is near (or a kSkipBrick brick) the march jumps to the sample whose segment holds
-// the point where the ray leaves (enters) that octant (brick); in the other octants it checks each
+// no stored cell is near (or a skip brick) the march jumps to the sample whose segment holds
+// the point where the ray leaves (enters) that octant (the cube of skip bricks around the brick); in the other octants it checks each
 // sample's corners (ReachesStoredCell). The samples that are
 // taken keep their index, hence their jitter: the sparse march equals the dense one wherever the
 // skipped space is empty. Dense grids: k.
@@ -216,18 +216,37 @@ PERF_HD_INLINE int TakeSample(const VolumeView<T>& vol, const BoxRay<T>& ray, co
     if (slot >= 0) return k;
     const int mask = OctantMask(slot);
     const int octant = ((cell[0] >> 2) & 1) | (((cell[1] >> 2) & 1) << 1) | (((cell[2] >> 2) & 1) << 2);
-    if (mask & (1 << octant)) {
-      if (ReachesStoredCell(vol, g)) return k;
-      k += dir;
-      continue;
+    const bool near = mask & (1 << octant);
+    if (near) {
+      // Only a sample within half a cell of a face reads the next brick's cells: in the brick's
+      // interior [8 b + 1, 8 b + 7) per axis (half a cell of margin) every corner is in this
+      // inactive brick. Outside it each sample is asked; inside, the march leaves the interior.
+      bool inside = true;
+      for (int a = 0; a < 3; ++a) {
+        const T l = g[a] - T(cell[a] >> 3 << 3);
+        inside = inside && l >= T(1) && l < T(kBrickSide - 1);
+      }
+      if (!inside) {
+        if (ReachesStoredCell(vol, g)) return k;
+        k += dir;
+        continue;
+      }
     }
-    // The box to leave: the whole brick when no octant of it is near a stored cell, else the octant.
-    const int side = mask == 0 ? kBrickSide : kBrickSide / 2;
+    // The box to leave: that interior, the cube of skip bricks around a brick with no octant near a
+    // stored cell (SkipRadius), or the octant.
+    const int radius = SkipRadius(slot);
     T t_edge = dir > 0 ? T(3.0e38) : T(-3.0e38);
     for (int a = 0; a < 3; ++a) {
       const T d = ray.grid_dir[a];
       if (d == 0) continue;
-      const int lo = cell[a] / side * side;
+      int lo = cell[a] >> 2 << 2, side = kBrickSide / 2;
+      if (near) {
+        lo = (cell[a] >> 3 << 3) + 1;
+        side = kBrickSide - 2;
+      } else if (mask == 0) {
+        lo = ((cell[a] >> 3) - (radius - 1)) * kBrickSide;
+        side = (2 * radius - 1) * kBrickSide;
+      }
       const T face = T(lo + ((d > 0) == (dir > 0) ? side : 0));
       const T t = (face - ray.grid_origin[a]) / d;
       t_edge = dir > 0 ? Min(t_edge, t) : Max(t_edge, t);

@@ -193,13 +193,19 @@ PERF_HD_INLINE int64_t PoseParam(int64_t pose_start, int slot) {
 // slot (>= 0), or for an inactive brick, which reads as 0 in every channel, -1 - mask: bit
 // ox + 2 oy + 4 oz of the mask is set when octant (ox, oy, oz) of the brick (its 4^3 cells at
 // 4 o) lies within one cell of a stored cell, so that a sample there may read one. The march
-// steps over the other octants, and over a brick whose mask is 0 (kSkipBrick) whole
-// (ray_math.h TakeSample).
+// steps over the other octants, and over a brick whose mask is 0 (a skip brick) whole. A skip
+// brick also says how far the skip bricks around it reach: with radius r, every brick within
+// r - 1 of it per axis is one too (a cube of 2 r - 1 bricks), and the march leaves that cube in
+// one jump (ray_march.h TakeSample). Radius 1 is kSkipBrick (-1); r > 1 is -256 - r.
 inline constexpr int kBrickSide = 8;
 inline constexpr int kBrickCells = kBrickSide * kBrickSide * kBrickSide;
 inline constexpr int32_t kSkipBrick = -1;
+inline constexpr int kMaxSkipRadius = 1 << 20;
 PERF_HD_INLINE int32_t InactiveBrick(int octant_mask) { return -1 - octant_mask; }
-PERF_HD_INLINE int OctantMask(int32_t slot) { return -1 - slot; }
+PERF_HD_INLINE int32_t SkipBrick(int radius) { return radius <= 1 ? kSkipBrick : -256 - radius; }
+PERF_HD_INLINE int OctantMask(int32_t slot) { return slot < -256 ? 0 : -1 - slot; }
+// The radius of a skip brick's cube (0: the slot is not a skip brick).
+PERF_HD_INLINE int SkipRadius(int32_t slot) { return slot == kSkipBrick ? 1 : (slot < -256 ? -256 - slot : 0); }
 
 PERF_HD_INLINE int64_t SparseGridParams(int64_t active_bricks) { return 4 * kBrickCells * active_bricks; }
 // The bricks of an n^3 grid, (n / 8)^3.

@@ -1,8 +1,45 @@
 #include "recon_cuda/data/brick_grid.h"
 
+#include <algorithm>
+
 #include "common/errors.h"
 
 namespace perf::recon {
+
+namespace {
+
+// Each skip brick's radius: its chessboard distance (in bricks) to the nearest brick that is not
+// one, by a forward and a backward sweep over the 13 neighbours before (after) it, which is exact
+// for that distance. Bricks outside the grid count as skip bricks (the march ends at the box).
+void SetSkipRadii(BrickGrid* b) {
+  const int nb = b->nb();
+  std::vector<int> dist(b->slot.size());
+  for (size_t i = 0; i < dist.size(); ++i) dist[i] = OctantMask(b->slot[i]) == 0 && b->slot[i] < 0 ? kMaxSkipRadius : 0;
+  const auto sweep = [&](int sign) {
+    for (int t = 0; t < nb * nb * nb; ++t) {
+      const int idx = sign > 0 ? t : nb * nb * nb - 1 - t;
+      const int i = idx % nb, j = idx / nb % nb, k = idx / (nb * nb);
+      int& d = dist[idx];
+      if (d == 0) continue;
+      for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int before = (dz * nb + dy) * nb + dx;  // neighbours already swept: index offset < 0 (> 0)
+            if (before * sign >= 0) continue;
+            const int x = i + dx, y = j + dy, z = k + dz;
+            if (x < 0 || y < 0 || z < 0 || x >= nb || y >= nb || z >= nb) continue;
+            d = std::min(d, dist[BrickOf(nb, x, y, z)] + 1);
+          }
+    }
+  };
+  sweep(1);
+  sweep(-1);
+  for (size_t i = 0; i < dist.size(); ++i) {
+    if (dist[i] > 0) b->slot[i] = SkipBrick(std::min(dist[i], kMaxSkipRadius));
+  }
+}
+
+}  // namespace
 
 BrickGrid MakeBrickGrid(int n, const std::vector<uint8_t>& active) {
   if (n <= 0 || n % kBrickSide != 0) {
@@ -45,6 +82,7 @@ BrickGrid MakeBrickGrid(int n, const std::vector<uint8_t>& active) {
       }
     }
   }
+  SetSkipRadii(&b);
   return b;
 }
 

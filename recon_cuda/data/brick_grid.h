@@ -13,7 +13,7 @@ namespace perf::recon {
 
 struct BrickGrid {
   int n = 0;                    // cells per axis, a multiple of kBrickSide
-  std::vector<int32_t> slot;    // [(n/8)^3], x fastest: the brick's slot, or InactiveBrick(octant mask)
+  std::vector<int32_t> slot;    // [(n/8)^3], x fastest: the brick's slot, InactiveBrick(octant mask) or SkipBrick(radius)
   std::vector<int64_t> bricks;  // the active bricks (BrickOf index) in slot order
 
   int nb() const { return n / kBrickSide; }
@@ -37,7 +37,8 @@ struct BrickGrid {
 };
 
 // active: [(n/8)^3] flags, x fastest. Slots follow the brick order; an inactive brick holds the
-// mask of its octants within one cell of an active brick (ray_types.h). Throws InputError
+// mask of its octants within one cell of an active brick, or when that is 0 its skip radius
+// (ray_types.h). Throws InputError
 // when n is not a positive multiple of 8 or `active` has the wrong size.
 BrickGrid MakeBrickGrid(int n, const std::vector<uint8_t>& active);
 

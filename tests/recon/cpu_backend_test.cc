@@ -186,7 +186,9 @@ TEST(CpuBackendTest, JtJpOnASubsetOfTheRaysUsesTheirRowsAlone) {
       b->MultiplyJtJ(kP, kOut);
       b->Download(kOut, after);
       for (size_t i = 0; i < free.size(); ++i) {
-        if (free[i] != 0.f) ASSERT_NEAR(after[i], before[i], 1e-5f * (1 + std::abs(before[i]))) << "entry " << i;
+        if (free[i] != 0.f) {
+          ASSERT_NEAR(after[i], before[i], 1e-5f * (1 + std::abs(before[i]))) << "entry " << i;
+        }
       }
     }
     ExpectClose(std::vector<float>(sum.begin(), sum.end()), full, "the offsets' sum");

@@ -233,6 +233,38 @@ TEST(RayMathTest, TrilinearReproducesALinearField) {
   for (int ch = 0; ch < 4; ++ch) EXPECT_NEAR(a[ch], b[ch], 1e-14);
 }
 
+// A brick-sparse grid's cells: the one-brick shortcut of TrilinearWeights gives each corner the
+// cell SparseCell gives it, at brick edges, the box's border and next to inactive bricks.
+TEST(RayMathTest, SparseTrilinearCellsMatchEachCornersLookup) {
+  const int n = 32, nb = n / kBrickSide;
+  std::mt19937 rng(17);
+  std::vector<int32_t> slot(BrickCount(n));
+  int32_t next = 0;
+  for (auto& s : slot) s = rng() % 3 == 0 ? InactiveBrick(static_cast<int>(rng() % 256)) : next++;
+  std::uniform_real_distribution<double> u(-0.5, n + 0.5);
+  std::uniform_int_distribution<int> edge(1, nb - 1);
+  int one_brick = 0, spanning = 0, inactive = 0;
+  for (int t = 0; t < 20000; ++t) {
+    V3 p{u(rng), u(rng), u(rng)};
+    if (t % 2) p[t % 3] = edge(rng) * kBrickSide + (u(rng) - n / 2.0) / n;  // within half a cell of a brick edge
+    const GridSample<double> gs = TrilinearWeights(n, slot.data(), p);
+    int lo[3], hi[3];
+    double f[3];
+    for (int a = 0; a < 3; ++a) LinearCoord(p[a], n, &lo[a], &hi[a], &f[a]);
+    for (int c = 0; c < 8; ++c) {
+      const int64_t want = SparseCell(slot.data(), nb, c & 1 ? hi[0] : lo[0], c & 2 ? hi[1] : lo[1], c & 4 ? hi[2] : lo[2]);
+      ASSERT_EQ(gs.cell[c], want) << "corner " << c << " of (" << p.x << ", " << p.y << ", " << p.z << ")";
+      EXPECT_EQ(gs.w[c], (c & 1 ? f[0] : 1 - f[0]) * (c & 2 ? f[1] : 1 - f[1]) * (c & 4 ? f[2] : 1 - f[2]));
+    }
+    const bool same = lo[0] / 8 == hi[0] / 8 && lo[1] / 8 == hi[1] / 8 && lo[2] / 8 == hi[2] / 8;
+    (same ? one_brick : spanning) += 1;
+    inactive += gs.cell[0] < 0;
+  }
+  EXPECT_GT(one_brick, 5000);  // both paths and inactive bricks are exercised
+  EXPECT_GT(spanning, 5000);
+  EXPECT_GT(inactive, 2000);
+}
+
 TEST(RayMathTest, CubeMapRoundTripAndContinuity) {
   std::mt19937 rng(13);
   std::normal_distribution<double> g;

@@ -4,6 +4,7 @@
 // same residuals and the same J^T r, bit for bit), and every partial matches central differences.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <span>
@@ -129,7 +130,7 @@ TEST(BrickGrid, SlotsMarksAndLayouts) {
           if (reach) want |= 1 << o;
         }
         EXPECT_EQ(OctantMask(s), want) << i << " " << j << " " << k;
-        (s == kSkipBrick ? skip : partial)++;
+        (OctantMask(s) == 0 ? skip : partial)++;
       }
     }
   }
@@ -181,10 +182,45 @@ std::vector<uint8_t> BallOfBricks(int nb, std::mt19937& rng) {
   return active;
 }
 
+// A skip brick's radius is its chessboard distance to the nearest brick that is not one (active,
+// or inactive with an octant near a stored cell): the cube the march leaves in one jump.
+TEST(BrickGrid, SkipRadiusIsTheDistanceToTheNearestBrickThatIsNotSkipped) {
+  const int n = 80, nb = 10;
+  std::vector<uint8_t> active(nb * nb * nb, 0);
+  active[BrickOf(nb, 1, 2, 1)] = 1;
+  active[BrickOf(nb, 6, 6, 7)] = 1;
+  const BrickGrid b = MakeBrickGrid(n, active);
+  int largest = 0;
+  for (int k = 0; k < nb; ++k) {
+    for (int j = 0; j < nb; ++j) {
+      for (int i = 0; i < nb; ++i) {
+        const int32_t s = b.slot[BrickOf(nb, i, j, k)];
+        int want = 0;
+        if (s < 0 && OctantMask(s) == 0) {
+          want = 1 << 20;
+          for (int z = 0; z < nb; ++z)
+            for (int y = 0; y < nb; ++y)
+              for (int x = 0; x < nb; ++x) {
+                const int32_t q = b.slot[BrickOf(nb, x, y, z)];
+                if (q >= 0 || OctantMask(q) != 0) want = std::min(want, std::max({std::abs(x - i), std::abs(y - j), std::abs(z - k)}));
+              }
+        }
+        EXPECT_EQ(SkipRadius(s), want) << i << " " << j << " " << k;
+        largest = std::max(largest, want);
+      }
+    }
+  }
+  EXPECT_EQ(largest, 6);  // the corners far from both active bricks reach 6
+  EXPECT_EQ(SkipRadius(MakeBrickGrid(16, std::vector<uint8_t>(8, 0)).slot[0]), kMaxSkipRadius);  // nothing stored
+}
+
 TEST(SparseMarch, EqualsTheDenseMarchWhereTheSkippedSpaceIsEmpty) {
   std::mt19937 rng(11);
-  const int n = 64;
+  const int n = 96;
   SparseScene s(rng, n, BallOfBricks(n / kBrickSide, rng), 40.0);
+  int wide = 0;  // skip bricks whose cube reaches beyond their neighbours: the march jumps several
+  for (const int32_t slot : s.bricks.slot) wide += SkipRadius(slot) >= 3;
+  EXPECT_GT(wide, 100);
   int skipping = 0;
   int64_t dense_samples = 0, sparse_samples = 0;
   const double target[3] = {0.2, 0.5, 0.7};
