@@ -36,8 +36,9 @@ int main(int argc, char** argv) {
   app.add_option("--repeat", repeat, "Runs per pass (the best is reported)")->capture_default_str();
   app.add_option("--json", json_path, "Also write the figures here");
   bool as_dense = false;
-  bool cost_only = false;
-  app.add_flag("--cost-only", cost_only, "Time the cost pass alone (for back-to-back comparisons of the march)");
+  std::string only;
+  app.add_option("--only", only, "Time one pass alone, for back-to-back comparisons: cost, or jtjp (after one Linearize)")
+      ->check(CLI::IsMember({"cost", "jtjp"}));
   app.add_flag("--as-dense", as_dense, "A sparse checkpoint's volume in the dense layout (the same values)");
   bench::CpuHierarchySettings hs;
   std::string modes = "both";
@@ -101,8 +102,12 @@ int main(int argc, char** argv) {
                   rps / 1e6, sps / 1e6, static_cast<double>(best.samples) / std::max<int64_t>(1, best.rays));
       out["passes"][name] = {{"seconds", best.seconds}, {"rays_per_s", rps}, {"samples_per_s", sps}};
     };
-    if (cost_only) {
-      measure("cost", [&] { return backend->Cost(0, 7); });
+    if (!only.empty()) {
+      if (only == "cost") measure("cost", [&] { return backend->Cost(0, 7); });
+      if (only == "jtjp") {
+        backend->Linearize(0, 7, 1, 2);
+        measure("J^T J p", [&] { return backend->MultiplyJtJ(1, 3); });
+      }
       if (!json_path.empty()) std::ofstream(json_path) << out.dump(2) << "\n";
       return 0;
     }
