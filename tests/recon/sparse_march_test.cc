@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <random>
 #include <span>
@@ -100,12 +101,18 @@ struct Gradient {
   }
 };
 
+// The brick grid of n^3 cells whose only active bricks are `p` and `q`.
+BrickGrid TwoActiveBricks(int n, std::array<int, 3> p, std::array<int, 3> q) {
+  const int nb = n / kBrickSide;
+  std::vector<uint8_t> active(static_cast<size_t>(nb) * nb * nb, 0);
+  active[BrickOf(nb, p[0], p[1], p[2])] = 1;
+  active[BrickOf(nb, q[0], q[1], q[2])] = 1;
+  return MakeBrickGrid(n, active);
+}
+
 TEST(BrickGrid, SlotsMarksAndLayouts) {
   const int n = 32, nb = 4;
-  std::vector<uint8_t> active(nb * nb * nb, 0);
-  active[BrickOf(nb, 1, 1, 1)] = 1;
-  active[BrickOf(nb, 3, 0, 0)] = 1;
-  const BrickGrid b = MakeBrickGrid(n, active);
+  const BrickGrid b = TwoActiveBricks(n, {1, 1, 1}, {3, 0, 0});
   ASSERT_EQ(b.ActiveBricks(), 2);
   EXPECT_EQ(b.slot[BrickOf(nb, 3, 0, 0)], 0);  // brick order, x fastest
   EXPECT_EQ(b.slot[BrickOf(nb, 1, 1, 1)], 1);
@@ -186,10 +193,7 @@ std::vector<uint8_t> BallOfBricks(int nb, std::mt19937& rng) {
 // or inactive with an octant near a stored cell): the cube the march leaves in one jump.
 TEST(BrickGrid, SkipRadiusIsTheDistanceToTheNearestBrickThatIsNotSkipped) {
   const int n = 80, nb = 10;
-  std::vector<uint8_t> active(nb * nb * nb, 0);
-  active[BrickOf(nb, 1, 2, 1)] = 1;
-  active[BrickOf(nb, 6, 6, 7)] = 1;
-  const BrickGrid b = MakeBrickGrid(n, active);
+  const BrickGrid b = TwoActiveBricks(n, {1, 2, 1}, {6, 6, 7});
   int largest = 0;
   for (int k = 0; k < nb; ++k) {
     for (int j = 0; j < nb; ++j) {
