@@ -27,6 +27,8 @@ PERF_HD_INLINE GridSample<T> TrilinearWeights(int n, const int32_t* brick_slot, 
   GridSample<T> s;
   const T wx[2] = {1 - f[0], f[0]}, wy[2] = {1 - f[1], f[1]}, wz[2] = {1 - f[2], f[2]};
   for (int c = 0; c < 8; ++c) s.w[c] = wx[c & 1] * wy[(c >> 1) & 1] * wz[(c >> 2) & 1];
+  for (int a = 0; a < 3; ++a) s.lo[a] = lo[a];
+  s.distinct = hi[0] != lo[0] && hi[1] != lo[1] && hi[2] != lo[2];
   // Corner c's stored index is base + (dx ? ox : 0) + (dy ? oy : 0) + (dz ? oz : 0) in the dense
   // layout, and in a sparse grid's brick when all 8 corners lie in it (about 2/3 of the samples:
   // hi is lo or lo + 1, in lo's brick when they agree above the brick's 3 bits).
@@ -37,22 +39,20 @@ PERF_HD_INLINE GridSample<T> TrilinearWeights(int n, const int32_t* brick_slot, 
     oz *= static_cast<int64_t>(n) * n;
   } else if ((lo[0] ^ hi[0]) < kBrickSide && (lo[1] ^ hi[1]) < kBrickSide && (lo[2] ^ hi[2]) < kBrickSide) {
     const int32_t slot = brick_slot[BrickOf(n / kBrickSide, lo[0] >> 3, lo[1] >> 3, lo[2] >> 3)];
-    base = slot < 0 ? -1 : static_cast<int64_t>(slot) * kBrickCells + (((lo[2] & 7) * kBrickSide + (lo[1] & 7)) * kBrickSide + (lo[0] & 7));
+    if (slot < 0) {  // one inactive brick
+      for (int c = 0; c < 8; ++c) s.cell[c] = -1;
+      return s;
+    }
+    base = static_cast<int64_t>(slot) * kBrickCells + (((lo[2] & 7) * kBrickSide + (lo[1] & 7)) * kBrickSide + (lo[0] & 7));
     oy *= kBrickSide;
     oz *= kBrickSide * kBrickSide;
   } else {  // the corners span two or more bricks: each looks its own up
     const int nb = n / kBrickSide;
     for (int c = 0; c < 8; ++c)
       s.cell[c] = SparseCell(brick_slot, nb, c & 1 ? hi[0] : lo[0], c & 2 ? hi[1] : lo[1], c & 4 ? hi[2] : lo[2]);
-    base = -2;
+    return s;
   }
-  if (base >= 0) {
-    for (int c = 0; c < 8; ++c) s.cell[c] = base + (c & 1 ? ox : 0) + (c & 2 ? oy : 0) + (c & 4 ? oz : 0);
-  } else if (base == -1) {  // one inactive brick
-    for (int c = 0; c < 8; ++c) s.cell[c] = -1;
-  }
-  for (int a = 0; a < 3; ++a) s.lo[a] = lo[a];
-  s.distinct = hi[0] != lo[0] && hi[1] != lo[1] && hi[2] != lo[2];
+  for (int c = 0; c < 8; ++c) s.cell[c] = base + (c & 1 ? ox : 0) + (c & 2 ? oy : 0) + (c & 4 ? oz : 0);
   return s;
 }
 

@@ -196,12 +196,12 @@ PERF_HD_INLINE bool ReachesStoredCell(const VolumeView<T>& vol, Vec3<T> g) {
 // The march index of the first sample at or after k (dir +1), or at or before k (dir -1), that a
 // brick-sparse grid cannot skip, with its step in *st; march.count (or -1) when none is left. A
 // sample whose trilinear support has no stored cell reads only zeros: it adds exact zeros to every
-// sum of Forward and Backward, so skipping it changes nothing. In an inactive brick's octant that
-// no stored cell is near (or a skip brick) the march jumps to the sample whose segment holds
-// the point where the ray leaves (enters) that octant (the cube of skip bricks around the brick); in the other octants it checks each
-// sample's corners (ReachesStoredCell). The samples that are
-// taken keep their index, hence their jitter: the sparse march equals the dense one wherever the
-// skipped space is empty. Dense grids: k.
+// sum of Forward and Backward, so skipping it changes nothing. The march jumps to the sample
+// whose segment holds the point where the ray leaves (enters) the box it cannot read from: the
+// cube of skip bricks around a skip brick, an inactive brick's octant that no stored cell is
+// near, or the interior of one that is; in that octant's skin it checks each sample's corners
+// (ReachesStoredCell). The samples that are taken keep their index, hence their jitter: the
+// sparse march equals the dense one wherever the skipped space is empty. Dense grids: k.
 template <class T>
 PERF_HD_INLINE int TakeSample(const VolumeView<T>& vol, const BoxRay<T>& ray, const March<T>& m, int k, int dir,
                               const Jitter& jit, MarchStep<T>* st) {

@@ -14,7 +14,7 @@ namespace {
 void SetSkipRadii(BrickGrid* b) {
   const int nb = b->nb();
   std::vector<int> dist(b->slot.size());
-  for (size_t i = 0; i < dist.size(); ++i) dist[i] = OctantMask(b->slot[i]) == 0 && b->slot[i] < 0 ? kMaxSkipRadius : 0;
+  for (size_t i = 0; i < dist.size(); ++i) dist[i] = b->slot[i] == kSkipBrick ? kMaxSkipRadius : 0;  // the cap
   const auto sweep = [&](int sign) {
     for (int t = 0; t < nb * nb * nb; ++t) {
       const int idx = sign > 0 ? t : nb * nb * nb - 1 - t;
@@ -35,7 +35,7 @@ void SetSkipRadii(BrickGrid* b) {
   sweep(1);
   sweep(-1);
   for (size_t i = 0; i < dist.size(); ++i) {
-    if (dist[i] > 0) b->slot[i] = SkipBrick(std::min(dist[i], kMaxSkipRadius));
+    if (dist[i] > 0) b->slot[i] = SkipBrick(dist[i]);
   }
 }
 

@@ -38,8 +38,8 @@ struct BrickGrid {
 
 // active: [(n/8)^3] flags, x fastest. Slots follow the brick order; an inactive brick holds the
 // mask of its octants within one cell of an active brick, or when that is 0 its skip radius
-// (ray_types.h). Throws InputError
-// when n is not a positive multiple of 8 or `active` has the wrong size.
+// (ray_types.h). Throws InputError when n is not a positive multiple of 8 or `active` has the
+// wrong size.
 BrickGrid MakeBrickGrid(int n, const std::vector<uint8_t>& active);
 
 // The grid part of x between the layouts: dense [n^3, 4] to sparse [active cells, 4] (the values

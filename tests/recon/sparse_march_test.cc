@@ -201,7 +201,7 @@ TEST(BrickGrid, SkipRadiusIsTheDistanceToTheNearestBrickThatIsNotSkipped) {
         const int32_t s = b.slot[BrickOf(nb, i, j, k)];
         int want = 0;
         if (s < 0 && OctantMask(s) == 0) {
-          want = 1 << 20;
+          want = kMaxSkipRadius;  // no brick that is not a skip brick: the cap
           for (int z = 0; z < nb; ++z)
             for (int y = 0; y < nb; ++y)
               for (int x = 0; x < nb; ++x) {
