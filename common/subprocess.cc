@@ -1,14 +1,19 @@
 #include "common/subprocess.h"
 
 #include <fcntl.h>
+#include <poll.h>
 #include <signal.h>
 #include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <cmath>
+#include <chrono>
 #include <cstdlib>
 #include <cstring>
+#include <optional>
 
 #include "common/errors.h"
 #include "common/unique_fd.h"
@@ -34,8 +39,29 @@ class ChildGuard {
     while (::waitpid(pid_, &status, 0) < 0 && errno == EINTR) {
     }
   }
+  // Ends a child that has gone quiet: SIGTERM, and SIGKILL if it is still running after `grace`
+  // seconds. Does not reap it (Wait does).
+  void Stop(double grace) {
+    ::kill(pid_, SIGTERM);
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(grace);
+    while (std::chrono::steady_clock::now() < deadline) {
+      int status = 0;
+      const pid_t r = ::waitpid(pid_, &status, WNOHANG);
+      if (r == pid_) {  // ended: keep its status for Wait
+        reaped_status_ = status;
+        return;
+      }
+      if (r < 0 && errno != EINTR) return;
+      ::usleep(20000);
+    }
+    ::kill(pid_, SIGKILL);
+  }
   // Waits for the child; returns its wait status.
   int Wait(const fs::path& program) {
+    if (reaped_status_) {
+      pid_ = -1;
+      return *reaped_status_;
+    }
     int status = 0;
     while (::waitpid(pid_, &status, 0) < 0) {
       if (errno != EINTR) throw IoError(program.string(), StrCat("waitpid failed: ", std::strerror(errno)));
@@ -46,6 +72,7 @@ class ChildGuard {
 
  private:
   pid_t pid_;
+  std::optional<int> reaped_status_;
 };
 
 std::string ShellQuote(const std::string& s) {
@@ -115,7 +142,7 @@ fs::path FindExecutable(const std::string& binary, const std::string& hint) {
 
 ProcessResult RunProcess(const fs::path& program, const std::vector<std::string>& args,
                          const std::vector<std::string>& env,
-                         const std::function<void(std::string_view)>& on_output) {
+                         const std::function<void(std::string_view)>& on_output, double idle_timeout_seconds) {
   std::vector<std::string> argv_storage{program.string()};
   argv_storage.insert(argv_storage.end(), args.begin(), args.end());
   std::vector<std::string> env_storage = Environment(env);
@@ -144,15 +171,35 @@ ProcessResult RunProcess(const fs::path& program, const std::vector<std::string>
   write_end.Close();  // so read() sees end-of-file when the child exits
 
   char buf[4096];
+  bool idle = false;
+  using Clock = std::chrono::steady_clock;
+  auto last_output = Clock::now();
   while (true) {
+    if (idle_timeout_seconds > 0) {
+      const double quiet = std::chrono::duration<double>(Clock::now() - last_output).count();
+      if (quiet >= idle_timeout_seconds) {
+        idle = true;
+        child.Stop(kIdleKillGraceSeconds);
+        break;
+      }
+      pollfd p{read_end.get(), POLLIN, 0};
+      const int wait_ms = static_cast<int>(std::ceil((idle_timeout_seconds - quiet) * 1000));
+      const int ready = ::poll(&p, 1, std::max(1, wait_ms));
+      if (ready < 0 && errno != EINTR) {
+        throw IoError(program.string(), StrCat("cannot wait for the program's output: ", std::strerror(errno)));
+      }
+      if (ready <= 0) continue;
+    }
     const ssize_t n = ::read(read_end.get(), buf, sizeof buf);
     if (n < 0 && errno == EINTR) continue;
     if (n < 0) throw IoError(program.string(), StrCat("cannot read the program's output: ", std::strerror(errno)));
     if (n == 0) break;
+    last_output = Clock::now();
     on_output(std::string_view(buf, static_cast<size_t>(n)));
   }
   const int status = child.Wait(program);
   ProcessResult result;
+  result.idle = idle;
   if (WIFSIGNALED(status)) {
     result.signal = WTERMSIG(status);
   } else {

@@ -12,17 +12,22 @@
 namespace perf {
 
 struct ProcessResult {
-  int exit_code = 0;  // valid when signal == 0
-  int signal = 0;     // the signal that killed the process, or 0
+  int exit_code = 0;   // valid when signal == 0
+  int signal = 0;      // the signal that killed the process, or 0
+  bool idle = false;   // stopped by us: it printed nothing for idle_timeout_seconds
 };
 
 // Runs `program` with `args`; `env` entries ("NAME=value") replace or add to this process's
 // environment. `on_output` receives the child's output in chunks as it arrives; if it throws, the
-// child gets SIGTERM and is reaped before the exception propagates. Throws IoError when the
-// program cannot be started.
+// child gets SIGTERM and is reaped before the exception propagates. A child that prints nothing
+// for idle_timeout_seconds (> 0; 0: no limit) gets SIGTERM, and SIGKILL if it has not ended
+// kIdleKillGraceSeconds later; the result says `idle`. Throws IoError when the program cannot be
+// started.
+inline constexpr double kIdleKillGraceSeconds = 3;
 ProcessResult RunProcess(const std::filesystem::path& program, const std::vector<std::string>& args,
                          const std::vector<std::string>& env,
-                         const std::function<void(std::string_view chunk)>& on_output);
+                         const std::function<void(std::string_view chunk)>& on_output,
+                         double idle_timeout_seconds = 0);
 
 // `program args...` as a shell would need it typed, for logs and messages.
 std::string CommandLine(const std::filesystem::path& program, const std::vector<std::string>& args);

@@ -38,6 +38,9 @@ void AddSfmCommand(CLI::App& app) {
       ->capture_default_str();
   AddThreadsOption(cmd, &o->num_threads, -1);
   cmd->add_option("--colmap-binary", o->colmap_binary, "The colmap executable")->capture_default_str();
+  cmd->add_option("--colmap-idle-timeout", o->idle_timeout_seconds,
+                  "Seconds a COLMAP step may print nothing before it is stopped as stuck")
+      ->capture_default_str();
   cmd->add_flag("--force", o->force, "Run again even if WORKSPACE/sparse/0 exists");
   cmd->add_flag("-q,--quiet", *quiet, "No progress output");
   cmd->callback([o, quiet]() {

@@ -65,7 +65,7 @@ StepResult RunColmapStep(const fs::path& colmap, const std::vector<std::string>&
   };
   // COLMAP links Qt even for its CLI commands; without a display, Qt aborts unless told to use
   // the offscreen platform.
-  const ProcessResult process = RunProcess(colmap, args, {"QT_QPA_PLATFORM=offscreen"}, [&](std::string_view chunk) {
+  const auto on_output = [&](std::string_view chunk) {
     log.write(chunk.data(), static_cast<std::streamsize>(chunk.size()));
     log.flush();  // so the log is useful while a long step runs
     if (!log) throw IoError(log_path.string(), "cannot write the log (disk full?)");
@@ -78,14 +78,19 @@ StepResult RunColmapStep(const fs::path& colmap, const std::vector<std::string>&
         partial += c;
       }
     }
-  });
+  };
+  const ProcessResult process =
+      RunProcess(colmap, args, {"QT_QPA_PLATFORM=offscreen"}, on_output, options.idle_timeout_seconds);
   handle_line(std::move(partial));
   // The last status of a step (e.g. 12/12 images) is worth showing even if it came fast.
   if (!pending_status.empty()) Report(options, stage + ": " + pending_status);
   result.exit_code = process.exit_code;
   result.signal = process.signal;
+  result.idle = process.idle;
+  result.idle_timeout_seconds = options.idle_timeout_seconds;
   log << "[perf " << Timestamp() << "] "
-      << (result.signal ? StrCat("killed by signal ", result.signal)
+      << (result.idle     ? StrCat("stopped: no output for ", options.idle_timeout_seconds, " s")
+          : result.signal ? StrCat("killed by signal ", result.signal)
                         : StrCat("exit code ", result.exit_code))
       << "\n"
       << std::flush;
@@ -94,15 +99,20 @@ StepResult RunColmapStep(const fs::path& colmap, const std::vector<std::string>&
 
 [[noreturn]] void ThrowStepFailed(const std::string& step, const StepResult& r,
                                   const fs::path& log_path) {
-  std::string problem = r.signal ? StrCat("colmap ", step, " was killed by signal ", r.signal, " (",
-                                          strsignal(r.signal), ")")
-                                 : StrCat("colmap ", step, " failed with exit code ", r.exit_code);
+  std::string problem = r.idle     ? StrCat("colmap ", step, " printed nothing for ", r.idle_timeout_seconds,
+                                            " s and was stopped (it looks stuck)")
+                        : r.signal ? StrCat("colmap ", step, " was killed by signal ", r.signal, " (",
+                                            strsignal(r.signal), ")")
+                                   : StrCat("colmap ", step, " failed with exit code ", r.exit_code);
   problem += StrCat("; last lines of ", log_path.string(), ":");
   for (const auto& line : r.tail) problem += "\n  | " + line;
   std::string hint = StrCat("see the full log in ", log_path.string());
-  if (r.signal == SIGKILL)
-    hint +=
-        "; a kill by signal 9 is often the out-of-memory killer: try a smaller --max-image-size";
+  if (r.idle) {
+    hint += "; run again (a stuck step is often a one-off), or if the step is only slow, raise "
+            "--colmap-idle-timeout";
+  } else if (r.signal == SIGKILL) {
+    hint += "; a kill by signal 9 is often the out-of-memory killer: try a smaller --max-image-size";
+  }
   throw IoError(log_path.string(), problem, hint);
 }
 

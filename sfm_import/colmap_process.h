@@ -28,7 +28,10 @@ using ProgressParser = std::function<std::optional<std::string>(const std::strin
 struct StepResult {
   int exit_code = 0;             // valid when signal == 0
   int signal = 0;                // the signal that killed the process, or 0
+  bool idle = false;             // stopped after printing nothing for options.idle_timeout_seconds
+  double idle_timeout_seconds = 0;
   std::deque<std::string> tail;  // last output lines
+  bool failed() const { return idle || signal != 0 || exit_code != 0; }
   bool saw(const std::string& needle) const {
     return std::any_of(tail.begin(), tail.end(),
                        [&](const std::string& l) { return l.find(needle) != std::string::npos; });

@@ -163,7 +163,7 @@ void ExtractFeatures(SfmRun& run, const PhotoTags& tags) {
                                      std::to_string(options.max_num_features), "--SiftExtraction.num_threads", run.threads};
     args.insert(args.end(), list_args.begin(), list_args.end());
     const StepResult r = run.Step(args, "features", ExtractionParser());
-    if (r.signal || r.exit_code != 0) ThrowStepFailed("feature_extractor", r, run.log_path);
+    if (r.failed()) ThrowStepFailed("feature_extractor", r, run.log_path);
   };
   if (groups.size() > 1) {
     for (size_t g = 0; g < groups.size(); ++g) {
@@ -216,7 +216,7 @@ void Match(SfmRun& run, bool exhaustive) {
     parser = SequentialParser();
   }
   const StepResult r = run.Step(WithSiftMatching(run, args), "matching", parser);
-  if (r.signal || r.exit_code != 0) {
+  if (r.failed()) {
     ThrowStepFailed(exhaustive ? "exhaustive_matcher" : "sequential_matcher", r, run.log_path);
   }
 }
@@ -234,8 +234,8 @@ Mapping Map(SfmRun& run) {
       "mapping", MapperParser(run.n));
   // COLMAP 3.8 exits with 1 when no initial pair could be found: a property of the photos,
   // not a failure of the tool.
-  m.no_initial_pair = !r.signal && r.exit_code != 0 && r.saw("failed to create sparse model");
-  if ((r.signal || r.exit_code != 0) && !m.no_initial_pair) ThrowStepFailed("mapper", r, run.log_path);
+  m.no_initial_pair = !r.idle && !r.signal && r.exit_code != 0 && r.saw("failed to create sparse model");
+  if (r.failed() && !m.no_initial_pair) ThrowStepFailed("mapper", r, run.log_path);
   for (const auto& entry : fs::directory_iterator(run.models_dir, ec)) {
     const std::string name = entry.path().filename().string();
     if (!entry.is_directory() || name.empty() || name.find_first_not_of("0123456789") != std::string::npos) continue;
@@ -260,7 +260,7 @@ void RematchIfOutOfOrder(SfmRun& run, bool* exhaustive, Mapping* mapping) {
                              " photos in a model, so they were not taken in order: matching every pair and mapping again"));
   const StepResult r = run.Step(WithSiftMatching(run, {"exhaustive_matcher", "--database_path", run.database.string()}),
                                 "matching", ExhaustiveParser());
-  if (r.signal || r.exit_code != 0) ThrowStepFailed("exhaustive_matcher", r, run.log_path);
+  if (r.failed()) ThrowStepFailed("exhaustive_matcher", r, run.log_path);
   *exhaustive = true;
   *mapping = Map(run);
 }
@@ -317,7 +317,7 @@ void RegisterLeftOut(SfmRun& run, bool exhaustive, Mapping* mapping) {
   const auto step = [&](const std::vector<std::string>& args, const std::string& stage, const ProgressParser& parse) {
     if (!ok) return;
     const StepResult r = run.Step(args, stage, parse);
-    ok = !r.signal && r.exit_code == 0;
+    ok = !r.failed();
     if (!ok) Report(run.options, StrCat("sfm: ", args.front(), " failed (see ", run.log_path.string(), "); keeping the first model"));
   };
   step(WithSiftMatching(run, {"matches_importer", "--database_path", run.database.string(), "--match_list_path",

@@ -32,6 +32,9 @@ struct SfmOptions {
   int num_threads = -1;                  // -1: all cores
   int min_registered_images = 3;         // fewer is an error
   bool force = false;                    // re-run even if a sparse model exists
+  // A COLMAP step that prints nothing for this long is stopped and reported as stuck (its
+  // slowest steps print at least every few minutes on 2 cores); 30 minutes.
+  double idle_timeout_seconds = 1800;
   // Called with one line of progress per step (stage name and a short status).
   std::function<void(const std::string&)> progress;
 

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cctype>
+#include <cmath>
 #include <string_view>
 #include <system_error>
 
@@ -127,6 +128,10 @@ void SfmOptions::Check() const {
                  "how many following photos each photo is matched with, e.g. 10");
   check_at_least("--max-image-size", max_image_size, 1, "longest side in pixels, e.g. 1600");
   check_at_least("--max-num-features", max_num_features, 1, "features per image, e.g. 8192");
+  if (!(idle_timeout_seconds > 0) || !std::isfinite(idle_timeout_seconds)) {
+    throw InputError(kCommandLine, "--colmap-idle-timeout", StrCat(idle_timeout_seconds), "must be a positive number of seconds",
+                     "e.g. 1800 (30 minutes)");
+  }
   check_at_least("--min-registered-images", min_registered_images, 2,
                  "a model needs at least two images");
   if (num_threads != -1 && num_threads < 1) {

@@ -445,6 +445,9 @@ TEST(ColmapRunner, UnrelatedPhotosAreAnInputError) {
   options.images = images;
   options.workspace = dir.path() / "work";
   options.num_threads = 2;
+  // Each step prints within seconds here; a hang (seen once in a suite run) fails in 2 minutes
+  // with the tail of COLMAP's log instead of at CTest's timeout.
+  options.idle_timeout_seconds = 120;
   try {
     RunSfm(options);
     FAIL() << "expected InputError";
@@ -947,6 +950,45 @@ TEST(ColmapRunner, FailingStepReportsExitCodeAndLogTail) {
     EXPECT_NE(msg.find("output line 29"), std::string::npos) << msg;
     EXPECT_EQ(msg.find("output line 10"), std::string::npos) << msg;  // only the tail
     EXPECT_NE(ReadFile(log).find("output line 0"), std::string::npos);
+  }
+}
+
+// A step that goes quiet (a COLMAP that hangs) is stopped after the idle limit and reported as
+// stuck, with its log's tail, instead of holding the run forever.
+TEST(ColmapRunner, AStepThatPrintsNothingIsStoppedAsStuck) {
+  TempDir dir("stuck");
+  SfmOptions options;
+  options.images = dir.path() / "photos";
+  WritePhoto(options.images / "a.jpg");
+  options.workspace = dir.path() / "work";
+  options.colmap_binary = (dir.path() / "colmap").string();
+  options.idle_timeout_seconds = 0.5;
+  WriteExecutable(options.colmap_binary, "#!/bin/sh\necho \"reading $1\"\nexec sleep 60\n");
+  const auto t0 = std::chrono::steady_clock::now();
+  try {
+    RunSfm(options);
+    FAIL() << "expected IoError";
+  } catch (const IoError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("feature_extractor printed nothing for 0.5 s"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("reading feature_extractor"), std::string::npos) << msg;  // the log's tail
+    EXPECT_NE(msg.find("--colmap-idle-timeout"), std::string::npos) << msg;
+    EXPECT_NE(ReadFile(options.workspace / "colmap" / "colmap.log").find("stopped: no output for 0.5 s"),
+              std::string::npos);
+  }
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 10.0);
+}
+
+TEST(ColmapRunner, CheckRejectsANonPositiveIdleTimeout) {
+  SfmOptions options;
+  options.images = "photos";
+  options.workspace = "work";
+  options.idle_timeout_seconds = 0;
+  try {
+    options.Check();
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.field(), "--colmap-idle-timeout");
   }
 }
 
