@@ -925,18 +925,24 @@ TEST(ColmapRunner, CaptureTimesAgainstTheNamesMeanEveryPair) {
   EXPECT_TRUE(said("sfm: the EXIF capture times follow the file names (0 of 3"));
 }
 
-TEST(ColmapRunner, FailingStepReportsExitCodeAndLogTail) {
-  TempDir dir("failing");
+// Options for one photo in `dir` and a fake colmap there that runs `script`.
+SfmOptions WithFakeColmap(const TempDir& dir, const std::string& script) {
   SfmOptions options;
   options.images = dir.path() / "photos";
   WritePhoto(options.images / "a.jpg");
   options.workspace = dir.path() / "work";
   options.colmap_binary = (dir.path() / "colmap").string();
-  WriteExecutable(options.colmap_binary,
-                  "#!/bin/sh\n"
-                  "i=0; while [ $i -lt 30 ]; do echo \"output line $i\"; i=$((i+1)); done\n"
-                  "echo 'ERROR: something broke' >&2\n"
-                  "exit 3\n");
+  WriteExecutable(options.colmap_binary, script);
+  return options;
+}
+
+TEST(ColmapRunner, FailingStepReportsExitCodeAndLogTail) {
+  TempDir dir("failing");
+  const SfmOptions options = WithFakeColmap(dir,
+                                            "#!/bin/sh\n"
+                                            "i=0; while [ $i -lt 30 ]; do echo \"output line $i\"; i=$((i+1)); done\n"
+                                            "echo 'ERROR: something broke' >&2\n"
+                                            "exit 3\n");
   try {
     RunSfm(options);
     FAIL() << "expected IoError";
@@ -957,13 +963,8 @@ TEST(ColmapRunner, FailingStepReportsExitCodeAndLogTail) {
 // stuck, with its log's tail, instead of holding the run forever.
 TEST(ColmapRunner, AStepThatPrintsNothingIsStoppedAsStuck) {
   TempDir dir("stuck");
-  SfmOptions options;
-  options.images = dir.path() / "photos";
-  WritePhoto(options.images / "a.jpg");
-  options.workspace = dir.path() / "work";
-  options.colmap_binary = (dir.path() / "colmap").string();
+  SfmOptions options = WithFakeColmap(dir, "#!/bin/sh\necho \"reading $1\"\nexec sleep 60\n");
   options.idle_timeout_seconds = 0.5;
-  WriteExecutable(options.colmap_binary, "#!/bin/sh\necho \"reading $1\"\nexec sleep 60\n");
   const auto t0 = std::chrono::steady_clock::now();
   try {
     RunSfm(options);
