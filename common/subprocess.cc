@@ -33,7 +33,7 @@ class ChildGuard {
   ChildGuard(const ChildGuard&) = delete;
   ChildGuard& operator=(const ChildGuard&) = delete;
   ~ChildGuard() {
-    if (pid_ <= 0) return;
+    if (pid_ <= 0 || reaped_status_) return;  // (a reaped pid may already be another process's)
     ::kill(pid_, SIGTERM);
     int status = 0;
     while (::waitpid(pid_, &status, 0) < 0 && errno == EINTR) {

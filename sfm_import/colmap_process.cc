@@ -91,7 +91,7 @@ StepResult RunColmapStep(const fs::path& colmap, const std::vector<std::string>&
   log << "[perf " << Timestamp() << "] "
       << (result.idle     ? StrCat("stopped: no output for ", options.idle_timeout_seconds, " s")
           : result.signal ? StrCat("killed by signal ", result.signal)
-                        : StrCat("exit code ", result.exit_code))
+                          : StrCat("exit code ", result.exit_code))
       << "\n"
       << std::flush;
   return result;
