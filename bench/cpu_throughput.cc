@@ -37,7 +37,8 @@ int main(int argc, char** argv) {
   app.add_option("--json", json_path, "Also write the figures here");
   bool as_dense = false;
   std::string only;
-  app.add_option("--only", only, "Time one pass alone, for back-to-back comparisons: cost, or jtjp (after one Linearize)")
+  app.add_option("--only", only,
+                 "Time one pass alone, for back-to-back comparisons: cost, or jtjp (after one Linearize)")
       ->check(CLI::IsMember({"cost", "jtjp"}));
   app.add_flag("--as-dense", as_dense, "A sparse checkpoint's volume in the dense layout (the same values)");
   bench::CpuHierarchySettings hs;

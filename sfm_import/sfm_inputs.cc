@@ -129,8 +129,8 @@ void SfmOptions::Check() const {
   check_at_least("--max-image-size", max_image_size, 1, "longest side in pixels, e.g. 1600");
   check_at_least("--max-num-features", max_num_features, 1, "features per image, e.g. 8192");
   if (!(idle_timeout_seconds > 0) || !std::isfinite(idle_timeout_seconds)) {
-    throw InputError(kCommandLine, "--colmap-idle-timeout", StrCat(idle_timeout_seconds), "must be a positive number of seconds",
-                     "e.g. 1800 (30 minutes)");
+    throw InputError(kCommandLine, "--colmap-idle-timeout", StrCat(idle_timeout_seconds),
+                     "must be a positive number of seconds", "e.g. 1800 (30 minutes)");
   }
   check_at_least("--min-registered-images", min_registered_images, 2,
                  "a model needs at least two images");

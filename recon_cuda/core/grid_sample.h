@@ -43,7 +43,8 @@ PERF_HD_INLINE GridSample<T> TrilinearWeights(int n, const int32_t* brick_slot, 
       for (int c = 0; c < 8; ++c) s.cell[c] = -1;
       return s;
     }
-    base = static_cast<int64_t>(slot) * kBrickCells + (((lo[2] & 7) * kBrickSide + (lo[1] & 7)) * kBrickSide + (lo[0] & 7));
+    base = static_cast<int64_t>(slot) * kBrickCells +
+           (((lo[2] & 7) * kBrickSide + (lo[1] & 7)) * kBrickSide + (lo[0] & 7));
     oy *= kBrickSide;
     oz *= kBrickSide * kBrickSide;
   } else {  // the corners span two or more bricks: each looks its own up

@@ -13,7 +13,8 @@ namespace perf::recon {
 
 struct BrickGrid {
   int n = 0;                    // cells per axis, a multiple of kBrickSide
-  std::vector<int32_t> slot;    // [(n/8)^3], x fastest: the brick's slot, InactiveBrick(octant mask) or SkipBrick(radius)
+  // [(n/8)^3], x fastest: the brick's slot, InactiveBrick(octant mask) or SkipBrick(radius)
+  std::vector<int32_t> slot;
   std::vector<int64_t> bricks;  // the active bricks (BrickOf index) in slot order
 
   int nb() const { return n / kBrickSide; }

@@ -252,7 +252,8 @@ TEST(RayMathTest, SparseTrilinearCellsMatchEachCornersLookup) {
     double f[3];
     for (int a = 0; a < 3; ++a) LinearCoord(p[a], n, &lo[a], &hi[a], &f[a]);
     for (int c = 0; c < 8; ++c) {
-      const int64_t want = SparseCell(slot.data(), nb, c & 1 ? hi[0] : lo[0], c & 2 ? hi[1] : lo[1], c & 4 ? hi[2] : lo[2]);
+      const int64_t want =
+          SparseCell(slot.data(), nb, c & 1 ? hi[0] : lo[0], c & 2 ? hi[1] : lo[1], c & 4 ? hi[2] : lo[2]);
       ASSERT_EQ(gs.cell[c], want) << "corner " << c << " of (" << p.x << ", " << p.y << ", " << p.z << ")";
       EXPECT_EQ(gs.w[c], (c & 1 ? f[0] : 1 - f[0]) * (c & 2 ? f[1] : 1 - f[1]) * (c & 4 ? f[2] : 1 - f[2]));
     }

@@ -206,7 +206,9 @@ TEST(BrickGrid, SkipRadiusIsTheDistanceToTheNearestBrickThatIsNotSkipped) {
             for (int y = 0; y < nb; ++y)
               for (int x = 0; x < nb; ++x) {
                 const int32_t q = b.slot[BrickOf(nb, x, y, z)];
-                if (q >= 0 || OctantMask(q) != 0) want = std::min(want, std::max({std::abs(x - i), std::abs(y - j), std::abs(z - k)}));
+                if (q >= 0 || OctantMask(q) != 0) {
+                  want = std::min(want, std::max({std::abs(x - i), std::abs(y - j), std::abs(z - k)}));
+                }
               }
         }
         EXPECT_EQ(SkipRadius(s), want) << i << " " << j << " " << k;
