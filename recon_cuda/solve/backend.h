@@ -30,7 +30,8 @@ struct ResidualSettings {
   float lambda = 0.1f;  // weight of the paper's auxiliary residual L; 0 switches it off
   // Early ray termination: the march stops once the transmittance drops below this. What is
   // behind then contributes less than this fraction to the pixel (and to every partial). 1e-3:
-  // 7 % fewer samples than 1e-4 at the same held-out PSNR (docs/tuning.md "Residuals and rays").
+  // 7-11 % fewer samples than 1e-4, held-out PSNR within run-to-run noise (docs/tuning.md
+  // "Residuals and rays").
   float stop_transmittance = 1e-3f;
   // Jitter every sample along its ray (DESIGN.md "One ray"); off, samples sit mid-segment and
   // every pass sees the same rays (tests, reference solves).
