@@ -143,6 +143,11 @@ class CudaBackend final : public Backend {
     // with the CUDA context, so after the first level it is counted twice (free memory already
     // lacks it): a margin of a few tenths of a percent of such a device.
     e.scratch = Scratch::Bytes(rays, params) + cuda::KernelLocalMemoryBytes();
+    if (p.shape.bricks) {  // the brick table, its list and the march's empty-space table
+      const BrickGrid& b = *p.shape.bricks;
+      e.scratch += static_cast<int64_t>(b.slot.size() * sizeof(int32_t) + b.bricks.size() * sizeof(int64_t) +
+                                        b.skip_blocks.size());
+    }
     e.jacobian_cache = 0;  // never cached: MultiplyJtJ recomputes (cuda_passes.cu)
     e.available = Available();
     return e;
@@ -165,6 +170,8 @@ class CudaBackend final : public Backend {
     if (p.shape.bricks) {
       bricks_ = DeviceBuffer<int32_t>(static_cast<int64_t>(p.shape.bricks->slot.size()));
       bricks_.CopyFromHost(p.shape.bricks->slot);
+      skip_blocks_ = DeviceBuffer<uint8_t>(static_cast<int64_t>(p.shape.bricks->skip_blocks.size()));
+      skip_blocks_.CopyFromHost(p.shape.bricks->skip_blocks);
       brick_list_ = DeviceBuffer<int64_t>(p.shape.bricks->ActiveBricks());
       brick_list_.CopyFromHost(p.shape.bricks->bricks);
     }
@@ -300,6 +307,7 @@ class CudaBackend final : public Backend {
   void Release() {
     vectors_.clear();
     bricks_ = DeviceBuffer<int32_t>();
+    skip_blocks_ = DeviceBuffer<uint8_t>();
     brick_list_ = DeviceBuffer<int64_t>();
     rays_.reset();
     scratch_.reset();
@@ -353,7 +361,10 @@ class CudaBackend final : public Backend {
   // The level's volume at x as the kernels read it: a sparse grid's brick table on the device.
   VolumeView<float> View(const float* x) const {
     VolumeView<float> v = MakeView(level_.shape, level_.geometry, x);
-    if (v.brick_slot) v.brick_slot = bricks_.data();
+    if (v.brick_slot) {
+      v.brick_slot = bricks_.data();
+      v.skip_blocks = skip_blocks_.data();
+    }
     return v;
   }
 
@@ -397,6 +408,7 @@ class CudaBackend final : public Backend {
   LevelProblem level_;
   std::vector<DeviceBuffer<float>> vectors_;
   DeviceBuffer<int32_t> bricks_;  // a sparse level's brick table (VolumeView::brick_slot)
+  DeviceBuffer<uint8_t> skip_blocks_;  // its empty-space table (VolumeView::skip_blocks)
   DeviceBuffer<int64_t> brick_list_;  // and the brick of each slot (SmoothnessLayout::bricks)
   std::unique_ptr<DeviceRays> rays_;
   DeviceBuffer<float> pose_blocks_;  // [poses, kPoseBlock] of the last Linearize with a diagonal

@@ -45,6 +45,7 @@ struct VolumeView {
   // A brick-sparse grid (ray_types.h): its brick table [(n/8)^3] and stored bricks. nullptr:
   // the grid is dense.
   const int32_t* brick_slot = nullptr;
+  const uint8_t* skip_blocks = nullptr;  // with brick_slot: the march's empty-space table (SkipBlockOf)
   int64_t active_bricks = 0;
   int sh_degree = 0;  // spherical harmonics of the grid's colour (ray_types.h ShParam); 0: none
   int exposures = 0;  // photos whose exposures follow the spherical harmonics (ExposureParam)
@@ -196,59 +197,37 @@ PERF_HD_INLINE bool ReachesStoredCell(const VolumeView<T>& vol, Vec3<T> g) {
 // The march index of the first sample at or after k (dir +1), or at or before k (dir -1), that a
 // brick-sparse grid cannot skip, with its step in *st; march.count (or -1) when none is left. A
 // sample whose trilinear support has no stored cell reads only zeros: it adds exact zeros to every
-// sum of Forward and Backward, so skipping it changes nothing. The march jumps to the sample
-// whose segment holds the point where the ray leaves (enters) the box it cannot read from: the
-// cube of skip bricks around a skip brick, an inactive brick's octant that no stored cell is
-// near, or the interior of one that is; in that octant's skin it checks each sample's corners
-// (ReachesStoredCell). The samples that are taken keep their index, hence their jitter: the
-// sparse march equals the dense one wherever the skipped space is empty. Dense grids: k.
+// sum of Forward and Backward, so skipping it changes nothing. By the empty-space table
+// (ray_types.h SkipBlockOf): a sample in a stored brick is taken; one in a block that may read a
+// stored cell is asked (ReachesStoredCell); from one in a block at distance d the march jumps to
+// the sample whose segment holds the point where the ray leaves (enters) the cube of 2 d - 1
+// blocks around it. The samples that are taken keep their index, hence their jitter: the sparse
+// march equals the dense one wherever the skipped space is empty. Dense grids: k.
 template <class T>
 PERF_HD_INLINE int TakeSample(const VolumeView<T>& vol, const BoxRay<T>& ray, const March<T>& m, int k, int dir,
                               const Jitter& jit, MarchStep<T>* st) {
-  const int nb = vol.n / kBrickSide;
   while (k >= 0 && k < m.count) {
     *st = StepAt(m, k, jit);
     if (!vol.brick_slot) return k;
     const Vec3<T> g = ray.GridPoint(st->t);
     int cell[3];
     for (int a = 0; a < 3; ++a) cell[a] = static_cast<int>(Clamp(g[a], T(0), T(vol.n - 1)));  // >= 0: floor
-    const int32_t slot = vol.brick_slot[BrickOf(nb, cell[0] >> 3, cell[1] >> 3, cell[2] >> 3)];
-    if (slot >= 0) return k;
-    const int mask = OctantMask(slot);
-    const int octant = ((cell[0] >> 2) & 1) | (((cell[1] >> 2) & 1) << 1) | (((cell[2] >> 2) & 1) << 2);
-    const bool near = mask & (1 << octant);
-    if (near) {
-      // Only a sample within half a cell of a face reads the next brick's cells: in the brick's
-      // interior [8 b + 1, 8 b + 7) per axis (half a cell of margin) every corner is in this
-      // inactive brick. Outside it each sample is asked; inside, the march leaves the interior.
-      bool inside = true;
-      for (int a = 0; a < 3; ++a) {
-        const T l = g[a] - T(cell[a] >> 3 << 3);
-        inside = inside && l >= T(1) && l < T(kBrickSide - 1);
-      }
-      if (!inside) {
-        if (ReachesStoredCell(vol, g)) return k;
-        k += dir;
-        continue;
-      }
+    const int v = vol.skip_blocks[SkipBlockOf(vol.n, cell[0], cell[1], cell[2])];
+    if (v == kStoredBlock) return k;
+    if (v == kReadingBlock) {
+      if (ReachesStoredCell(vol, g)) return k;
+      k += dir;
+      continue;
     }
-    // The box to leave: that interior, the cube of skip bricks around a brick with no octant near a
-    // stored cell (SkipRadius), or the octant.
-    const int radius = SkipRadius(slot);
+    const int d = v - 1;
     T t_edge = dir > 0 ? T(3.0e38) : T(-3.0e38);
     for (int a = 0; a < 3; ++a) {
-      const T d = ray.grid_dir[a];
-      if (d == 0) continue;
-      int lo = cell[a] >> 2 << 2, side = kBrickSide / 2;
-      if (near) {
-        lo = (cell[a] >> 3 << 3) + 1;
-        side = kBrickSide - 2;
-      } else if (mask == 0) {
-        lo = ((cell[a] >> 3) - (radius - 1)) * kBrickSide;
-        side = (2 * radius - 1) * kBrickSide;
-      }
-      const T face = T(lo + ((d > 0) == (dir > 0) ? side : 0));
-      const T t = (face - ray.grid_origin[a]) / d;
+      const T dg = ray.grid_dir[a];
+      if (dg == 0) continue;
+      const int lo = (cell[a] / kSkipBlockSide - (d - 1)) * kSkipBlockSide;
+      const int side = (2 * d - 1) * kSkipBlockSide;
+      const T face = T(lo + ((dg > 0) == (dir > 0) ? side : 0));
+      const T t = (face - ray.grid_origin[a]) / dg;
       t_edge = dir > 0 ? Min(t_edge, t) : Max(t_edge, t);
     }
     const T seg = (t_edge - m.t_min) / m.delta;

@@ -190,22 +190,24 @@ PERF_HD_INLINE int64_t PoseParam(int64_t pose_start, int slot) {
 // of 8^3 (OpenVDB's leaf), N a multiple of 8. Only active bricks hold parameters: brick slot s
 // holds its cells at s 512 + (z 8 + y) 8 + x (local coordinates), each cell 4 values as in the
 // dense layout, and the shells follow the last slot. The brick table [(N/8)^3] gives each brick's
-// slot (>= 0), or for an inactive brick, which reads as 0 in every channel, -1 - mask: bit
-// ox + 2 oy + 4 oz of the mask is set when octant (ox, oy, oz) of the brick (its 4^3 cells at
-// 4 o) lies within one cell of a stored cell, so that a sample there may read one. The march
-// steps over the other octants, and over a brick whose mask is 0 (a skip brick) whole. A skip
-// brick also says how far the skip bricks around it reach: with radius r, every brick within
-// r - 1 of it per axis is one too (a cube of 2 r - 1 bricks), and the march leaves that cube in
-// one jump (ray_march.h TakeSample). Radius 1 is kSkipBrick (-1); r > 1 is -256 - r.
+// slot (>= 0), or kInactiveBrick for a brick that reads as 0 in every channel.
 inline constexpr int kBrickSide = 8;
 inline constexpr int kBrickCells = kBrickSide * kBrickSide * kBrickSide;
-inline constexpr int32_t kSkipBrick = -1;
-inline constexpr int kMaxSkipRadius = 1 << 20;
-PERF_HD_INLINE int32_t InactiveBrick(int octant_mask) { return -1 - octant_mask; }
-PERF_HD_INLINE int32_t SkipBrick(int radius) { return radius <= 1 ? kSkipBrick : -256 - radius; }
-PERF_HD_INLINE int OctantMask(int32_t slot) { return slot < -256 ? 0 : -1 - slot; }
-// The radius of a skip brick's cube (0: the slot is not a skip brick).
-PERF_HD_INLINE int SkipRadius(int32_t slot) { return slot == kSkipBrick ? 1 : (slot < -256 ? -256 - slot : 0); }
+inline constexpr int32_t kInactiveBrick = -1;
+
+// The march's empty-space table (ray_march.h TakeSample), one byte per block of kSkipBlockSide^3
+// cells [(N/2)^3], x fastest: kStoredBlock for a block of an active brick; kReadingBlock for one
+// outside them a sample in which may read a stored cell (a sample reads cells within half a cell
+// of it); else 1 + its chessboard distance d in blocks to the nearest block of either kind,
+// capped at kMaxBlockValue: the cube of 2 d - 1 blocks around it holds no sample that reads a
+// stored cell.
+inline constexpr int kSkipBlockSide = 2;
+inline constexpr uint8_t kStoredBlock = 0, kReadingBlock = 1, kMaxBlockValue = 255;
+static_assert(kBrickSide % kSkipBlockSide == 0, "a block lies in one brick");
+PERF_HD_INLINE int64_t SkipBlockOf(int n, int i, int j, int k) {
+  const int64_t nk = n / kSkipBlockSide;
+  return (k / kSkipBlockSide * nk + j / kSkipBlockSide) * nk + i / kSkipBlockSide;
+}
 
 PERF_HD_INLINE int64_t SparseGridParams(int64_t active_bricks) { return 4 * kBrickCells * active_bricks; }
 // The bricks of an n^3 grid, (n / 8)^3.

@@ -8,35 +8,63 @@ namespace perf::recon {
 
 namespace {
 
-// Each skip brick's radius: its chessboard distance (in bricks) to the nearest brick that is not
-// one, by a forward and a backward sweep over the 13 neighbours before (after) it, which is exact
-// for that distance. Bricks outside the grid count as skip bricks (the march ends at the box).
-void SetSkipRadii(BrickGrid* b) {
-  const int nb = b->nb();
-  std::vector<int> dist(b->slot.size());
-  for (size_t i = 0; i < dist.size(); ++i) dist[i] = b->slot[i] == kSkipBrick ? kMaxSkipRadius : 0;  // the cap
+// The march's empty-space table (ray_types.h SkipBlockOf). Block B's samples read cells 2 B - 1 ..
+// 2 B + 2 per axis (a sample reads cells within half a cell of it), so a block outside the active
+// bricks may read one when a brick over that range is active. The distances: two sweeps over the 13
+// neighbours before (after) a block, which is exact for the chessboard distance.
+std::vector<uint8_t> SkipBlocks(int n, const std::vector<uint8_t>& active) {
+  const int nb = n / kBrickSide, nk = n / kSkipBlockSide;
+  const int64_t blocks = int64_t{nk} * nk * nk;
+  const auto bricks_read = [&](int blk, int* lo, int* hi) {
+    *lo = std::max(0, (kSkipBlockSide * blk - 1) / kBrickSide);
+    *hi = std::min(nb - 1, (kSkipBlockSide * blk + kSkipBlockSide) / kBrickSide);
+  };
+  constexpr int kFar = 1 << 20;
+  std::vector<int> dist(static_cast<size_t>(blocks));  // 0: stored or reading
+  std::vector<uint8_t> out(static_cast<size_t>(blocks));
+  for (int64_t idx = 0; idx < blocks; ++idx) {
+    const int i = static_cast<int>(idx % nk), j = static_cast<int>(idx / nk % nk),
+              k = static_cast<int>(idx / (int64_t{nk} * nk));
+    const int per_brick = kBrickSide / kSkipBlockSide;
+    if (active[BrickOf(nb, i / per_brick, j / per_brick, k / per_brick)]) {
+      out[idx] = kStoredBlock;
+      continue;
+    }
+    int lo[3], hi[3];
+    bricks_read(i, &lo[0], &hi[0]);
+    bricks_read(j, &lo[1], &hi[1]);
+    bricks_read(k, &lo[2], &hi[2]);
+    bool reads = false;
+    for (int z = lo[2]; z <= hi[2] && !reads; ++z)
+      for (int y = lo[1]; y <= hi[1] && !reads; ++y)
+        for (int x = lo[0]; x <= hi[0] && !reads; ++x) reads = active[BrickOf(nb, x, y, z)];
+    out[idx] = kReadingBlock;
+    dist[idx] = reads ? 0 : kFar;
+  }
   const auto sweep = [&](int sign) {
-    for (int t = 0; t < nb * nb * nb; ++t) {
-      const int idx = sign > 0 ? t : nb * nb * nb - 1 - t;
-      const int i = idx % nb, j = idx / nb % nb, k = idx / (nb * nb);
+    for (int64_t t = 0; t < blocks; ++t) {
+      const int64_t idx = sign > 0 ? t : blocks - 1 - t;
+      const int i = static_cast<int>(idx % nk), j = static_cast<int>(idx / nk % nk),
+                k = static_cast<int>(idx / (int64_t{nk} * nk));
       int& d = dist[idx];
       if (d == 0) continue;
       for (int dz = -1; dz <= 1; ++dz)
         for (int dy = -1; dy <= 1; ++dy)
           for (int dx = -1; dx <= 1; ++dx) {
-            const int before = (dz * nb + dy) * nb + dx;  // neighbours already swept: index offset < 0 (> 0)
+            const int before = (dz * nk + dy) * nk + dx;  // neighbours already swept: index offset < 0 (> 0)
             if (before * sign >= 0) continue;
             const int x = i + dx, y = j + dy, z = k + dz;
-            if (x < 0 || y < 0 || z < 0 || x >= nb || y >= nb || z >= nb) continue;
-            d = std::min(d, dist[BrickOf(nb, x, y, z)] + 1);
+            if (x < 0 || y < 0 || z < 0 || x >= nk || y >= nk || z >= nk) continue;
+            d = std::min(d, dist[(int64_t{z} * nk + y) * nk + x] + 1);
           }
     }
   };
   sweep(1);
   sweep(-1);
-  for (size_t i = 0; i < dist.size(); ++i) {
-    if (dist[i] > 0) b->slot[i] = SkipBrick(dist[i]);
+  for (int64_t idx = 0; idx < blocks; ++idx) {
+    if (dist[idx] > 0) out[idx] = static_cast<uint8_t>(std::min(1 + dist[idx], int{kMaxBlockValue}));
   }
+  return out;
 }
 
 }  // namespace
@@ -48,41 +76,17 @@ BrickGrid MakeBrickGrid(int n, const std::vector<uint8_t>& active) {
   }
   BrickGrid b;
   b.n = n;
-  const int nb = b.nb();
   const int64_t count = BrickCount(n);
   if (static_cast<int64_t>(active.size()) != count) {
     throw InputError("brick grid", "active", StrCat(active.size(), " flags"), StrCat("expected ", count));
   }
-  b.slot.assign(static_cast<size_t>(count), kSkipBrick);
+  b.slot.assign(static_cast<size_t>(count), kInactiveBrick);
   for (int64_t i = 0; i < count; ++i) {
     if (!active[i]) continue;
     b.slot[i] = static_cast<int32_t>(b.bricks.size());
     b.bricks.push_back(i);
   }
-  // An inactive brick's octant o (per axis 0 or 1) reaches cells 4 o - 1 .. 4 o + 4 of it, so the
-  // bricks o - 1 and o along each axis: its mask bit is set when one of those 2 x 2 x 2 is active.
-  const auto active_at = [&](int i, int j, int k) {
-    return i >= 0 && j >= 0 && k >= 0 && i < nb && j < nb && k < nb && active[BrickOf(nb, i, j, k)];
-  };
-  for (int bk = 0; bk < nb; ++bk) {
-    for (int bj = 0; bj < nb; ++bj) {
-      for (int bi = 0; bi < nb; ++bi) {
-        int32_t& s = b.slot[BrickOf(nb, bi, bj, bk)];
-        if (s >= 0) continue;
-        int mask = 0;
-        for (int o = 0; o < 8; ++o) {
-          const int ox = o & 1, oy = (o >> 1) & 1, oz = o >> 2;
-          bool reach = false;
-          for (int c = 0; c < 8 && !reach; ++c) {
-            reach = active_at(bi + ox - 1 + (c & 1), bj + oy - 1 + ((c >> 1) & 1), bk + oz - 1 + (c >> 2));
-          }
-          if (reach) mask |= 1 << o;
-        }
-        s = InactiveBrick(mask);
-      }
-    }
-  }
-  SetSkipRadii(&b);
+  b.skip_blocks = SkipBlocks(n, active);
   return b;
 }
 

@@ -13,9 +13,9 @@ namespace perf::recon {
 
 struct BrickGrid {
   int n = 0;                    // cells per axis, a multiple of kBrickSide
-  // [(n/8)^3], x fastest: the brick's slot, InactiveBrick(octant mask) or SkipBrick(radius)
-  std::vector<int32_t> slot;
+  std::vector<int32_t> slot;    // [(n/8)^3], x fastest: the brick's slot, or kInactiveBrick
   std::vector<int64_t> bricks;  // the active bricks (BrickOf index) in slot order
+  std::vector<uint8_t> skip_blocks;  // [(n/2)^3], x fastest: the march's empty-space table (SkipBlockOf)
 
   int nb() const { return n / kBrickSide; }
   int64_t ActiveBricks() const { return static_cast<int64_t>(bricks.size()); }
@@ -37,10 +37,9 @@ struct BrickGrid {
   }
 };
 
-// active: [(n/8)^3] flags, x fastest. Slots follow the brick order; an inactive brick holds the
-// mask of its octants within one cell of an active brick, or when that is 0 its skip radius
-// (ray_types.h). Throws InputError when n is not a positive multiple of 8 or `active` has the
-// wrong size.
+// active: [(n/8)^3] flags, x fastest. Slots follow the brick order; the empty-space table is
+// built from the same flags (ray_types.h). Throws InputError when n is not a positive multiple of
+// 8 or `active` has the wrong size.
 BrickGrid MakeBrickGrid(int n, const std::vector<uint8_t>& active);
 
 // The grid part of x between the layouts: dense [n^3, 4] to sparse [active cells, 4] (the values

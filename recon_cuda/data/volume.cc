@@ -52,6 +52,7 @@ VolumeView<float> MakeView(const VolumeShape& shape, const VolumeGeometry& geome
   if (shape.bricks) {
     PERF_CHECK(shape.bricks->n == shape.n);
     v.brick_slot = shape.bricks->slot.data();
+    v.skip_blocks = shape.bricks->skip_blocks.data();
     v.active_bricks = shape.bricks->ActiveBricks();
   }
   return v;

@@ -240,7 +240,7 @@ TEST(RayMathTest, SparseTrilinearCellsMatchEachCornersLookup) {
   std::mt19937 rng(17);
   std::vector<int32_t> slot(BrickCount(n));
   int32_t next = 0;
-  for (auto& s : slot) s = rng() % 3 == 0 ? InactiveBrick(static_cast<int>(rng() % 256)) : next++;
+  for (auto& s : slot) s = rng() % 3 == 0 ? kInactiveBrick : next++;
   std::uniform_real_distribution<double> u(-0.5, n + 0.5);
   std::uniform_int_distribution<int> edge(1, nb - 1);
   int one_brick = 0, spanning = 0, inactive = 0;

@@ -161,6 +161,7 @@ inline VolumeView<double> DoubleView(const TinyProblem& p, const std::vector<dou
   for (int k = 0; k < p.shape.num_shells; ++k) vol.shell_radii[k] = p.geometry.shell_radii[k];
   if (p.shape.bricks) {  // a brick-sparse x
     vol.brick_slot = p.shape.bricks->slot.data();
+    vol.skip_blocks = p.shape.bricks->skip_blocks.data();
     vol.active_bricks = p.shape.bricks->ActiveBricks();
   }
   EXPECT_EQ(static_cast<int64_t>(x.size()), p.shape.ParamCount());

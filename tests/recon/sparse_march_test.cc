@@ -67,6 +67,7 @@ struct SparseScene {
     sparse_view = dense_view;
     sparse_view.params = sparse.data();
     sparse_view.brick_slot = bricks.slot.data();
+    sparse_view.skip_blocks = bricks.skip_blocks.data();
     sparse_view.active_bricks = bricks.ActiveBricks();
   }
 
@@ -110,6 +111,46 @@ BrickGrid TwoActiveBricks(int n, std::array<int, 3> p, std::array<int, 3> q) {
   return MakeBrickGrid(n, active);
 }
 
+// The empty-space table by its definition (ray_types.h SkipBlockOf), cell by cell: a block of an
+// active brick is stored; one any of whose samples' cells (within half a cell of the block) is
+// stored is reading; any other holds 1 + its chessboard distance to the nearest of those.
+std::vector<uint8_t> WantSkipBlocks(const BrickGrid& b) {
+  const int n = b.n, nk = n / kSkipBlockSide;
+  std::vector<int> kind(static_cast<size_t>(nk) * nk * nk);  // 0 stored, 1 reading, 2 neither
+  for (int k = 0; k < nk; ++k)
+    for (int j = 0; j < nk; ++j)
+      for (int i = 0; i < nk; ++i) {
+        const int s = kSkipBlockSide;
+        int& out = kind[(static_cast<size_t>(k) * nk + j) * nk + i];
+        out = SparseCell(b.slot.data(), b.nb(), s * i, s * j, s * k) >= 0 ? 0 : 2;
+        for (int z = s * k - 1; z <= s * k + s && out == 2; ++z)
+          for (int y = s * j - 1; y <= s * j + s && out == 2; ++y)
+            for (int x = s * i - 1; x <= s * i + s && out == 2; ++x)
+              if (x >= 0 && y >= 0 && z >= 0 && x < n && y < n && z < n && SparseCell(b.slot.data(), b.nb(), x, y, z) >= 0) {
+                out = 1;
+              }
+      }
+  std::vector<uint8_t> want(kind.size());
+  for (int k = 0; k < nk; ++k)
+    for (int j = 0; j < nk; ++j)
+      for (int i = 0; i < nk; ++i) {
+        const size_t idx = (static_cast<size_t>(k) * nk + j) * nk + i;
+        if (kind[idx] < 2) {
+          want[idx] = kind[idx] == 0 ? kStoredBlock : kReadingBlock;
+          continue;
+        }
+        int d = 1 << 20;
+        for (int z = 0; z < nk; ++z)
+          for (int y = 0; y < nk; ++y)
+            for (int x = 0; x < nk; ++x)
+              if (kind[(static_cast<size_t>(z) * nk + y) * nk + x] < 2) {
+                d = std::min(d, std::max({std::abs(x - i), std::abs(y - j), std::abs(z - k)}));
+              }
+        want[idx] = static_cast<uint8_t>(std::min(1 + d, int{kMaxBlockValue}));
+      }
+  return want;
+}
+
 TEST(BrickGrid, SlotsMarksAndLayouts) {
   const int n = 32, nb = 4;
   const BrickGrid b = TwoActiveBricks(n, {1, 1, 1}, {3, 0, 0});
@@ -117,33 +158,10 @@ TEST(BrickGrid, SlotsMarksAndLayouts) {
   EXPECT_EQ(b.slot[BrickOf(nb, 3, 0, 0)], 0);  // brick order, x fastest
   EXPECT_EQ(b.slot[BrickOf(nb, 1, 1, 1)], 1);
   EXPECT_EQ(b.bricks, (std::vector<int64_t>{BrickOf(nb, 3, 0, 0), BrickOf(nb, 1, 1, 1)}));
-  // Each inactive brick's octant mask against the definition: octant o is within one cell of a
-  // stored cell when a cell of 4 o - 1 .. 4 o + 4 (per axis, relative to the brick) is stored.
-  int partial = 0, skip = 0;
-  for (int k = 0; k < nb; ++k) {
-    for (int j = 0; j < nb; ++j) {
-      for (int i = 0; i < nb; ++i) {
-        const int32_t s = b.slot[BrickOf(nb, i, j, k)];
-        if (s >= 0) continue;
-        int want = 0;
-        for (int o = 0; o < 8; ++o) {
-          const int o3[3] = {o & 1, (o >> 1) & 1, o >> 2}, base[3] = {8 * i, 8 * j, 8 * k};
-          bool reach = false;
-          for (int z = base[2] + 4 * o3[2] - 1; z <= base[2] + 4 * o3[2] + 4; ++z)
-            for (int y = base[1] + 4 * o3[1] - 1; y <= base[1] + 4 * o3[1] + 4; ++y)
-              for (int x = base[0] + 4 * o3[0] - 1; x <= base[0] + 4 * o3[0] + 4; ++x)
-                reach = reach || (x >= 0 && y >= 0 && z >= 0 && x < n && y < n && z < n &&
-                                  SparseCell(b.slot.data(), nb, x, y, z) >= 0);
-          if (reach) want |= 1 << o;
-        }
-        EXPECT_EQ(OctantMask(s), want) << i << " " << j << " " << k;
-        (OctantMask(s) == 0 ? skip : partial)++;
-      }
-    }
-  }
-  EXPECT_EQ(partial, 26 + 7 - 4);  // the bricks next to (1,1,1) or (3,0,0), edges and corners included
-  EXPECT_EQ(skip, 64 - 2 - partial);
-  EXPECT_EQ(OctantMask(b.slot[BrickOf(nb, 0, 1, 1)]), 0b10101010);  // its +x half faces (1,1,1)
+  EXPECT_EQ(b.skip_blocks, WantSkipBlocks(b));
+  EXPECT_EQ(b.skip_blocks[SkipBlockOf(n, 8, 8, 8)], kStoredBlock);
+  EXPECT_EQ(b.skip_blocks[SkipBlockOf(n, 6, 8, 8)], kReadingBlock);  // next to brick (1, 1, 1)
+  EXPECT_EQ(b.skip_blocks[SkipBlockOf(n, 4, 8, 8)], 2);              // one block further
 
   std::mt19937 rng(3);
   std::uniform_real_distribution<float> u(0.f, 1.f);
@@ -189,44 +207,47 @@ std::vector<uint8_t> BallOfBricks(int nb, std::mt19937& rng) {
   return active;
 }
 
-// A skip brick's radius is its chessboard distance to the nearest brick that is not one (active,
-// or inactive with an octant near a stored cell): the cube the march leaves in one jump.
-TEST(BrickGrid, SkipRadiusIsTheDistanceToTheNearestBrickThatIsNotSkipped) {
-  const int n = 80, nb = 10;
+// The empty-space table on a grid with two active bricks far apart, and the meaning of its marks:
+// no sample in a block marked neither stored nor reading reaches a stored cell.
+TEST(BrickGrid, SkipBlocksHoldTheDistanceToWhereASampleMayReadAStoredCell) {
+  const int n = 80;
   const BrickGrid b = TwoActiveBricks(n, {1, 2, 1}, {6, 6, 7});
-  int largest = 0;
-  for (int k = 0; k < nb; ++k) {
-    for (int j = 0; j < nb; ++j) {
-      for (int i = 0; i < nb; ++i) {
-        const int32_t s = b.slot[BrickOf(nb, i, j, k)];
-        int want = 0;
-        if (s < 0 && OctantMask(s) == 0) {
-          want = kMaxSkipRadius;  // no brick that is not a skip brick: the cap
-          for (int z = 0; z < nb; ++z)
-            for (int y = 0; y < nb; ++y)
-              for (int x = 0; x < nb; ++x) {
-                const int32_t q = b.slot[BrickOf(nb, x, y, z)];
-                if (q >= 0 || OctantMask(q) != 0) {
-                  want = std::min(want, std::max({std::abs(x - i), std::abs(y - j), std::abs(z - k)}));
-                }
-              }
-        }
-        EXPECT_EQ(SkipRadius(s), want) << i << " " << j << " " << k;
-        largest = std::max(largest, want);
-      }
+  EXPECT_EQ(b.skip_blocks, WantSkipBlocks(b));
+  EXPECT_EQ(*std::max_element(b.skip_blocks.begin(), b.skip_blocks.end()), 1 + 27);  // corners such as (39, 0, 0): 27 blocks away
+  VolumeView<double> vol{};
+  vol.n = n;
+  vol.brick_slot = b.slot.data();
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<double> u(0.0, n);
+  int reading = 0, reached = 0, empty = 0;
+  for (int t = 0; t < 200000; ++t) {
+    const Vec3<double> g{u(rng), u(rng), u(rng)};
+    const int v = b.skip_blocks[SkipBlockOf(n, static_cast<int>(g.x), static_cast<int>(g.y), static_cast<int>(g.z))];
+    const bool reaches = ReachesStoredCell(vol, g);
+    if (v == kStoredBlock) {
+      ASSERT_TRUE(reaches);
+    } else if (v == kReadingBlock) {
+      reading++;
+      reached += reaches;
+    } else {
+      empty++;
+      ASSERT_FALSE(reaches) << g.x << " " << g.y << " " << g.z;
     }
   }
-  EXPECT_EQ(largest, 6);  // the corners far from both active bricks reach 6
-  EXPECT_EQ(SkipRadius(MakeBrickGrid(16, std::vector<uint8_t>(8, 0)).slot[0]), kMaxSkipRadius);  // nothing stored
+  EXPECT_GT(reached, reading / 10);  // a reading block's samples near the brick do read it
+  EXPECT_GT(empty, 150000);
+  // Nothing stored: every block at the cap.
+  const BrickGrid none = MakeBrickGrid(16, std::vector<uint8_t>(8, 0));
+  EXPECT_EQ(none.skip_blocks, std::vector<uint8_t>(512, kMaxBlockValue));
 }
 
 TEST(SparseMarch, EqualsTheDenseMarchWhereTheSkippedSpaceIsEmpty) {
   std::mt19937 rng(11);
   const int n = 96;
   SparseScene s(rng, n, BallOfBricks(n / kBrickSide, rng), 40.0);
-  int wide = 0;  // skip bricks whose cube reaches beyond their neighbours: the march jumps several
-  for (const int32_t slot : s.bricks.slot) wide += SkipRadius(slot) >= 3;
-  EXPECT_GT(wide, 100);
+  int wide = 0;  // blocks whose cube reaches beyond their neighbours: the march jumps several
+  for (const uint8_t v : s.bricks.skip_blocks) wide += v >= 1 + 3;
+  EXPECT_GT(wide, 10000);
   int skipping = 0;
   int64_t dense_samples = 0, sparse_samples = 0;
   const double target[3] = {0.2, 0.5, 0.7};
