@@ -111,20 +111,11 @@ class CpuBackend final : public Backend {
     const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, vec(lin_x_).data());
     vectors_.arena().execute([&] {
       tbb::parallel_for(int64_t{0}, static_cast<int64_t>(blocks_.size()), [&](int64_t b) {
-        BlockJ& block = blocks_[b];
         const int64_t ray0 = jtj_.FirstFrom(b * kBlockRays);  // the block's first recorded ray
-        uint32_t first = 0, kept = 0;
-        for (size_t r = 0; r < block.end.size(); ++r) {
-          const BoxRay<float> ray = TrainingRayOf(vol, ray0 + static_cast<int64_t>(r) * jtj_.stride, lin_seed_).ray;
-          for (uint32_t j = first; j < block.end[r]; ++j) {
-            const SampleJ& sj = block.samples[j];
-            if (SkippableSample(TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(sj.t)), sj.sp, pf)) continue;
-            block.samples[kept++] = sj;
-          }
-          first = block.end[r];
-          block.end[r] = kept;
-        }
-        block.samples.resize(kept);
+        const auto ray_of = [&](size_t r) {
+          return TrainingRayOf(vol, ray0 + static_cast<int64_t>(r) * jtj_.stride, lin_seed_);
+        };
+        DropSkippableSamples(vol, pf, ray_of, &blocks_[b]);
       });
     });
   }
@@ -149,7 +140,7 @@ class CpuBackend final : public Backend {
     const uint64_t pass = BeginPass();
     PassStats stats = ForBlocks(want_diag ? 2 : 1, pass, [&](int64_t block, int64_t begin, int64_t end, Scratch& s) {
       BlockJ* out = record ? &blocks_[block] : nullptr;
-      if (out) out->Clear(jtj.CountIn(begin, end), level_.shape);
+      if (out) out->Clear(jtj.CountIn(begin, end), level_.shape, options_.compact_jacobian);
       return want_diag ? LinearizeBlock<true>(vol, seed, subset, jtj, begin, end, s, out)
                        : LinearizeBlock<false>(vol, seed, subset, jtj, begin, end, s, out);
     });
@@ -186,7 +177,8 @@ class CpuBackend final : public Backend {
       for (int64_t i = jtj_.FirstFrom(begin); i < end; i += jtj_.stride, ++r) {
         const TrainingRay tr = TrainingRayOf(vol, i, lin_seed_);
         const BoxRay<float>& ray = tr.ray;
-        const SampleJ* samples;
+        const BlockJ* row;  // the ray's samples: row's from `first` on, `count` of them
+        uint32_t first = 0;
         const ShellJ* shells;
         const float* h;
         const float* pose_row;
@@ -194,8 +186,8 @@ class CpuBackend final : public Backend {
         int count;
         if (recorded_) {
           const BlockJ& b = blocks_[block];
-          const uint32_t first = r == 0 ? 0 : b.end[r - 1];
-          samples = b.samples.data() + first;
+          row = &b;
+          first = r == 0 ? 0 : b.end[r - 1];
           count = static_cast<int>(b.end[r] - first);
           shells = &b.shells[r * k_shells];
           h = &b.h[3 * r];
@@ -203,7 +195,7 @@ class CpuBackend final : public Backend {
           pose_row = tr.pose >= 0 ? &b.pose[kPoseRowValues * r] : nullptr;
         } else {
           RecomputeRow(vol, tr, i, s);
-          samples = s.row.samples.data();
+          row = &s.row;
           count = static_cast<int>(s.row.samples.size());
           shells = s.row.shells.data();
           h = s.row.h.data();
@@ -221,12 +213,16 @@ class CpuBackend final : public Backend {
           AddJpShell(pp, ts[k], shells[k].sp, u);
         }
         GridSample<float>* w = s.weights.data();
+        SamplePartials<float>* sp = s.partials.data();
+        const March<float> m = row->compact ? MakeMarch(vol, ray) : March<float>{};
         for (int j = 0; j < count; ++j) {
-          w[j] = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(samples[j].t));
-          if (sh.degree == 0) AddJpSample(pp, w[j], samples[j].sp, u, sh);
+          float t;
+          RecordedSample(*row, m, tr.jit, first + j, &t, &sp[j]);
+          w[j] = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(t));
+          if (sh.degree == 0) AddJpSample(pp, w[j], sp[j], u, sh);
           else PrefetchCells(w[j], pp, sh);  // the bands lie apart from the cell: gather after
         }
-        if (sh.degree > 0) for (int j = 0; j < count; ++j) AddJpSample(pp, w[j], samples[j].sp, u, sh);
+        if (sh.degree > 0) for (int j = 0; j < count; ++j) AddJpSample(pp, w[j], sp[j], u, sh);
         if (pose_row) AddJpPose(pr, pp, tr.pose, u);
         FinishJp(e, pp, u);
         float uv[4];
@@ -237,7 +233,7 @@ class CpuBackend final : public Backend {
         }
         if (sh.degree == 0) {
           // Direct scatter: measured faster here than merging cells (CellMerger) first.
-          for (int j = 0; j < count; ++j) ScatterJtuSample(w[j], samples[j].sp, uv, sink, sh);
+          for (int j = 0; j < count; ++j) ScatterJtuSample(w[j], sp[j], uv, sink, sh);
         } else {
           // With spherical harmonics each cell's bands are written once per ray from its merged
           // colour values, not once per sample (3 to 5 samples reach a cell).
@@ -245,7 +241,7 @@ class CpuBackend final : public Backend {
           CellMerger<float, 4> merger;
           for (int j = 0; j < count; ++j) {
             float v[4];
-            JtuValues(samples[j].sp, uv, v);
+            JtuValues(sp[j], uv, v);
             merger.Sample(w[j], v, flush);
           }
           merger.Finish(flush);
@@ -363,7 +359,7 @@ class CpuBackend final : public Backend {
       ScatterJtuExposure(e, r, v.g);
       if constexpr (kDiag) AddDiagExposure(e, v.d);
       if (out) {
-        out->end[r_out] = static_cast<uint32_t>(out->samples.size());
+        out->end[r_out] = out->SampleCount();
         for (int c = 0; c < 3; ++c) out->h[3 * r_out + c] = fwd.h[c];
         out->scale[r_out] = scale;
         ++r_out;
@@ -409,7 +405,9 @@ class CpuBackend final : public Backend {
     s.row.scale[0] = RobustRowScale(fwd.residual, robust_);
   }
 
-  int64_t CacheBytes(const LevelProblem& p) const { return RecordedJacobianBytes(p, kBlockRays, vectors_); }
+  int64_t CacheBytes(const LevelProblem& p) const {
+    return RecordedJacobianBytes(p, kBlockRays, options_.compact_jacobian, vectors_);
+  }
 
   uint64_t BeginPass() { return ++pass_; }
 
@@ -428,6 +426,7 @@ class CpuBackend final : public Backend {
         if (static_cast<int>(s.record.size()) < max_samples_) {
           s.record.resize(max_samples_);
           s.weights.resize(max_samples_);
+          s.partials.resize(max_samples_);
         }
         if (width > 0 && s.pass != pass) {
           s.acc.assign(params * width, 0.f);

@@ -15,8 +15,10 @@ namespace perf::recon::cpu {
 // to the block: an estimate, and a quarter of a march) times the per-sample record, plus the
 // shell records and, when poses are refined, the pose rows; of the recorded rays (every
 // p.jtj_ray_stride-th) only.
-void BlockJ::Clear(int64_t rays, const VolumeShape& shape) {
+void BlockJ::Clear(int64_t rays, const VolumeShape& shape, bool compact_samples) {
+  compact = compact_samples;
   samples.clear();
+  packed.clear();
   end.assign(rays, 0);
   shells.assign(rays * shape.num_shells, ShellJ{{-1, 0.f, 0.f}, {}});
   h.assign(3 * rays, 0.f);
@@ -31,7 +33,7 @@ const int32_t* PhotoSlots(const LevelProblem& p, int count) {
   return p.rays->exposure_slot.data();
 }
 
-int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, const CpuVectors& vectors) {
+int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, bool compact, const CpuVectors& vectors) {
   constexpr int64_t kSparseStride = 4;
   const VolumeView<float> vol = MakeView(p.shape, p.geometry, nullptr);
   const int64_t n = p.rays->size();
@@ -67,7 +69,7 @@ int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, const C
   for (int64_t c : per_block) samples += c;
   // Only every jtj_ray_stride-th ray is recorded.
   const int64_t stride = std::max(1, p.jtj_ray_stride), recorded = (n + stride - 1) / stride;
-  return samples / stride * static_cast<int64_t>(sizeof(SampleJ)) +
+  return samples / stride * static_cast<int64_t>(compact ? sizeof(CompactSampleJ) : sizeof(SampleJ)) +
          recorded * (static_cast<int64_t>(sizeof(uint32_t) + 4 * sizeof(float)) +
               p.shape.num_shells * static_cast<int64_t>(sizeof(ShellJ)) +
               (p.shape.poses > 0 ? kPoseRowValues * static_cast<int64_t>(sizeof(float)) : 0));

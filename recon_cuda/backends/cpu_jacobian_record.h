@@ -3,12 +3,15 @@
 // to the CPU backend.
 #pragma once
 
+#include <bit>
 #include <cstdint>
 #include <vector>
 
+#include "common/errors.h"
 #include "recon_cuda/core/jacobian.h"
 #include "recon_cuda/core/pose.h"
 #include "recon_cuda/core/ray_math.h"
+#include "recon_cuda/core/training_ray.h"
 #include "recon_cuda/solve/backend.h"
 
 namespace perf::recon {
@@ -32,10 +35,32 @@ struct AddSink {
   }
 };
 
-// One ray's Jacobian, as recorded by Linearize.
+// A float rounded to bfloat16 (its top 16 bits, to nearest, ties to even), and back.
+inline uint16_t ToBfloat16(float x) {
+  uint32_t u = std::bit_cast<uint32_t>(x);
+  u += 0x7fffu + ((u >> 16) & 1u);
+  return static_cast<uint16_t>(u >> 16);
+}
+inline float FromBfloat16(uint16_t h) { return std::bit_cast<float>(static_cast<uint32_t>(h) << 16); }
+
+// One sample of a ray's Jacobian, as recorded by Linearize: exact, or compact (CpuBackendOptions::
+// compact_jacobian): its march index, whose t StepAt recomputes exactly, and its partials in
+// bfloat16 (8 bits of mantissa).
 struct SampleJ {
   float t;
   SamplePartials<float> sp;
+};
+struct CompactSampleJ {
+  uint16_t k;
+  uint16_t sp[5];  // dc, ds[3], dl
+  static CompactSampleJ Make(int k, const SamplePartials<float>& p) {
+    PERF_CHECK(k >= 0 && k <= 0xffff);
+    return {static_cast<uint16_t>(k), {ToBfloat16(p.dc), ToBfloat16(p.ds[0]), ToBfloat16(p.ds[1]), ToBfloat16(p.ds[2]),
+                                       ToBfloat16(p.dl)}};
+  }
+  SamplePartials<float> Partials() const {
+    return {FromBfloat16(sp[0]), {FromBfloat16(sp[1]), FromBfloat16(sp[2]), FromBfloat16(sp[3])}, FromBfloat16(sp[4])};
+  }
 };
 struct ShellJ {
   CubeCoord<float> coord;  // face -1: the ray misses this shell
@@ -44,16 +69,55 @@ struct ShellJ {
 
 // The recorded Jacobian of one block of rays.
 struct BlockJ {
+  bool compact = false;                 // its samples are in `packed`, else in `samples`
   std::vector<SampleJ> samples;
-  std::vector<uint32_t> end;  // [rays]: one past the ray's last sample in `samples`
+  std::vector<CompactSampleJ> packed;
+  std::vector<uint32_t> end;  // [rays]: one past the ray's last sample in `samples` (`packed`)
   std::vector<ShellJ> shells;  // [rays, num_shells]
   std::vector<float> h;        // [rays, 3] the composited colour H (the exposure's partials)
   std::vector<float> scale;    // [rays] the robust loss's row scale (jacobian.h RobustRowScale)
   std::vector<float> pose;     // [rays, kPoseRowValues] each ray's pose row (PackPoseRow), when poses are refined
 
-  // Empty, for `rays` rays of a level of `shape`.
-  void Clear(int64_t rays, const VolumeShape& shape);
+  // Empty, for `rays` rays of a level of `shape`, exact or compact.
+  void Clear(int64_t rays, const VolumeShape& shape, bool compact_samples = false);
+  // One past the last sample recorded.
+  uint32_t SampleCount() const { return static_cast<uint32_t>(compact ? packed.size() : samples.size()); }
 };
+
+// Sample j of a block's record: its position t on its ray (of march m and jitter jit) and its partials.
+inline void RecordedSample(const BlockJ& b, const March<float>& m, const Jitter& jit, uint32_t j, float* t,
+                           SamplePartials<float>* sp) {
+  if (b.compact) {
+    *t = StepAt(m, b.packed[j].k, jit).t;
+    *sp = b.packed[j].Partials();
+  } else {
+    *t = b.samples[j].t;
+    *sp = b.samples[j].sp;
+  }
+}
+
+// Drops the samples of a block's record that reach no free parameter with a non-zero value
+// (jacobian.h SkippableSample; free: the free-parameter mask). ray_of(r): its r-th ray (TrainingRay).
+template <class RayOf>
+void DropSkippableSamples(const VolumeView<float>& vol, const float* free, RayOf&& ray_of, BlockJ* block) {
+  uint32_t first = 0, kept = 0;
+  for (size_t r = 0; r < block->end.size(); ++r) {
+    const TrainingRay tr = ray_of(r);
+    const March<float> m = block->compact ? MakeMarch(vol, tr.ray) : March<float>{};
+    for (uint32_t j = first; j < block->end[r]; ++j) {
+      float t;
+      SamplePartials<float> sp;
+      RecordedSample(*block, m, tr.jit, j, &t, &sp);
+      if (SkippableSample(TrilinearWeights(vol.n, vol.brick_slot, tr.ray.GridPoint(t)), sp, free)) continue;
+      if (block->compact) block->packed[kept++] = block->packed[j];
+      else block->samples[kept++] = block->samples[j];
+    }
+    first = block->end[r];
+    block->end[r] = kept;
+  }
+  if (block->compact) block->packed.resize(kept);
+  else block->samples.resize(kept);
+}
 
 // A ray's pose row (pose.h PoseRow) without its padding column: 4 residuals x 7 values.
 inline constexpr int kPoseRowValues = 4 * kPoseSolved;
@@ -73,6 +137,7 @@ inline PoseRow<float> UnpackPoseRow(const float* in) {
 struct Scratch {
   std::vector<SampleRecord<float>> record;  // [max samples a ray]
   std::vector<GridSample<float>> weights;   // [max samples a ray]
+  std::vector<SamplePartials<float>> partials;  // [max samples a ray]: a recorded ray's, unpacked
   BlockJ row;                               // one ray, when recomputing
   std::vector<float> acc;                   // per-thread sums (Linearize: g and diag interleaved)
   std::vector<double> pose_blocks;          // per-thread sums of the pose blocks (kPoseBlock a photo)
@@ -99,7 +164,7 @@ struct LinearizeVisitor {
     if constexpr (kDiag) AddDiagShell(ts, sp, g2, d);
     if (out_shells) out_shells[k] = {c, sp};
   }
-  void Sample(int, const MarchStep<float>& st, const GridSample<float>& gs, const SamplePartials<float>& sp) {
+  void Sample(int k, const MarchStep<float>& st, const GridSample<float>& gs, const SamplePartials<float>& sp) {
     if constexpr (kDiag) {
       float v[K];
       JtuValues(sp, r, v);
@@ -108,7 +173,8 @@ struct LinearizeVisitor {
     } else {
       ScatterJtuSample(gs, sp, r, g, sh);
     }
-    if (out) out->samples.push_back({st.t, sp});
+    if (out && out->compact) out->packed.push_back(CompactSampleJ::Make(k, sp));
+    else if (out) out->samples.push_back({st.t, sp});
   }
   // A cell's merged sums are complete.
   void operator()(int64_t cell, const float* acc) {
@@ -165,6 +231,6 @@ const int32_t* PhotoSlots(const LevelProblem& p, int count);
 
 // Bytes of the Jacobian record of `p`'s rays (every p.jtj_ray_stride-th), in blocks of
 // `block_rays` rays (an estimate made by marching the rays, on the arena of `vectors`).
-int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, const CpuVectors& vectors);
+int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, bool compact, const CpuVectors& vectors);
 
 }  // namespace perf::recon::cpu

@@ -26,10 +26,12 @@ void ExpectClose(const std::vector<float>& got, const std::vector<double>& want,
   test::ExpectAllClose(got, want, 2e-4, 1e-4, what);
 }
 
-std::unique_ptr<Backend> Cpu(int threads, bool cache = true) {
+// The tests against the dense Jacobian check the exact record; the compact one has its own test.
+std::unique_ptr<Backend> Cpu(int threads, bool cache = true, bool compact = false) {
   CpuBackendOptions o;
   o.threads = threads;
   o.cache_jacobian = cache;
+  o.compact_jacobian = compact;
   return MakeCpuBackend(o);
 }
 
@@ -143,6 +145,31 @@ TEST(CpuBackendTest, JtJpMatchesTheDenseJacobianCachedAndRecomputed) {
 // Subsampled Gauss-Newton (SolverOptions::jtj_ray_stride): with jtj = every 3rd ray from an
 // offset, MultiplyJtJ is J_S^T J_S p over those rays' rows alone, recorded (only those rays are
 // kept) and recomputed, and after RestrictJacobian; the three offsets sum to the full product.
+// The compact record (CpuBackendOptions::compact_jacobian, the default): the same samples (their
+// positions recomputed from their march indices; a wrong one would miss by far more than the
+// tolerance) with partials rounded to bfloat16 (2^-9 relative each), so J^T J p within a few
+// tenths of a percent of the exact record's.
+TEST(CpuBackendTest, CompactRecordIsTheExactOneRoundedToBfloat16) {
+  const TinyProblem p(3);
+  const std::vector<float> pv = test::RandomDirection(p.shape, 4);
+  std::vector<float> out[2];
+  PassStats stats[2];
+  for (const bool compact : {false, true}) {
+    auto b = Cpu(2, true, compact);
+    b->SetLevel(p.Level(), kVectors);
+    b->Upload(kX, p.x);
+    b->Upload(kP, pv);
+    b->Linearize(kX, 11, kG, kD);
+    stats[compact] = b->MultiplyJtJ(kP, kOut);
+    out[compact].resize(p.shape.ParamCount());
+    b->Download(kOut, out[compact]);
+  }
+  EXPECT_EQ(stats[1].samples, stats[0].samples);
+  EXPECT_GT(stats[1].samples, 100);
+  test::ExpectAllClose(out[1], std::vector<double>(out[0].begin(), out[0].end()), 3e-3, 3e-3, "compact J^T J p");
+  EXPECT_NE(out[1], out[0]);  // rounded: not the exact record
+}
+
 TEST(CpuBackendTest, JtJpOnASubsetOfTheRaysUsesTheirRowsAlone) {
   const TinyProblem p(3);
   const uint32_t seed = 11;
