@@ -19,8 +19,8 @@ std::vector<uint8_t> SkipBlocks(int n, const std::vector<uint8_t>& active) {
     *lo = std::max(0, (kSkipBlockSide * blk - 1) / kBrickSide);
     *hi = std::min(nb - 1, (kSkipBlockSide * blk + kSkipBlockSide) / kBrickSide);
   };
-  constexpr int kFar = 1 << 20;
-  std::vector<int> dist(static_cast<size_t>(blocks));  // 0: stored or reading
+  constexpr uint8_t kFar = 255;  // the distance, capped (the table caps it lower)
+  std::vector<uint8_t> dist(static_cast<size_t>(blocks));  // 0: stored or reading
   std::vector<uint8_t> out(static_cast<size_t>(blocks));
   for (int64_t idx = 0; idx < blocks; ++idx) {
     const int i = static_cast<int>(idx % nk), j = static_cast<int>(idx / nk % nk),
@@ -46,7 +46,7 @@ std::vector<uint8_t> SkipBlocks(int n, const std::vector<uint8_t>& active) {
       const int64_t idx = sign > 0 ? t : blocks - 1 - t;
       const int i = static_cast<int>(idx % nk), j = static_cast<int>(idx / nk % nk),
                 k = static_cast<int>(idx / (int64_t{nk} * nk));
-      int& d = dist[idx];
+      uint8_t& d = dist[idx];
       if (d == 0) continue;
       for (int dz = -1; dz <= 1; ++dz)
         for (int dy = -1; dy <= 1; ++dy)
@@ -55,7 +55,7 @@ std::vector<uint8_t> SkipBlocks(int n, const std::vector<uint8_t>& active) {
             if (before * sign >= 0) continue;
             const int x = i + dx, y = j + dy, z = k + dz;
             if (x < 0 || y < 0 || z < 0 || x >= nk || y >= nk || z >= nk) continue;
-            d = std::min(d, dist[(int64_t{z} * nk + y) * nk + x] + 1);
+            d = static_cast<uint8_t>(std::min<int>(d, dist[(int64_t{z} * nk + y) * nk + x] + 1));
           }
     }
   };
