@@ -126,7 +126,8 @@ std::vector<uint8_t> WantSkipBlocks(const BrickGrid& b) {
         for (int z = s * k - 1; z <= s * k + s && out == 2; ++z)
           for (int y = s * j - 1; y <= s * j + s && out == 2; ++y)
             for (int x = s * i - 1; x <= s * i + s && out == 2; ++x)
-              if (x >= 0 && y >= 0 && z >= 0 && x < n && y < n && z < n && SparseCell(b.slot.data(), b.nb(), x, y, z) >= 0) {
+              if (x >= 0 && y >= 0 && z >= 0 && x < n && y < n && z < n &&
+                  SparseCell(b.slot.data(), b.nb(), x, y, z) >= 0) {
                 out = 1;
               }
       }
@@ -213,7 +214,8 @@ TEST(BrickGrid, SkipBlocksHoldTheDistanceToWhereASampleMayReadAStoredCell) {
   const int n = 80;
   const BrickGrid b = TwoActiveBricks(n, {1, 2, 1}, {6, 6, 7});
   EXPECT_EQ(b.skip_blocks, WantSkipBlocks(b));
-  EXPECT_EQ(*std::max_element(b.skip_blocks.begin(), b.skip_blocks.end()), 1 + 27);  // corners such as (39, 0, 0): 27 blocks away
+  // Corners such as (39, 0, 0) lie 27 blocks from the nearest reading block.
+  EXPECT_EQ(*std::max_element(b.skip_blocks.begin(), b.skip_blocks.end()), 1 + 27);
   VolumeView<double> vol{};
   vol.n = n;
   vol.brick_slot = b.slot.data();
