@@ -217,7 +217,7 @@ class CpuBackend final : public Backend {
         const March<float> m = row->compact ? MakeMarch(vol, ray) : March<float>{};
         for (int j = 0; j < count; ++j) {
           float t;
-          RecordedSample(*row, m, tr.jit, first + j, &t, &sp[j]);
+          RecordedSample(*row, m, tr.jit, r, first + j, &t, &sp[j]);
           w[j] = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(t));
           if (sh.degree == 0) AddJpSample(pp, w[j], sp[j], u, sh);
           else PrefetchCells(w[j], pp, sh);  // the bands lie apart from the cell: gather after
@@ -362,6 +362,7 @@ class CpuBackend final : public Backend {
         out->end[r_out] = out->SampleCount();
         for (int c = 0; c < 3; ++c) out->h[3 * r_out + c] = fwd.h[c];
         out->scale[r_out] = scale;
+        if (out->compact) out->dl_per_delta[r_out] = -fwd.dl_dt * fwd.t_box;  // as Backward makes it
         ++r_out;
       }
       bs.Add(fwd, robust_, subset.Contains(i));

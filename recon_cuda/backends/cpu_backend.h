@@ -22,7 +22,7 @@ struct CpuBackendOptions {
   // Keep the Jacobian partials between passes when they fit (see above).
   bool cache_jacobian = true;
   // Keep it compact: each sample's partials in bfloat16 and its position as its march index,
-  // 12 bytes instead of 24; J^T J p then within ~3e-3 of the exact product (docs/tuning.md).
+  // 10 bytes instead of 24; J^T J p then within ~3e-3 of the exact product (docs/tuning.md).
   bool compact_jacobian = true;
   // Memory the backend may use; 0: what /proc/meminfo calls available, less 10 %.
   int64_t max_memory = 0;

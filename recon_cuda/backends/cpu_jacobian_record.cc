@@ -23,6 +23,7 @@ void BlockJ::Clear(int64_t rays, const VolumeShape& shape, bool compact_samples)
   shells.assign(rays * shape.num_shells, ShellJ{{-1, 0.f, 0.f}, {}});
   h.assign(3 * rays, 0.f);
   scale.assign(rays, 1.f);
+  dl_per_delta.assign(compact ? rays : 0, 0.f);
   pose.assign(shape.poses > 0 ? kPoseRowValues * rays : 0, 0.f);
 }
 
@@ -70,7 +71,7 @@ int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, bool co
   // Only every jtj_ray_stride-th ray is recorded.
   const int64_t stride = std::max(1, p.jtj_ray_stride), recorded = (n + stride - 1) / stride;
   return samples / stride * static_cast<int64_t>(compact ? sizeof(CompactSampleJ) : sizeof(SampleJ)) +
-         recorded * (static_cast<int64_t>(sizeof(uint32_t) + 4 * sizeof(float)) +
+         recorded * (static_cast<int64_t>(sizeof(uint32_t) + (compact ? 5 : 4) * sizeof(float)) +
               p.shape.num_shells * static_cast<int64_t>(sizeof(ShellJ)) +
               (p.shape.poses > 0 ? kPoseRowValues * static_cast<int64_t>(sizeof(float)) : 0));
 }

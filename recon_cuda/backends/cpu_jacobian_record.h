@@ -44,24 +44,26 @@ inline uint16_t ToBfloat16(float x) {
 inline float FromBfloat16(uint16_t h) { return std::bit_cast<float>(static_cast<uint32_t>(h) << 16); }
 
 // One sample of a ray's Jacobian, as recorded by Linearize: exact, or compact (CpuBackendOptions::
-// compact_jacobian): its march index, whose t StepAt recomputes exactly, and its partials in
-// bfloat16 (8 bits of mantissa).
+// compact_jacobian): its march index, whose t and delta StepAt recomputes exactly, and its colour
+// partials in bfloat16 (8 bits of mantissa); its dl is the ray's dl_per_delta times delta, as
+// Backward makes it, so it is not stored.
 struct SampleJ {
   float t;
   SamplePartials<float> sp;
 };
 struct CompactSampleJ {
   uint16_t k;
-  uint16_t sp[5];  // dc, ds[3], dl
+  uint16_t sp[4];  // dc, ds[3]
   static CompactSampleJ Make(int k, const SamplePartials<float>& p) {
     PERF_CHECK(k >= 0 && k <= 0xffff);
-    return {static_cast<uint16_t>(k), {ToBfloat16(p.dc), ToBfloat16(p.ds[0]), ToBfloat16(p.ds[1]), ToBfloat16(p.ds[2]),
-                                       ToBfloat16(p.dl)}};
+    return {static_cast<uint16_t>(k),
+            {ToBfloat16(p.dc), ToBfloat16(p.ds[0]), ToBfloat16(p.ds[1]), ToBfloat16(p.ds[2])}};
   }
-  SamplePartials<float> Partials() const {
-    return {FromBfloat16(sp[0]), {FromBfloat16(sp[1]), FromBfloat16(sp[2]), FromBfloat16(sp[3])}, FromBfloat16(sp[4])};
+  SamplePartials<float> Partials(float dl) const {
+    return {FromBfloat16(sp[0]), {FromBfloat16(sp[1]), FromBfloat16(sp[2]), FromBfloat16(sp[3])}, dl};
   }
 };
+static_assert(sizeof(CompactSampleJ) == 10, "10 bytes a recorded sample");
 struct ShellJ {
   CubeCoord<float> coord;  // face -1: the ray misses this shell
   ShellPartials<float> sp;
@@ -76,6 +78,7 @@ struct BlockJ {
   std::vector<ShellJ> shells;  // [rays, num_shells]
   std::vector<float> h;        // [rays, 3] the composited colour H (the exposure's partials)
   std::vector<float> scale;    // [rays] the robust loss's row scale (jacobian.h RobustRowScale)
+  std::vector<float> dl_per_delta;  // [rays] when compact: a sample's dl over its delta (ray_math.h Backward)
   std::vector<float> pose;     // [rays, kPoseRowValues] each ray's pose row (PackPoseRow), when poses are refined
 
   // Empty, for `rays` rays of a level of `shape`, exact or compact.
@@ -84,12 +87,14 @@ struct BlockJ {
   uint32_t SampleCount() const { return static_cast<uint32_t>(compact ? packed.size() : samples.size()); }
 };
 
-// Sample j of a block's record: its position t on its ray (of march m and jitter jit) and its partials.
-inline void RecordedSample(const BlockJ& b, const March<float>& m, const Jitter& jit, uint32_t j, float* t,
-                           SamplePartials<float>* sp) {
+// Sample j of a block's record, of its r-th ray (of march m and jitter jit): its position t on
+// the ray and its partials.
+inline void RecordedSample(const BlockJ& b, const March<float>& m, const Jitter& jit, size_t r, uint32_t j,
+                           float* t, SamplePartials<float>* sp) {
   if (b.compact) {
-    *t = StepAt(m, b.packed[j].k, jit).t;
-    *sp = b.packed[j].Partials();
+    const MarchStep<float> st = StepAt(m, b.packed[j].k, jit);
+    *t = st.t;
+    *sp = b.packed[j].Partials(b.dl_per_delta[r] * st.delta);
   } else {
     *t = b.samples[j].t;
     *sp = b.samples[j].sp;
@@ -107,7 +112,7 @@ void DropSkippableSamples(const VolumeView<float>& vol, const float* free, RayOf
     for (uint32_t j = first; j < block->end[r]; ++j) {
       float t;
       SamplePartials<float> sp;
-      RecordedSample(*block, m, tr.jit, j, &t, &sp);
+      RecordedSample(*block, m, tr.jit, r, j, &t, &sp);
       if (SkippableSample(TrilinearWeights(vol.n, vol.brick_slot, tr.ray.GridPoint(t)), sp, free)) continue;
       if (block->compact) block->packed[kept++] = block->packed[j];
       else block->samples[kept++] = block->samples[j];
