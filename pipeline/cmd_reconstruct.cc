@@ -47,6 +47,19 @@ void AddSolverOptions(CLI::App* cmd, recon::SolverOptions* solver) {
   cmd->add_option("--lr-density", solver->adam.lr_density, "Adam learning rate of densities")->capture_default_str();
 }
 
+// --sh-degree and the level its bands join.
+void AddViewDependenceOptions(CLI::App* cmd, recon::ReconstructOptions& o) {
+  cmd->add_option("--sh-degree", o.sh_degree,
+                  "View-dependent colour: spherical harmonics of degree 1 (3 more values per channel and cell) or 2 "
+                  "(8 more) beyond each cell's colour; 0: none")
+      ->capture_default_str();
+  cmd->add_option("--sh-from-level", o.sh_from_level,
+                  "With --sh-degree: the first level (1 to 6) that solves the spherical harmonics, or 0: the last "
+                  "level alone (with automatic levels, the last planned; a run that stops a level early for memory "
+                  "ends without them); the levels before fit a view-independent colour")
+      ->capture_default_str();
+}
+
 // --refine-poses and its settings.
 void AddPoseOptions(CLI::App* cmd, recon::ReconstructOptions& o) {
   AddCameraRefinementOptions(cmd, &o.poses, &o.refine_focal);
@@ -151,10 +164,7 @@ void AddReconstructCommand(CLI::App& app) {
                   "photos, not for NeRF json scenes); held-out views take the blend of their two nearest training "
                   "photos' (by camera centre)");
   AddPoseOptions(cmd, o);
-  cmd->add_option("--sh-degree", o.sh_degree,
-                  "View-dependent colour: spherical harmonics of degree 1 (3 more values per channel and cell) or 2 "
-                  "(8 more) beyond each cell's colour; 0: none")
-      ->capture_default_str();
+  AddViewDependenceOptions(cmd, o);
   cmd->add_option("--exposure-prior", o.solver.exposure_prior,
                   "Weight of the prior that keeps the photos' exposures near the identity, relative to the photos")
       ->capture_default_str();

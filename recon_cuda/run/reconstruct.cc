@@ -176,7 +176,7 @@ class Reconstruction {
       return false;
     }
     start->level = last + 1;
-    start->shape = NextLevelShape(ho, run_.geometry, c.shape, c.params, run_.train_views);
+    start->shape = NextLevelShape(ho, run_.geometry, c.shape, c.params, run_.train_views, last + 1);
     start->x = Resample(c.shape, c.params, start->shape);
     // Constants of this run, whatever an earlier run (perhaps with learned shells) left there.
     if (ho.fixed_background) SetBackgroundShells(start->shape, ho.background.data(), start->x);
@@ -311,6 +311,7 @@ json ReconstructResult::ToJson(const ReconstructOptions& o) const {
               {"smooth_shells", ho.solver.smooth_shells},
               {"background", fixed_background ? "fixed" : "learned"},
               {"sh_degree", o.sh_degree},
+              {"sh_from_level", o.sh_from_level},
               {"exposures",
                {{"photos", exposures},
                 {"prior", ho.solver.exposure_prior},

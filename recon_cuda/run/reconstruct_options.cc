@@ -42,6 +42,9 @@ void ReconstructOptions::Check() const {
     Fail("--refine-poses", "on", "refines poses in Gauss-Newton only", "use --solver gn, or --refine-poses off");
   }
   CheckCameraRefinement(poses, refine_focal);
+  if (sh_from_level < 0 || sh_from_level > 6) {
+    Fail("--sh-from-level", std::to_string(sh_from_level), "must be a level, 1 (the first) to 6, or 0 (the last)");
+  }
   if (refine_poses_from < 1 || refine_poses_from > 6) {
     Fail("--refine-poses-from", std::to_string(refine_poses_from), "must be a level, 1 (the first) to 6");
   }
@@ -83,6 +86,7 @@ HierarchyOptions ReconstructOptions::Hierarchy(const Scene& scene, const LevelCh
   h.sparse = !dense;
   h.occupancy = occupancy;
   h.sh_degree = sh_degree;
+  h.sh_from_level = sh_from_level > 0 ? sh_from_level - 1 : h.levels - 1;
   SetHierarchyBackground(background, scene, &h);
   if (h.solver.smooth_grid < 0) h.solver.smooth_grid = h.fixed_background ? 0.0 : kAutoSmoothGrid;
   if (solver.type == SolverType::kAdam) h.solver.smooth_grid = h.solver.smooth_shells = 0;  // Gauss-Newton only

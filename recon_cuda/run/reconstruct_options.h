@@ -71,8 +71,10 @@ struct ReconstructOptions {
   // scale of fx and fy (PoseParam's value 3), its own per photo; false: the imported intrinsics.
   bool refine_focal = false;
   // View-dependent colour: spherical harmonics of this degree (0, 1 or 2) beyond each cell's
-  // colour (ray_types.h ShParam); 0: none.
+  // colour (ray_types.h ShParam); 0: none. Solved from level sh_from_level on (1: the first; 0,
+  // the default: the last level alone, which measured faster and better on lego, docs/tuning.md).
   int sh_degree = 0;
+  int sh_from_level = 0;
   ResidualSettings residuals;
   // Coarse levels fit downscaled photos: the largest power-of-two downscale that keeps a voxel
   // at least one pixel wide in the median view (fewer rays, same information at that level).

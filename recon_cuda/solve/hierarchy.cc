@@ -9,7 +9,7 @@ namespace perf::recon {
 
 VolumeShape LevelShape(const HierarchyOptions& o, int num_shells, int level) {
   return VolumeShape{o.start_resolution << level, o.start_resolution << level, num_shells, nullptr, o.exposures,
-                     o.sh_degree, o.poses};
+                     o.ShDegreeAt(level), o.poses};
 }
 
 int ShellResolution(int ladder, int64_t rays, int num_shells, double min_rays_per_texel) {
@@ -20,8 +20,9 @@ int ShellResolution(int ladder, int64_t rays, int num_shells, double min_rays_pe
 }
 
 VolumeShape NextLevelShape(const HierarchyOptions& o, const VolumeGeometry& geometry, const VolumeShape& shape,
-                           std::span<const float> x, std::span<const ViewFrustum> views) {
-  const VolumeShape next = shape.Doubled().WithExposures(o.exposures).WithShDegree(o.sh_degree).WithPoses(o.poses);
+                           std::span<const float> x, std::span<const ViewFrustum> views, int next_level) {
+  const VolumeShape next =
+      shape.Doubled().WithExposures(o.exposures).WithShDegree(o.ShDegreeAt(next_level)).WithPoses(o.poses);
   if (!o.sparse || next.n % kBrickSide != 0) return next;
   return next.WithBricks(OccupiedBricks(shape, geometry, x, next.n, o.occupancy, views));
 }
@@ -88,7 +89,7 @@ std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geomet
     if (cb.level_done) cb.level_done(h, summary, x);
     if (stopped) break;
     if (level + 1 < o.levels) {
-      shape = NextLevelShape(o, geometry, h.shape, x, train.views);
+      shape = NextLevelShape(o, geometry, h.shape, x, train.views, level + 1);
       std::vector<float> next = Resample(h.shape, x, shape);
       if (o.stop_when_out_of_memory) fitted = std::move(x);
       x = std::move(next);

@@ -37,8 +37,11 @@ struct HierarchyOptions {
   double min_rays_per_texel = 8;
   // Training photos whose exposures every level solves (VolumeShape::exposures); 0: none.
   int exposures = 0;
-  // Spherical harmonics of the grid's colour at every level (VolumeShape::sh_degree); 0: none.
+  // Spherical harmonics of the grid's colour (VolumeShape::sh_degree) at the levels from
+  // sh_from_level on; the levels before fit a view-independent colour and the bands start at 0
+  // (Resample). sh_degree 0: none.
   int sh_degree = 0;
+  int sh_from_level = 0;
   // Training photos whose poses the levels from refine_poses_from on refine (VolumeShape::poses);
   // 0: none. The corrections carry over from level to level.
   int poses = 0;
@@ -55,6 +58,7 @@ struct HierarchyOptions {
   // hierarchy at the level before (automatic levels); false: SetLevel throws ResourceError.
   bool stop_when_out_of_memory = false;
 
+  int ShDegreeAt(int level) const { return level >= sh_from_level ? sh_degree : 0; }
   int IterationsAt(int level) const {
     return level < static_cast<int>(level_iterations.size()) ? level_iterations[level] : iterations;
   }
@@ -68,11 +72,11 @@ int ShellResolution(int ladder, int64_t rays, int num_shells, double min_rays_pe
 // The resolutions of `level`, its grid dense.
 VolumeShape LevelShape(const HierarchyOptions& options, int num_shells, int level);
 
-// The shape of the level after the fitted one (shape, x): resolutions doubled, and with
+// The shape of level next_level after the fitted one (shape, x): resolutions doubled, and with
 // options.sparse (and a grid a multiple of 8 cells across) only the occupied bricks that the
 // training views see (OccupiedBricks).
 VolumeShape NextLevelShape(const HierarchyOptions& options, const VolumeGeometry& geometry, const VolumeShape& shape,
-                           std::span<const float> x, std::span<const ViewFrustum> views);
+                           std::span<const float> x, std::span<const ViewFrustum> views, int next_level);
 
 // What the callbacks see of the level being solved.
 struct HierarchyLevel {

@@ -59,6 +59,10 @@ TEST(ReconstructOptionsTest, TheHierarchyIsDerivedForTheScene) {
   EXPECT_EQ(h.IterationsAt(1), 7);
   EXPECT_FALSE(h.sparse);
   EXPECT_EQ(h.sh_degree, 1);
+  EXPECT_EQ(h.sh_from_level, h.levels - 1) << "by default the last level alone";
+  ReconstructOptions from_first = o;
+  from_first.sh_from_level = 1;
+  EXPECT_EQ(from_first.Hierarchy(scene, automatic).sh_from_level, 0);
   // COLMAP photos without alpha: learned shells, the automatic grid smoothness, exposures solved.
   EXPECT_FALSE(h.fixed_background);
   EXPECT_EQ(h.solver.smooth_grid, kAutoSmoothGrid);
@@ -145,6 +149,37 @@ TEST_F(HierarchyMemoryTest, ALevelThatDoesNotFitEndsAutomaticLevelsAtTheOneBefor
   // Levels as given: the level that does not fit is an error.
   o.stop_when_out_of_memory = false;
   EXPECT_THROW(SolveHierarchy(backend.get(), scene.geometry, views, o, {}, {}), ResourceError);
+}
+
+// View dependence from a later level (HierarchyOptions::sh_from_level): the levels before carry
+// no bands, the first level with them starts them at 0 (Resample) and solves them, and a resume
+// after the band-less level gets them too (NextLevelShape of the next level).
+TEST_F(HierarchyMemoryTest, SphericalHarmonicsStartAtTheirLevel) {
+  o.levels = 2;
+  o.iterations = 2;
+  o.sh_degree = 1;
+  o.sh_from_level = 1;
+  EXPECT_EQ(LevelShape(o, scene.geometry.num_shells(), 0).sh_degree, 0);
+  EXPECT_EQ(LevelShape(o, scene.geometry.num_shells(), 1).sh_degree, 1);
+  auto backend = MakeCpuBackend({});
+  std::vector<int> degrees;
+  std::vector<float> first;  // level 0's fit
+  VolumeShape first_shape;
+  HierarchyCallbacks cb;
+  cb.level_started = [&](const HierarchyLevel& h) { degrees.push_back(h.shape.sh_degree); };
+  cb.level_done = [&](const HierarchyLevel& h, const SolverSummary&, const std::vector<float>& x) {
+    if (h.level == 0) first = x, first_shape = h.shape;
+  };
+  const std::vector<float> x = SolveHierarchy(backend.get(), scene.geometry, views, o, {}, cb);
+  EXPECT_EQ(degrees, (std::vector<int>{0, 1}));
+  const VolumeShape last = LevelShape(o, scene.geometry.num_shells(), 1);
+  ASSERT_EQ(static_cast<int64_t>(x.size()), last.ParamCount());
+  int moved = 0;  // bands the last level solved away from their start at 0
+  for (int64_t i = last.ShStart(); i < last.ExposureStart(); ++i) moved += x[i] != 0.f;
+  EXPECT_GT(moved, 100);
+  const VolumeShape resumed = NextLevelShape(o, scene.geometry, first_shape, first, views.views, 1);
+  EXPECT_EQ(resumed.sh_degree, 1);
+  EXPECT_EQ(NextLevelShape(o, scene.geometry, first_shape, first, views.views, 0).sh_degree, 0);
 }
 
 // Shell texels per face side: the ladder's, unless the rays are too few for them.
