@@ -311,7 +311,7 @@ json ReconstructResult::ToJson(const ReconstructOptions& o) const {
               {"smooth_shells", ho.solver.smooth_shells},
               {"background", fixed_background ? "fixed" : "learned"},
               {"sh_degree", o.sh_degree},
-              {"sh_from_level", o.sh_from_level},
+              {"sh_from_level", ho.sh_from_level + 1},  // the level the bands joined, 1-based
               {"exposures",
                {{"photos", exposures},
                 {"prior", ho.solver.exposure_prior},

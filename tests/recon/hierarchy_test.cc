@@ -168,7 +168,9 @@ TEST_F(HierarchyMemoryTest, SphericalHarmonicsStartAtTheirLevel) {
   HierarchyCallbacks cb;
   cb.level_started = [&](const HierarchyLevel& h) { degrees.push_back(h.shape.sh_degree); };
   cb.level_done = [&](const HierarchyLevel& h, const SolverSummary&, const std::vector<float>& x) {
-    if (h.level == 0) first = x, first_shape = h.shape;
+    if (h.level != 0) return;
+    first = x;
+    first_shape = h.shape;
   };
   const std::vector<float> x = SolveHierarchy(backend.get(), scene.geometry, views, o, {}, cb);
   EXPECT_EQ(degrees, (std::vector<int>{0, 1}));
