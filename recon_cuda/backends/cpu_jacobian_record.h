@@ -46,7 +46,8 @@ inline float FromBfloat16(uint16_t h) { return std::bit_cast<float>(static_cast<
 // One sample of a ray's Jacobian, as recorded by Linearize: exact, or compact (CpuBackendOptions::
 // compact_jacobian): its march index, whose t and delta StepAt recomputes exactly, and its colour
 // partials in bfloat16 (8 bits of mantissa); its dl is the ray's dl_per_delta times delta, as
-// Backward makes it, so it is not stored.
+// Backward makes it, so it is not stored (rounded to bfloat16 as the others are: the product is
+// then the 12-byte record's to the bit; the exact dl measured no better, docs/tuning.md).
 struct SampleJ {
   float t;
   SamplePartials<float> sp;
@@ -94,7 +95,7 @@ inline void RecordedSample(const BlockJ& b, const March<float>& m, const Jitter&
   if (b.compact) {
     const MarchStep<float> st = StepAt(m, b.packed[j].k, jit);
     *t = st.t;
-    *sp = b.packed[j].Partials(b.dl_per_delta[r] * st.delta);
+    *sp = b.packed[j].Partials(FromBfloat16(ToBfloat16(b.dl_per_delta[r] * st.delta)));
   } else {
     *t = b.samples[j].t;
     *sp = b.samples[j].sp;
