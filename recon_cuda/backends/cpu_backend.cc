@@ -362,7 +362,7 @@ class CpuBackend final : public Backend {
         out->end[r_out] = out->SampleCount();
         for (int c = 0; c < 3; ++c) out->h[3 * r_out + c] = fwd.h[c];
         out->scale[r_out] = scale;
-        if (out->compact) out->dl_per_delta[r_out] = -fwd.dl_dt * fwd.t_box;  // as Backward makes it
+        if (out->compact) out->dl_per_delta[r_out] = DlPerDelta(fwd);  // as Backward makes it
         ++r_out;
       }
       bs.Add(fwd, robust_, subset.Contains(i));

@@ -45,9 +45,10 @@ inline float FromBfloat16(uint16_t h) { return std::bit_cast<float>(static_cast<
 
 // One sample of a ray's Jacobian, as recorded by Linearize: exact, or compact (CpuBackendOptions::
 // compact_jacobian): its march index, whose t and delta StepAt recomputes exactly, and its colour
-// partials in bfloat16 (8 bits of mantissa); its dl is the ray's dl_per_delta times delta, as
-// Backward makes it, so it is not stored (rounded to bfloat16 as the others are: the product is
-// then the 12-byte record's to the bit; the exact dl measured no better, docs/tuning.md).
+// partials in bfloat16 (8 bits of mantissa); its dl is the ray's DlPerDelta times delta, as
+// Backward makes it, so it is not stored. That dl is rounded to bfloat16 as the others are, so the
+// product is the 12-byte record's to the bit (left exact, the two-rank MPI test's cost bound
+// failed; docs/tuning.md "dl not recorded").
 struct SampleJ {
   float t;
   SamplePartials<float> sp;
@@ -79,7 +80,7 @@ struct BlockJ {
   std::vector<ShellJ> shells;  // [rays, num_shells]
   std::vector<float> h;        // [rays, 3] the composited colour H (the exposure's partials)
   std::vector<float> scale;    // [rays] the robust loss's row scale (jacobian.h RobustRowScale)
-  std::vector<float> dl_per_delta;  // [rays] when compact: a sample's dl over its delta (ray_math.h Backward)
+  std::vector<float> dl_per_delta;  // [rays] when compact: ray_math.h DlPerDelta
   std::vector<float> pose;     // [rays, kPoseRowValues] each ray's pose row (PackPoseRow), when poses are refined
 
   // Empty, for `rays` rays of a level of `shape`, exact or compact.

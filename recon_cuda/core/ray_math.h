@@ -231,6 +231,13 @@ struct ShellPartials {
   bool opaque;
 };
 
+// dL/dsigma_i over delta_i, the same for every sample of a ray (see Backward's derivation): a
+// sample's partial of the fourth residual is this times its delta.
+template <class T>
+PERF_HD_INLINE T DlPerDelta(const RayOutput<T>& fwd) {
+  return -fwd.dl_dt * fwd.t_box;
+}
+
 // Backward sweep (paper Algorithm 1). Calls
 //   visit.Shell(k, const CubeCoord<T>&, const TexelSample<T>&, const ShellPartials<T>&)
 //                                                                    for each shell hit, outermost first;
@@ -280,7 +287,7 @@ PERF_HD void Backward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitt
 
   T g[3];
   for (int c = 0; c < 3; ++c) g[c] = tb * fwd.shells[c];
-  const T dl_per_delta = -fwd.dl_dt * tb;
+  const T dl_per_delta = DlPerDelta(fwd);
   T v_depth = fwd.depth;
   MarchStep<T> st{};
   for (int k = record ? fwd.count - 1 : TakeSample(vol, ray, march, fwd.end - 1, -1, jit, &st); k >= 0;
