@@ -22,6 +22,10 @@ namespace {
 void AddSolverOptions(CLI::App* cmd, recon::SolverOptions* solver) {
   cmd->add_option("--max-cg-iterations", solver->max_cg_iterations, "PCG iterations per Gauss-Newton step at most")
       ->capture_default_str();
+  cmd->add_option("--cost-tolerance", solver->cost_tolerance,
+                  "Gauss-Newton leaves a level early once its cost fell by less than this fraction over the last 4 "
+                  "iterations (0: every level runs its iterations)")
+      ->capture_default_str();
   cmd->add_option("--jtj-ray-stride", solver->jtj_ray_stride,
                   "Subsampled Gauss-Newton: PCG multiplies by J^T J on every k-th ray only (the gradient keeps all "
                   "rays; 1: exact)")
@@ -49,10 +53,7 @@ void AddSolverOptions(CLI::App* cmd, recon::SolverOptions* solver) {
 
 // --sh-degree and the level its bands join.
 void AddViewDependenceOptions(CLI::App* cmd, recon::ReconstructOptions& o) {
-  cmd->add_option("--sh-degree", o.sh_degree,
-                  "View-dependent colour: spherical harmonics of degree 1 (3 more values per channel and cell) or 2 "
-                  "(8 more) beyond each cell's colour; 0: none")
-      ->capture_default_str();
+  AddShDegreeOption(cmd, &o.sh_degree);
   cmd->add_option("--sh-from-level", o.sh_from_level,
                   "With --sh-degree: the first level (1 to 6) that solves the spherical harmonics, or 0: the last "
                   "level alone (with automatic levels, the last planned; a run that stops a level early for memory "

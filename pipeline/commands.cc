@@ -72,6 +72,13 @@ void AddCameraRefinementOptions(CLI::App* cmd, recon::PoseChoice* poses, bool* r
                   "With refined poses: also refine each training photo's focal length (off: the imported one)");
 }
 
+void AddShDegreeOption(CLI::App* cmd, int* sh_degree) {
+  cmd->add_option("--sh-degree", *sh_degree,
+                  "View-dependent colour: spherical harmonics of degree 1 (3 more values per channel and cell) or 2 "
+                  "(8 more) beyond each cell's colour; 0: none")
+      ->capture_default_str();
+}
+
 void AddLiveViewOptions(CLI::App* cmd, bool* view, int* port, std::string* image, const std::string& after) {
   cmd->add_flag("--view", *view,
                 StrCat("Serve perf view's page while the command runs (stage, iteration, ETA, the PSNR curve, a photo's "

@@ -59,6 +59,9 @@ void AddDeviceOptions(CLI::App* cmd, recon::DeviceChoice* device, int* threads);
 // reconstruct.
 void AddCameraRefinementOptions(CLI::App* cmd, recon::PoseChoice* poses, bool* refine_focal);
 
+// --sh-degree: view-dependent colour, the same for perf run and perf reconstruct.
+void AddShDegreeOption(CLI::App* cmd, int* sh_degree);
+
 // --view, --view-port, --view-image: perf view's page while the command runs (viewer/live_view.h);
 // `after` says what becomes of the page when the command ends.
 void AddLiveViewOptions(CLI::App* cmd, bool* view, int* port, std::string* image, const std::string& after);

@@ -272,6 +272,7 @@ recon::ReconstructOptions RunOptions::ReconstructStage(const PresetSettings& pre
   ro.exposure = exposure;
   ro.poses = poses;
   ro.refine_focal = refine_focal;
+  ro.sh_degree = sh_degree;
   ro.preview_every = live != nullptr ? 1 : 0;  // the live page shows the newest
   ro.preview_image = view_image;
   ro.resume = fresh && !force;
@@ -295,6 +296,9 @@ void RunOptions::Check() const {
   if (levels < 0 || levels > 6) throw InputError(kCommandLine, "--levels", StrCat(levels), "must be 1 to 6");
   if (iterations < 0) throw InputError(kCommandLine, "--iterations", StrCat(iterations), "must be >= 0");
   if (max_resolution < 0) throw InputError(kCommandLine, "--max-resolution", StrCat(max_resolution), "must be >= 0");
+  if (sh_degree < 0 || sh_degree > 2) {
+    throw InputError(kCommandLine, "--sh-degree", StrCat(sh_degree), "must be 0, 1 or 2");
+  }
   recon::CheckCameraRefinement(poses, refine_focal);  // before the import, not only at the reconstruction
   for (const fs::path* p : {&images, &colmap, &nerf}) {
     if (!p->empty() && !fs::exists(*p)) throw IoError(p->string(), "does not exist", "check the path");

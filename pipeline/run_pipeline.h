@@ -37,6 +37,7 @@ struct RunOptions {
   recon::ExposureChoice exposure = recon::ExposureChoice::kAuto;  // reconstruct: per-photo exposure
   recon::PoseChoice poses = recon::PoseChoice::kAuto;             // reconstruct: camera refinement
   bool refine_focal = false;                                       // reconstruct: and the focal lengths
+  int sh_degree = 0;  // reconstruct: view-dependent colour (its bands solved at the last level); 0: none
   // Overrides of the preset (0: the preset's).
   int max_size = 0, levels = 0, iterations = 0, max_resolution = 0;
   bool quiet = false;

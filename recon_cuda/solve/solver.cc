@@ -24,6 +24,15 @@ double Psnr(double colour_sse, int64_t rays) {
   return rays > 0 ? PsnrFromMse(colour_sse / (3.0 * static_cast<double>(rays))) : 0.0;
 }
 
+// Gauss-Newton's convergence test (SolverOptions::cost_tolerance) after the iterations so far:
+// the cost at the newest one's start against the cost cost_tolerance_window iterations before.
+bool Converged(const SolverOptions& o, const std::vector<IterationSummary>& done) {
+  const int w = o.cost_tolerance_window, n = static_cast<int>(done.size());
+  if (o.type != SolverType::kGaussNewton || o.cost_tolerance <= 0 || n <= w) return false;
+  const double now = done[n - 1].cost, before = done[n - 1 - w].cost;
+  return before - now < o.cost_tolerance * now;
+}
+
 }  // namespace
 
 const char* SolverName(SolverType t) { return t == SolverType::kGaussNewton ? "gn" : "adam"; }
@@ -31,6 +40,7 @@ const char* SolverName(SolverType t) { return t == SolverType::kGaussNewton ? "g
 const char* StatusName(SolverStatus s) {
   switch (s) {
     case SolverStatus::kIterationLimit: return "iteration limit";
+    case SolverStatus::kConverged: return "converged";
     case SolverStatus::kNoProgress: return "no progress";
     case SolverStatus::kUserAbort: return "stopped by the caller";
     case SolverStatus::kFailure: return "failure";
@@ -78,6 +88,12 @@ void SolverOptions::Check() const {
   if (!(smooth_grid >= 0 && std::isfinite(smooth_grid))) Fail("smooth_grid (--smooth-grid)", StrCat(smooth_grid), "must be finite and >= 0");
   if (!(smooth_shells >= 0 && std::isfinite(smooth_shells))) {
     Fail("smooth_shells (--smooth-shells)", StrCat(smooth_shells), "must be finite and >= 0");
+  }
+  if (!(cost_tolerance >= 0 && cost_tolerance < 1)) {
+    Fail("cost_tolerance (--cost-tolerance)", StrCat(cost_tolerance), "must be in [0, 1) (0: off)");
+  }
+  if (cost_tolerance_window < 1) {
+    Fail("cost_tolerance_window", std::to_string(cost_tolerance_window), "must be >= 1");
   }
   if (psnr_ray_stride < 0) Fail("psnr_ray_stride", std::to_string(psnr_ray_stride), "must be >= 0");
   const auto finite_positive = [](float v) { return v > 0 && std::isfinite(v); };
@@ -348,6 +364,12 @@ void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const Iter
     if (rejected_in_a_row >= 3) {
       summary->status = SolverStatus::kNoProgress;
       summary->message = "3 Gauss-Newton steps in a row did not lower the cost";
+      break;
+    }
+    if (it + 1 < o.max_iterations && Converged(o, summary->per_iteration)) {
+      summary->status = SolverStatus::kConverged;
+      summary->message = StrCat("the cost fell by less than ", o.cost_tolerance * 100, " % in ",
+                                o.cost_tolerance_window, " iterations");
       break;
     }
   }

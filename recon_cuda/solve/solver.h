@@ -35,6 +35,11 @@ struct SolverOptions {
   SolverType type = SolverType::kGaussNewton;
   // Gauss-Newton iterations, or Adam steps, at this level (paper: 30 per level).
   int max_iterations = 30;
+  // Gauss-Newton leaves the level (status kConverged) once its cost fell by less than this
+  // fraction over the last cost_tolerance_window iterations (Ceres' function_tolerance, over a
+  // window since each iteration's cost has its own jitter). 0: always run max_iterations.
+  double cost_tolerance = 0;
+  int cost_tolerance_window = 4;
   // Jitter: iteration k uses Hash(seed, k, 0) for every pass (DESIGN.md "Gauss-Newton step").
   uint32_t seed = 1;
 
@@ -97,6 +102,7 @@ struct SolverOptions {
 // Why Solve returned.
 enum class SolverStatus {
   kIterationLimit,  // max_iterations ran (the normal end: the hierarchy uses a fixed budget)
+  kConverged,       // the cost fell by less than cost_tolerance over cost_tolerance_window iterations
   kNoProgress,      // 3 consecutive Gauss-Newton steps were rejected by the line search
   kUserAbort,       // the iteration callback asked to stop
   kFailure,         // the cost became non-finite (diverged or bad input values)

@@ -121,6 +121,51 @@ TEST_F(SolverTest, OptionsAreChecked) {
     o.jtj_ray_stride = stride;
     EXPECT_THROW(o.Check(), InputError) << stride;
   }
+  for (double tolerance : {-0.01, 1.0}) {
+    o = SolverOptions();
+    o.cost_tolerance = tolerance;
+    EXPECT_THROW(o.Check(), InputError) << tolerance;
+  }
+  o = SolverOptions();
+  o.cost_tolerance_window = 0;
+  EXPECT_THROW(o.Check(), InputError);
+}
+
+// SolverOptions::cost_tolerance: the level ends at the first iteration whose cost is within the
+// tolerance of the cost a window before, and not earlier; 0 (and Adam) run every iteration.
+TEST_F(SolverTest, ConvergedStopsWhereTheCostFlattens) {
+  const VolumeShape shape{8, 4, 2};
+  SetLevel(shape, RequiredVectors(SolverType::kGaussNewton));
+  SolverOptions so;
+  so.max_iterations = 30;
+  so.cost_tolerance = 0.01;
+  const int w = so.cost_tolerance_window;
+  std::vector<float> x = RandomStart(shape);
+  SolverSummary summary;
+  Solve(so, backend.get(), &x, {}, &summary);
+  ASSERT_EQ(summary.status, SolverStatus::kConverged) << summary.BriefReport();
+  const std::vector<IterationSummary>& its = summary.per_iteration;
+  const int n = summary.iterations;
+  ASSERT_GT(n, w);
+  EXPECT_LT(n, so.max_iterations);
+  const auto fell = [&](int i) { return (its[i - w].cost - its[i].cost) / its[i].cost; };
+  EXPECT_LT(fell(n - 1), so.cost_tolerance);
+  for (int i = w; i < n - 1; ++i) EXPECT_GE(fell(i), so.cost_tolerance) << "iteration " << i;
+  EXPECT_NE(summary.BriefReport().find("converged"), std::string::npos) << summary.BriefReport();
+
+  so.cost_tolerance = 0;
+  so.max_iterations = n + 2;
+  x = RandomStart(shape);
+  Solve(so, backend.get(), &x, {}, &summary);
+  EXPECT_EQ(summary.status, SolverStatus::kIterationLimit);
+  EXPECT_EQ(summary.iterations, n + 2);
+
+  so.type = SolverType::kAdam;
+  so.cost_tolerance = 0.5;
+  SetLevel(shape, RequiredVectors(so.type));
+  x = RandomStart(shape);
+  Solve(so, backend.get(), &x, {}, &summary);
+  EXPECT_EQ(summary.iterations, n + 2);
 }
 
 TEST_F(SolverTest, CallbackStopsAndSummaryReports) {
