@@ -22,10 +22,7 @@ namespace {
 void AddSolverOptions(CLI::App* cmd, recon::SolverOptions* solver) {
   cmd->add_option("--max-cg-iterations", solver->max_cg_iterations, "PCG iterations per Gauss-Newton step at most")
       ->capture_default_str();
-  cmd->add_option("--cost-tolerance", solver->cost_tolerance,
-                  "Gauss-Newton leaves a level early once its cost fell by less than this fraction over the last 4 "
-                  "iterations (0: every level runs its iterations)")
-      ->capture_default_str();
+  AddCostToleranceOption(cmd, &solver->cost_tolerance);
   cmd->add_option("--jtj-ray-stride", solver->jtj_ray_stride,
                   "Subsampled Gauss-Newton: PCG multiplies by J^T J on every k-th ray only (the gradient keeps all "
                   "rays; 1: exact)")

@@ -47,6 +47,7 @@ void AddRunCommand(CLI::App& app) {
                   "Solve each photo's exposure (gain and offset per channel; auto: for COLMAP photos)");
   AddCameraRefinementOptions(cmd, &o.poses, &o.refine_focal);
   AddShDegreeOption(cmd, &o.sh_degree);
+  AddCostToleranceOption(cmd, &o.cost_tolerance);
   cmd->add_flag("--keep-bad-poses", o.keep_bad_poses,
                 "Train and score on COLMAP photos whose pose looks wrong too (by default they are left out and named)");
   AddLiveViewOptions(cmd, &args->view, &args->view_options.port, &args->o.view_image,

@@ -79,6 +79,13 @@ void AddShDegreeOption(CLI::App* cmd, int* sh_degree) {
       ->capture_default_str();
 }
 
+void AddCostToleranceOption(CLI::App* cmd, double* cost_tolerance) {
+  cmd->add_option("--cost-tolerance", *cost_tolerance,
+                  "Gauss-Newton leaves a level early once its cost fell by less than this fraction over the last 4 "
+                  "iterations (0: every level runs all its iterations)")
+      ->capture_default_str();
+}
+
 void AddLiveViewOptions(CLI::App* cmd, bool* view, int* port, std::string* image, const std::string& after) {
   cmd->add_flag("--view", *view,
                 StrCat("Serve perf view's page while the command runs (stage, iteration, ETA, the PSNR curve, a photo's "

@@ -62,6 +62,9 @@ void AddCameraRefinementOptions(CLI::App* cmd, recon::PoseChoice* poses, bool* r
 // --sh-degree: view-dependent colour, the same for perf run and perf reconstruct.
 void AddShDegreeOption(CLI::App* cmd, int* sh_degree);
 
+// --cost-tolerance: when a level's Gauss-Newton ends early, the same for perf run and perf reconstruct.
+void AddCostToleranceOption(CLI::App* cmd, double* cost_tolerance);
+
 // --view, --view-port, --view-image: perf view's page while the command runs (viewer/live_view.h);
 // `after` says what becomes of the page when the command ends.
 void AddLiveViewOptions(CLI::App* cmd, bool* view, int* port, std::string* image, const std::string& after);

@@ -273,6 +273,7 @@ recon::ReconstructOptions RunOptions::ReconstructStage(const PresetSettings& pre
   ro.poses = poses;
   ro.refine_focal = refine_focal;
   ro.sh_degree = sh_degree;
+  ro.solver.cost_tolerance = cost_tolerance;
   ro.preview_every = live != nullptr ? 1 : 0;  // the live page shows the newest
   ro.preview_image = view_image;
   ro.resume = fresh && !force;
@@ -299,6 +300,9 @@ void RunOptions::Check() const {
   if (sh_degree < 0 || sh_degree > 2) {
     throw InputError(kCommandLine, "--sh-degree", StrCat(sh_degree), "must be 0, 1 or 2");
   }
+  if (!(cost_tolerance >= 0 && cost_tolerance < 1)) {
+    throw InputError(kCommandLine, "--cost-tolerance", StrCat(cost_tolerance), "must be in [0, 1) (0: off)");
+  }
   recon::CheckCameraRefinement(poses, refine_focal);  // before the import, not only at the reconstruction
   for (const fs::path* p : {&images, &colmap, &nerf}) {
     if (!p->empty() && !fs::exists(*p)) throw IoError(p->string(), "does not exist", "check the path");
@@ -314,7 +318,7 @@ std::string PresetSettings::Describe() const {
   std::ostringstream s;
   s << "images " << (max_size > 0 ? "at most " + std::to_string(max_size) + " px" : std::string("full size")) << ", "
     << (levels > 0 ? std::to_string(levels) + " levels" : "levels from the photos (finest grid " + finest + ")")
-    << " x " << iterations
+    << " x at most " << iterations
     << " Gauss-Newton iterations, " << orbit_frames << " orbit frames";
   return s.str();
 }

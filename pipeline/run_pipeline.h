@@ -38,6 +38,7 @@ struct RunOptions {
   recon::PoseChoice poses = recon::PoseChoice::kAuto;             // reconstruct: camera refinement
   bool refine_focal = false;                                       // reconstruct: and the focal lengths
   int sh_degree = 0;  // reconstruct: view-dependent colour (its bands solved at the last level); 0: none
+  double cost_tolerance = recon::kDefaultCostTolerance;  // reconstruct: a level ends once its cost flattens
   // Overrides of the preset (0: the preset's).
   int max_size = 0, levels = 0, iterations = 0, max_resolution = 0;
   bool quiet = false;

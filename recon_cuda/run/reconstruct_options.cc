@@ -18,6 +18,7 @@ SolverOptions ReconstructOptions::DefaultSolver() {
   SolverOptions s;
   s.smooth_grid = -1;  // chosen for the scene (Hierarchy)
   s.smooth_shells = 0.1;
+  s.cost_tolerance = kDefaultCostTolerance;
   return s;
 }
 

@@ -39,6 +39,10 @@ enum class PoseChoice { kAuto, kOn, kOff };
 // there; 0 where it is fixed).
 inline constexpr double kAutoSmoothGrid = 0.3;
 
+// --cost-tolerance's default (SolverOptions::cost_tolerance): a level ends once its cost fell by
+// less than 2 % in 4 iterations (docs/tuning.md "A level ends when its cost flattens").
+inline constexpr double kDefaultCostTolerance = 0.02;
+
 struct ReconstructOptions {
   std::filesystem::path workspace;
   // The ranks of the job (comm.h; nullptr: one process). Each rank loads and fits its share of
@@ -57,6 +61,7 @@ struct ReconstructOptions {
   // The solver of every level (max_iterations and seed are set per level). Its smoothness
   // weights: smooth_shells 0.1; smooth_grid < 0 (the default) is chosen for the scene,
   // kAutoSmoothGrid where the background is learned and 0 where it is fixed. Adam runs none.
+  // Gauss-Newton leaves a level early once its cost flattens (kDefaultCostTolerance).
   SolverOptions solver = DefaultSolver();
   InitOptions init;
   bool init_shells_from_photos = false;  // shells start at the training photos' mean colour

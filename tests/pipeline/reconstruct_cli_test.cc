@@ -237,7 +237,8 @@ TEST_F(ReconstructCli, BadInputsAreNamed) {
   // Each bad value is refused (exit 2) naming its option.
   for (const std::string choice : {"--solver sgd", "--device tpu", "--background sky", "--device CPU", "--levels 9",
                                    "--smooth-shells -1", "--smooth-grid inf", "--init-opacity 1", "--lambda inf",
-                                   "--alpha-weight inf", "--lr-density inf", "--sh-from-level 7"}) {
+                                   "--alpha-weight inf", "--lr-density inf", "--sh-from-level 7",
+                                   "--cost-tolerance -0.1"}) {
     r = RunCommand(Perf("reconstruct " + ws_.string() + " " + choice));
     EXPECT_EQ(r.exit_code, 2) << choice << ": " << r.output;
     EXPECT_NE(r.output.find(choice.substr(0, choice.find(' '))), std::string::npos) << r.output;

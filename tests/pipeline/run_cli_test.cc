@@ -81,10 +81,12 @@ TEST_F(RunCli, RunsEveryStageThenSkipsWhatIsUpToDate) {
   r = RunCommand(test::PerfBinary() + " run --workspace " + ws_.string());
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("--images"), std::string::npos) << r.output;
-  r = RunCommand(test::PerfBinary() + " run --nerf " + (dir_ / "transforms.json").string() + " --workspace " +
-                 ws_.string() + " --preset fast");
-  EXPECT_EQ(r.exit_code, 2) << r.output;
-  EXPECT_NE(r.output.find("--preset"), std::string::npos) << r.output;
+  for (const std::string bad : {"--preset fast", "--sh-degree 3", "--cost-tolerance 1"}) {
+    r = RunCommand(test::PerfBinary() + " run --nerf " + (dir_ / "transforms.json").string() + " --workspace " +
+                   ws_.string() + " " + bad);
+    EXPECT_EQ(r.exit_code, 2) << bad << ": " << r.output;
+    EXPECT_NE(r.output.find(bad.substr(0, bad.find(' '))), std::string::npos) << r.output;
+  }
 }
 
 // Stops `perf run` with `sig` once level 0's checkpoint is written (the solve is then inside level 1).

@@ -32,6 +32,7 @@ ReconstructResult Fit(const fs::path& workspace, bool refine, bool focal = false
   o.device = DeviceChoice::kCpu;
   o.levels = 2;
   o.iterations = 8;
+  o.solver.cost_tolerance = 0;  // every iteration, with and without refinement alike
   o.poses = refine ? PoseChoice::kOn : PoseChoice::kOff;
   o.refine_focal = focal;
   return Reconstruct(o);

@@ -39,6 +39,7 @@ ReconstructOptions CpuReconstruct(const fs::path& workspace, int levels, int ite
   o.device = DeviceChoice::kCpu;
   o.levels = levels;
   o.iterations = iterations;
+  o.solver.cost_tolerance = 0;  // every iteration, as calibrated
   return o;
 }
 
