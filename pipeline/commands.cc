@@ -72,11 +72,16 @@ void AddCameraRefinementOptions(CLI::App* cmd, recon::PoseChoice* poses, bool* r
                   "With refined poses: also refine each training photo's focal length (off: the imported one)");
 }
 
-void AddShDegreeOption(CLI::App* cmd, int* sh_degree) {
-  cmd->add_option("--sh-degree", *sh_degree,
-                  "View-dependent colour: spherical harmonics of degree 1 (3 more values per channel and cell) or 2 "
-                  "(8 more) beyond each cell's colour; 0: none")
-      ->capture_default_str();
+void AddShDegreeOption(CLI::App* cmd, int* sh_degree, const std::string& default_text) {
+  CLI::Option* option = cmd->add_option(
+      "--sh-degree", *sh_degree,
+      "View-dependent colour: spherical harmonics of degree 1 (3 more values per channel and cell) or 2 (8 more) "
+      "beyond each cell's colour; 0: none");
+  if (default_text.empty()) {
+    option->capture_default_str();
+  } else {
+    option->default_str(default_text);
+  }
 }
 
 void AddCostToleranceOption(CLI::App* cmd, double* cost_tolerance) {

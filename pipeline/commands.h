@@ -59,8 +59,9 @@ void AddDeviceOptions(CLI::App* cmd, recon::DeviceChoice* device, int* threads);
 // reconstruct.
 void AddCameraRefinementOptions(CLI::App* cmd, recon::PoseChoice* poses, bool* refine_focal);
 
-// --sh-degree: view-dependent colour, the same for perf run and perf reconstruct.
-void AddShDegreeOption(CLI::App* cmd, int* sh_degree);
+// --sh-degree: view-dependent colour, the same for perf run and perf reconstruct; `default_text`
+// replaces the shown default (empty: *sh_degree's value).
+void AddShDegreeOption(CLI::App* cmd, int* sh_degree, const std::string& default_text = "");
 
 // --cost-tolerance: when a level's Gauss-Newton ends early, the same for perf run and perf reconstruct.
 void AddCostToleranceOption(CLI::App* cmd, double* cost_tolerance);

@@ -89,6 +89,25 @@ TEST_F(RunCli, RunsEveryStageThenSkipsWhatIsUpToDate) {
   }
 }
 
+// The high preset solves view-dependent colour at its last level (the others do not), and
+// --sh-degree overrides the preset's.
+TEST_F(RunCli, TheHighPresetSolvesViewDependence) {
+  const auto sh_degree = [&](const std::string& extra) {
+    const auto r = RunCommand(test::PerfBinary() + " run --nerf " + (dir_ / "transforms.json").string() +
+                              " --workspace " + ws_.string() + " --levels 1 --iterations 2 --max-size 24 --force " +
+                              extra);
+    EXPECT_EQ(r.exit_code, 0) << extra << ": " << r.output;
+    const bool said = r.output.find("view-dependent colour (degree 1)") != std::string::npos;
+    const int degree = nlohmann::json::parse(ReadFileToString(ws_ / "recon" / "recon.json"))["sh_degree"];
+    EXPECT_EQ(said, degree == 1) << extra << ": " << r.output;
+    return degree;
+  };
+  EXPECT_EQ(sh_degree("--preset high"), 1);
+  EXPECT_EQ(sh_degree("--preset high --sh-degree 0"), 0);
+  EXPECT_EQ(sh_degree("--preset default"), 0);
+  EXPECT_EQ(sh_degree("--preset preview --sh-degree 1"), 1);
+}
+
 // Stops `perf run` with `sig` once level 0's checkpoint is written (the solve is then inside level 1).
 int StopDuringLevel1(const std::string& command, const fs::path& ws, int sig) {
   return test::StopWhenExists(command, recon::CheckpointPath(ws, 0), sig);
