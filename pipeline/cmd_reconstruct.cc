@@ -101,7 +101,8 @@ void AddReconstructCommand(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--start-resolution", o.start_resolution, "Grid cells per axis (and texels per face side) at level 1")
       ->capture_default_str();
-  cmd->add_option("--iterations", o.iterations, "Solver iterations per level (Gauss-Newton iterations or Adam steps)")
+  cmd->add_option("--iterations", o.iterations,
+                  "Solver iterations per level (Gauss-Newton iterations, at most: see --cost-tolerance; or Adam steps)")
       ->capture_default_str();
   cmd->add_option("--level-iterations", o.level_iterations,
                   "Solver iterations of each level, comma-separated (e.g. 4,4,4,8); levels not listed run --iterations")

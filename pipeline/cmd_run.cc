@@ -38,7 +38,8 @@ void AddRunCommand(CLI::App& app) {
   cmd->add_option("--levels", o.levels, "Override the preset: hierarchy levels");
   cmd->add_option("--max-resolution", o.max_resolution,
                   "Override the preset: levels from the photos, the finest grid at most this many cells across");
-  cmd->add_option("--iterations", o.iterations, "Override the preset: Gauss-Newton iterations per level");
+  cmd->add_option("--iterations", o.iterations,
+                  "Override the preset: Gauss-Newton iterations per level (at most: see --cost-tolerance)");
   AddDeviceOptions(cmd, &o.device, &o.threads);
   cmd->add_flag("--force", o.force, "Re-run every stage even when its outputs are up to date");
   using recon::ExposureChoice;

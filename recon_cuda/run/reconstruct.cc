@@ -309,6 +309,7 @@ json ReconstructResult::ToJson(const ReconstructOptions& o) const {
               {"solver", SolverName(o.solver.type)},
               {"smooth_grid", ho.solver.smooth_grid},
               {"smooth_shells", ho.solver.smooth_shells},
+              {"cost_tolerance", ho.solver.cost_tolerance},  // each level's "status" says whether it stopped
               {"background", fixed_background ? "fixed" : "learned"},
               {"sh_degree", o.sh_degree},
               {"sh_from_level", ho.sh_from_level + 1},  // the level the bands joined, 1-based

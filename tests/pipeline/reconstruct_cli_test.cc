@@ -9,6 +9,7 @@
 
 #include "common/atomic_file.h"
 #include "recon_cuda/data/checkpoint.h"
+#include "recon_cuda/run/reconstruct_options.h"
 #include "tests/pipeline/synthetic_workspace.h"
 #include "tests/test_util.h"
 #include "workspace/image_io.h"
@@ -78,6 +79,7 @@ TEST_F(ReconstructCli, ReconstructsLogsCheckpointsResumesAndRenders) {
   EXPECT_EQ(summary["background"], "learned");
   EXPECT_EQ(summary["smooth_grid"].get<double>(), 0.3);
   EXPECT_EQ(summary["smooth_shells"].get<double>(), 0.1);
+  EXPECT_EQ(summary["cost_tolerance"].get<double>(), recon::kDefaultCostTolerance);
 
   // Everything done: --resume says so and changes nothing.
   const auto before = fs::last_write_time(ws_ / "recon" / "level_1.perfvol");
