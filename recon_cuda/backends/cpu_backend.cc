@@ -177,9 +177,9 @@ class CpuBackend final : public Backend {
       for (int64_t i = jtj_.FirstFrom(begin); i < end; i += jtj_.stride, ++r) {
         const TrainingRay tr = TrainingRayOf(vol, i, lin_seed_);
         const BoxRay<float>& ray = tr.ray;
-        const BlockJ* row;  // the ray's samples: row's from `first` on, `count` of them
+        const BlockJ* row;  // the ray's record: its `r_row`-th ray, its samples from `first` on, `count` of them
+        int64_t r_row = r;
         uint32_t first = 0;
-        const ShellJ* shells;
         const float* h;
         const float* pose_row;
         float scale;
@@ -189,15 +189,14 @@ class CpuBackend final : public Backend {
           row = &b;
           first = r == 0 ? 0 : b.end[r - 1];
           count = static_cast<int>(b.end[r] - first);
-          shells = &b.shells[r * k_shells];
           h = &b.h[3 * r];
           scale = b.scale[r];
           pose_row = tr.pose >= 0 ? &b.pose[kPoseRowValues * r] : nullptr;
         } else {
           RecomputeRow(vol, tr, i, s);
           row = &s.row;
+          r_row = 0;
           count = static_cast<int>(s.row.samples.size());
-          shells = s.row.shells.data();
           h = s.row.h.data();
           scale = s.row.scale[0];
           pose_row = tr.pose >= 0 ? s.row.pose.data() : nullptr;
@@ -206,15 +205,14 @@ class CpuBackend final : public Backend {
         const RayExposure<float> e = ExposureAt(vol, i, h, scale);
         const RaySh<float> sh = ShOfRay(vol, ray);
         float u[4] = {0, 0, 0, 0};
-        TexelSample<float> ts[kMaxShells];
+        const March<float> m = row->compact ? MakeMarch(vol, ray) : March<float>{};
+        RayShellsJ shells;
+        RecordedShells(*row, r_row, vol, ray, m, &shells);
         for (int k = 0; k < k_shells; ++k) {
-          if (shells[k].coord.face < 0) continue;
-          ts[k] = TexelWeights(vol.GridParams(), vol.m, k, shells[k].coord);
-          AddJpShell(pp, ts[k], shells[k].sp, u);
+          if (shells.hit[k]) AddJpShell(pp, shells.ts[k], shells.sp[k], u);
         }
         GridSample<float>* w = s.weights.data();
         SamplePartials<float>* sp = s.partials.data();
-        const March<float> m = row->compact ? MakeMarch(vol, ray) : March<float>{};
         for (int j = 0; j < count; ++j) {
           float t;
           RecordedSample(*row, m, tr.jit, r, first + j, &t, &sp[j]);
@@ -228,8 +226,7 @@ class CpuBackend final : public Backend {
         float uv[4];
         VolumeU(e, u, uv);
         for (int k = 0; k < k_shells; ++k) {
-          if (shells[k].coord.face < 0) continue;
-          ScatterJtuShell(ts[k], shells[k].sp, uv, sink);
+          if (shells.hit[k]) ScatterJtuShell(shells.ts[k], shells.sp[k], uv, sink);
         }
         if (sh.degree == 0) {
           // Direct scatter: measured faster here than merging cells (CellMerger) first.
@@ -337,7 +334,9 @@ class CpuBackend final : public Backend {
       ScaledResidual(e, fwd.residual, r);
       LinearizeVisitor<kDiag> v{{}, {}, AddSink{s.acc.data(), kDiag ? 1 : 0, 0},
                                 AddSink{kDiag ? s.acc.data() : nullptr, 1, 4}, out,
-                                out ? &out->shells[r_out * level_.shape.num_shells] : nullptr};
+                                out && !out->compact ? &out->shells[r_out * level_.shape.num_shells] : nullptr,
+                                out && out->compact ? &out->shell_partials[4 * r_out * level_.shape.num_shells]
+                                                    : nullptr};
       VolumeU(e, r, v.r);
       GainSquared(e, v.g2);
       v.sh = ShOfRay(vol, ray);

@@ -20,7 +20,8 @@ void BlockJ::Clear(int64_t rays, const VolumeShape& shape, bool compact_samples)
   samples.clear();
   packed.clear();
   end.assign(rays, 0);
-  shells.assign(rays * shape.num_shells, ShellJ{{-1, 0.f, 0.f}, {}});
+  shells.assign(compact ? 0 : rays * shape.num_shells, ShellJ{{-1, 0.f, 0.f}, {}});
+  shell_partials.assign(compact ? 4 * rays * shape.num_shells : 0, 0.f);
   h.assign(3 * rays, 0.f);
   scale.assign(rays, 1.f);
   dl_per_delta.assign(compact ? rays : 0, 0.f);
@@ -72,7 +73,7 @@ int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, bool co
   const int64_t stride = std::max(1, p.jtj_ray_stride), recorded = (n + stride - 1) / stride;
   return samples / stride * static_cast<int64_t>(compact ? sizeof(CompactSampleJ) : sizeof(SampleJ)) +
          recorded * (static_cast<int64_t>(sizeof(uint32_t) + (compact ? 5 : 4) * sizeof(float)) +
-              p.shape.num_shells * static_cast<int64_t>(sizeof(ShellJ)) +
+              p.shape.num_shells * static_cast<int64_t>(compact ? 4 * sizeof(float) : sizeof(ShellJ)) +
               (p.shape.poses > 0 ? kPoseRowValues * static_cast<int64_t>(sizeof(float)) : 0));
 }
 

@@ -43,6 +43,16 @@ inline uint16_t ToBfloat16(float x) {
 }
 inline float FromBfloat16(uint16_t h) { return std::bit_cast<float>(static_cast<uint32_t>(h) << 16); }
 
+// A shell's partials in the compact record (BlockJ::shell_partials), and back for shell k of a
+// volume of num_shells.
+inline void StoreShellPartials(const ShellPartials<float>& sp, float* out) {
+  out[0] = sp.de;
+  for (int c = 0; c < 3; ++c) out[1 + c] = sp.da[c];
+}
+inline ShellPartials<float> LoadShellPartials(const float* in, int k, int num_shells) {
+  return {in[0], {in[1], in[2], in[3]}, k == num_shells - 1};
+}
+
 // One sample of a ray's Jacobian, as recorded by Linearize: exact, or compact (CpuBackendOptions::
 // compact_jacobian): its march index, whose t and delta StepAt recomputes exactly, and its colour
 // partials in bfloat16 (8 bits of mantissa); its dl is the ray's DlPerDelta times delta, as
@@ -77,7 +87,10 @@ struct BlockJ {
   std::vector<SampleJ> samples;
   std::vector<CompactSampleJ> packed;
   std::vector<uint32_t> end;  // [rays]: one past the ray's last sample in `samples` (`packed`)
-  std::vector<ShellJ> shells;  // [rays, num_shells]
+  std::vector<ShellJ> shells;  // [rays, num_shells] when exact
+  // [rays, num_shells, 4] when compact: a shell's partials (de, da[3]); where the ray meets it and
+  // whether it does are recomputed (ray_math.h ShellCoordAt), and the outermost is opaque.
+  std::vector<float> shell_partials;
   std::vector<float> h;        // [rays, 3] the composited colour H (the exposure's partials)
   std::vector<float> scale;    // [rays] the robust loss's row scale (jacobian.h RobustRowScale)
   std::vector<float> dl_per_delta;  // [rays] when compact: ray_math.h DlPerDelta
@@ -88,6 +101,31 @@ struct BlockJ {
   // One past the last sample recorded.
   uint32_t SampleCount() const { return static_cast<uint32_t>(compact ? packed.size() : samples.size()); }
 };
+
+// A recorded ray's shells as J^T J p reads them: which the ray meets, their texel weights and
+// partials (the compact record recomputes where the ray meets them, from the ray and its march).
+struct RayShellsJ {
+  bool hit[kMaxShells];
+  TexelSample<float> ts[kMaxShells];
+  ShellPartials<float> sp[kMaxShells];
+};
+inline void RecordedShells(const BlockJ& b, int64_t r, const VolumeView<float>& vol, const BoxRay<float>& ray,
+                           const March<float>& m, RayShellsJ* out) {
+  const int n = vol.num_shells;
+  for (int k = 0; k < n; ++k) {
+    CubeCoord<float> c{-1, 0.f, 0.f};
+    if (b.compact) {
+      out->hit[k] = ShellCoordAt(vol, ray, ShellStart(m), k, &c);
+      out->sp[k] = LoadShellPartials(&b.shell_partials[4 * (r * n + k)], k, n);
+    } else {
+      const ShellJ& sj = b.shells[r * n + k];
+      out->hit[k] = sj.coord.face >= 0;
+      c = sj.coord;
+      out->sp[k] = sj.sp;
+    }
+    if (out->hit[k]) out->ts[k] = TexelWeights(vol.GridParams(), vol.m, k, c);
+  }
+}
 
 // Sample j of a block's record, of its r-th ray (of march m and jitter jit): its position t on
 // the ray and its partials.
@@ -162,7 +200,8 @@ struct LinearizeVisitor {
   float g2[3];         // the squared gains of the ray's photo (jacobian.h GainSquared)
   AddSink g, d;
   BlockJ* out;         // nullptr: nothing recorded
-  ShellJ* out_shells;  // [num_shells] of this ray
+  ShellJ* out_shells;  // [num_shells] of this ray, exact record
+  float* out_shell_partials;  // [num_shells, 4] of this ray, compact record
   RaySh<float> sh{};   // the ray's spherical harmonics (degree 0: none)
   CellMerger<float, K> merger{};
 
@@ -170,6 +209,7 @@ struct LinearizeVisitor {
     ScatterJtuShell(ts, sp, r, g);
     if constexpr (kDiag) AddDiagShell(ts, sp, g2, d);
     if (out_shells) out_shells[k] = {c, sp};
+    if (out_shell_partials) StoreShellPartials(sp, out_shell_partials + 4 * k);
   }
   void Sample(int k, const MarchStep<float>& st, const GridSample<float>& gs, const SamplePartials<float>& sp) {
     if constexpr (kDiag) {

@@ -56,22 +56,36 @@ struct ShellStack {
   T s[3];           // S = sum_k P_k a_k e_k
 };
 
+// Where the shells' lookups start along the ray: behind the box, or at the origin when it misses it.
+template <class T>
+PERF_HD_INLINE T ShellStart(const March<T>& march) {
+  return march.hit ? march.t_max : T(0);
+}
+
+// Where the ray leaves shell k, from t_start on (ShellStart), as a cube-map coordinate; false
+// when it misses the shell. EvalShells' lookup, and the compact record's recomputation of it.
+template <class T>
+PERF_HD_INLINE bool ShellCoordAt(const VolumeView<T>& vol, const BoxRay<T>& ray, T t_start, int k, CubeCoord<T>* c) {
+  T t;
+  if (!SphereExit(ray.origin, ray.dir, vol.shell_center, vol.shell_radii[k], t_start, &t)) return false;
+  *c = DirectionToCube(ray.origin + ray.dir * t - vol.shell_center);
+  return true;
+}
+
 template <class T>
 PERF_HD_INLINE void EvalShells(const VolumeView<T>& vol, const BoxRay<T>& ray, const March<T>& march,
                                ShellStack<T>* st) {
-  const T t_start = march.hit ? march.t_max : T(0);
+  const T t_start = ShellStart(march);
   T p = 1;
   for (int c = 0; c < 3; ++c) st->s[c] = 0;
   for (int k = 0; k < vol.num_shells; ++k) {
-    T t;
     st->p[k] = p;
-    st->hit[k] = SphereExit(ray.origin, ray.dir, vol.shell_center, vol.shell_radii[k], t_start, &t);
+    st->hit[k] = ShellCoordAt(vol, ray, t_start, k, &st->coord[k]);
     if (!st->hit[k]) {
       st->a[k] = 0;
       for (int c = 0; c < 3; ++c) st->e[k][c] = 0;
       continue;
     }
-    st->coord[k] = DirectionToCube(ray.origin + ray.dir * t - vol.shell_center);
     T v[4];
     GatherTexels(vol.params, TexelWeights(vol.GridParams(), vol.m, k, st->coord[k]), v);
     st->a[k] = k == vol.num_shells - 1 ? T(1) : v[3];
