@@ -297,13 +297,12 @@ void RunOptions::Check() const {
   if (levels < 0 || levels > 6) throw InputError(kCommandLine, "--levels", StrCat(levels), "must be 1 to 6");
   if (iterations < 0) throw InputError(kCommandLine, "--iterations", StrCat(iterations), "must be >= 0");
   if (max_resolution < 0) throw InputError(kCommandLine, "--max-resolution", StrCat(max_resolution), "must be >= 0");
-  if (sh_degree < -1 || sh_degree > 2) {
-    throw InputError(kCommandLine, "--sh-degree", StrCat(sh_degree), "must be 0, 1 or 2");
-  }
-  if (!(cost_tolerance >= 0 && cost_tolerance < 1)) {
-    throw InputError(kCommandLine, "--cost-tolerance", StrCat(cost_tolerance), "must be in [0, 1) (0: off)");
-  }
-  recon::CheckCameraRefinement(poses, refine_focal);  // before the import, not only at the reconstruction
+  // The reconstruction's own checks of what perf run passes it, before the import.
+  if (sh_degree != -1) recon::CheckShDegree(sh_degree);  // -1: the preset's
+  recon::SolverOptions solver;
+  solver.cost_tolerance = cost_tolerance;
+  solver.Check();
+  recon::CheckCameraRefinement(poses, refine_focal);
   for (const fs::path* p : {&images, &colmap, &nerf}) {
     if (!p->empty() && !fs::exists(*p)) throw IoError(p->string(), "does not exist", "check the path");
   }

@@ -26,7 +26,7 @@ void ReconstructOptions::Check() const {
   if (workspace.empty()) Fail("WORKSPACE", "", "missing", "pass the workspace made by perf import");
   if (levels < 0 || levels > 6) Fail("--levels", std::to_string(levels), "must be 1 to 6 (or 0 for the default)");
   if (!std::isfinite(solver.smooth_grid)) Fail("--smooth-grid", StrCat(solver.smooth_grid), "must be finite (0: off)");
-  if (sh_degree < 0 || sh_degree > 2) Fail("--sh-degree", std::to_string(sh_degree), "must be 0, 1 or 2");
+  CheckShDegree(sh_degree);
   if (max_resolution != 0 && max_resolution < start_resolution) {
     Fail("--max-resolution", std::to_string(max_resolution), StrCat("must be at least --start-resolution (", start_resolution, ")"),
          "or 0 for the backend's default");
@@ -108,6 +108,10 @@ HierarchyOptions ReconstructOptions::Hierarchy(const Scene& scene, const LevelCh
 
 bool FixedBackground(BackgroundChoice background, const Scene& scene) {
   return background == BackgroundChoice::kAuto ? EveryImageHasAlpha(scene) : background == BackgroundChoice::kFixed;
+}
+
+void CheckShDegree(int sh_degree) {
+  if (sh_degree < 0 || sh_degree > 2) Fail("--sh-degree", std::to_string(sh_degree), "must be 0, 1 or 2");
 }
 
 void CheckCameraRefinement(PoseChoice poses, bool refine_focal) {

@@ -124,6 +124,9 @@ bool FixedBackground(BackgroundChoice background, const Scene& scene);
 // off: it is refined with them.
 void CheckCameraRefinement(PoseChoice poses, bool refine_focal);
 
+// Throws InputError (naming --sh-degree) unless the degree is 0, 1 or 2.
+void CheckShDegree(int sh_degree);
+
 // Whether `exposure` solves the photos' exposures for this scene (kAuto: COLMAP photos).
 bool SolvesExposures(ExposureChoice exposure, const Scene& scene);
 
