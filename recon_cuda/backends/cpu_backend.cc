@@ -181,7 +181,7 @@ class CpuBackend final : public Backend {
         int64_t r_row = r;
         uint32_t first = 0;
         const float* h;
-        const float* pose_row;
+        bool pose_row;
         float scale;
         int count;
         if (recorded_) {
@@ -191,7 +191,7 @@ class CpuBackend final : public Backend {
           count = static_cast<int>(b.end[r] - first);
           h = &b.h[3 * r];
           scale = b.scale[r];
-          pose_row = tr.pose >= 0 ? &b.pose[kPoseRowValues * r] : nullptr;
+          pose_row = tr.pose >= 0;
         } else {
           RecomputeRow(vol, tr, i, s);
           row = &s.row;
@@ -199,9 +199,9 @@ class CpuBackend final : public Backend {
           count = static_cast<int>(s.row.samples.size());
           h = s.row.h.data();
           scale = s.row.scale[0];
-          pose_row = tr.pose >= 0 ? s.row.pose.data() : nullptr;
+          pose_row = tr.pose >= 0;
         }
-        const PoseRow<float> pr = pose_row ? UnpackPoseRow(pose_row) : PoseRow<float>{};
+        const PoseRow<float> pr = pose_row ? row->PoseAt(r_row) : PoseRow<float>{};
         const RayExposure<float> e = ExposureAt(vol, i, h, scale);
         const RaySh<float> sh = ShOfRay(vol, ray);
         float u[4] = {0, 0, 0, 0};
@@ -350,7 +350,7 @@ class CpuBackend final : public Backend {
           AddDiagPose(row, tr.pose, v.g2, v.d);
           AddPoseBlock(row, v.g2, &s.pose_blocks[kPoseBlock * ((tr.pose - vol.PoseStart()) / kPoseValues)]);
         }
-        if (out) PackPoseRow(row, &out->pose[kPoseRowValues * r_out]);
+        if (out) out->StorePose(r_out, row);
       } else {
         Backward(vol, ray, jit, fwd, v, s.record.data());
       }
@@ -397,7 +397,7 @@ class CpuBackend final : public Backend {
       GeometryVisitor<float> geometry(vol, ray, jit);
       BothVisitors<RecordOnly, GeometryVisitor<float>> both{visitor, geometry};
       Backward(vol, ray, jit, fwd, both, s.record.data());
-      PackPoseRow(PoseRowOf(vol, vol.params + tr.pose, tr.forward, ray, geometry.grad), s.row.pose.data());
+      s.row.StorePose(0, PoseRowOf(vol, vol.params + tr.pose, tr.forward, ray, geometry.grad));
     } else {
       Backward(vol, ray, jit, fwd, visitor, s.record.data());
     }

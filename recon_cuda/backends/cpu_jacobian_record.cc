@@ -21,11 +21,34 @@ void BlockJ::Clear(int64_t rays, const VolumeShape& shape, bool compact_samples)
   packed.clear();
   end.assign(rays, 0);
   shells.assign(compact ? 0 : rays * shape.num_shells, ShellJ{{-1, 0.f, 0.f}, {}});
-  shell_partials.assign(compact ? 4 * rays * shape.num_shells : 0, 0.f);
+  shell_partials.assign(compact ? 4 * rays * shape.num_shells : 0, 0);
   h.assign(3 * rays, 0.f);
   scale.assign(rays, 1.f);
   dl_per_delta.assign(compact ? rays : 0, 0.f);
-  pose.assign(shape.poses > 0 ? kPoseRowValues * rays : 0, 0.f);
+  pose.assign(shape.poses > 0 && !compact ? kPoseRowValues * rays : 0, 0.f);
+  packed_pose.assign(shape.poses > 0 && compact ? kPoseRowValues * rays : 0, 0);
+}
+
+void BlockJ::StorePose(int64_t r, const PoseRow<float>& row) {
+  for (int i = 0; i < 4; ++i) {
+    for (int j = 0; j < kPoseSolved; ++j) {
+      const size_t at = kPoseRowValues * r + kPoseSolved * i + j;
+      if (compact) packed_pose[at] = ToBfloat16(row.j[i][j]);
+      else pose[at] = row.j[i][j];
+    }
+  }
+}
+
+PoseRow<float> BlockJ::PoseAt(int64_t r) const {
+  PoseRow<float> row;
+  for (int i = 0; i < 4; ++i) {
+    for (int j = 0; j < kPoseSolved; ++j) {
+      const size_t at = kPoseRowValues * r + kPoseSolved * i + j;
+      row.j[i][j] = compact ? FromBfloat16(packed_pose[at]) : pose[at];
+    }
+    for (int j = kPoseSolved; j < kPoseValues; ++j) row.j[i][j] = 0;
+  }
+  return row;
 }
 
 const int32_t* PhotoSlots(const LevelProblem& p, int count) {
@@ -73,8 +96,9 @@ int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, bool co
   const int64_t stride = std::max(1, p.jtj_ray_stride), recorded = (n + stride - 1) / stride;
   return samples / stride * static_cast<int64_t>(compact ? sizeof(CompactSampleJ) : sizeof(SampleJ)) +
          recorded * (static_cast<int64_t>(sizeof(uint32_t) + (compact ? 5 : 4) * sizeof(float)) +
-              p.shape.num_shells * static_cast<int64_t>(compact ? 4 * sizeof(float) : sizeof(ShellJ)) +
-              (p.shape.poses > 0 ? kPoseRowValues * static_cast<int64_t>(sizeof(float)) : 0));
+              p.shape.num_shells * static_cast<int64_t>(compact ? 4 * sizeof(uint16_t) : sizeof(ShellJ)) +
+              (p.shape.poses > 0 ? kPoseRowValues * static_cast<int64_t>(compact ? sizeof(uint16_t) : sizeof(float))
+                                 : 0));
 }
 
 }  // namespace perf::recon::cpu

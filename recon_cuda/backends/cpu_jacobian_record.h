@@ -43,15 +43,18 @@ inline uint16_t ToBfloat16(float x) {
 }
 inline float FromBfloat16(uint16_t h) { return std::bit_cast<float>(static_cast<uint32_t>(h) << 16); }
 
-// A shell's partials in the compact record (BlockJ::shell_partials), and back for shell k of a
-// volume of num_shells.
-inline void StoreShellPartials(const ShellPartials<float>& sp, float* out) {
-  out[0] = sp.de;
-  for (int c = 0; c < 3; ++c) out[1 + c] = sp.da[c];
+// A shell's partials in the compact record (BlockJ::shell_partials, bfloat16), and back for shell
+// k of a volume of num_shells.
+inline void StoreShellPartials(const ShellPartials<float>& sp, uint16_t* out) {
+  out[0] = ToBfloat16(sp.de);
+  for (int c = 0; c < 3; ++c) out[1 + c] = ToBfloat16(sp.da[c]);
 }
-inline ShellPartials<float> LoadShellPartials(const float* in, int k, int num_shells) {
-  return {in[0], {in[1], in[2], in[3]}, k == num_shells - 1};
+inline ShellPartials<float> LoadShellPartials(const uint16_t* in, int k, int num_shells) {
+  return {FromBfloat16(in[0]), {FromBfloat16(in[1]), FromBfloat16(in[2]), FromBfloat16(in[3])}, k == num_shells - 1};
 }
+
+// A ray's pose row (pose.h PoseRow) without its padding column: 4 residuals x 7 values.
+inline constexpr int kPoseRowValues = 4 * kPoseSolved;
 
 // One sample of a ray's Jacobian, as recorded by Linearize: exact, or compact (CpuBackendOptions::
 // compact_jacobian): its march index, whose t and delta StepAt recomputes exactly, and its colour
@@ -88,18 +91,24 @@ struct BlockJ {
   std::vector<CompactSampleJ> packed;
   std::vector<uint32_t> end;  // [rays]: one past the ray's last sample in `samples` (`packed`)
   std::vector<ShellJ> shells;  // [rays, num_shells] when exact
-  // [rays, num_shells, 4] when compact: a shell's partials (de, da[3]); where the ray meets it and
-  // whether it does are recomputed (ray_math.h ShellCoordAt), and the outermost is opaque.
-  std::vector<float> shell_partials;
+  // [rays, num_shells, 4] when compact: a shell's partials (de, da[3]) in bfloat16; where the ray
+  // meets it and whether it does are recomputed (ray_math.h ShellCoordAt), and the outermost is opaque.
+  std::vector<uint16_t> shell_partials;
   std::vector<float> h;        // [rays, 3] the composited colour H (the exposure's partials)
   std::vector<float> scale;    // [rays] the robust loss's row scale (jacobian.h RobustRowScale)
   std::vector<float> dl_per_delta;  // [rays] when compact: ray_math.h DlPerDelta
-  std::vector<float> pose;     // [rays, kPoseRowValues] each ray's pose row (PackPoseRow), when poses are refined
+  // [rays, kPoseRowValues] each ray's pose row (StorePose), when poses are refined: in `pose`
+  // when exact, in `packed_pose` (bfloat16) when compact.
+  std::vector<float> pose;
+  std::vector<uint16_t> packed_pose;
 
   // Empty, for `rays` rays of a level of `shape`, exact or compact.
   void Clear(int64_t rays, const VolumeShape& shape, bool compact_samples = false);
   // One past the last sample recorded.
   uint32_t SampleCount() const { return static_cast<uint32_t>(compact ? packed.size() : samples.size()); }
+  // Ray r's pose row, stored and read back (rounded to bfloat16 when compact).
+  void StorePose(int64_t r, const PoseRow<float>& row);
+  PoseRow<float> PoseAt(int64_t r) const;
 };
 
 // A recorded ray's shells as J^T J p reads them: which the ray meets, their texel weights and
@@ -164,21 +173,6 @@ void DropSkippableSamples(const VolumeView<float>& vol, const float* free, RayOf
   else block->samples.resize(kept);
 }
 
-// A ray's pose row (pose.h PoseRow) without its padding column: 4 residuals x 7 values.
-inline constexpr int kPoseRowValues = 4 * kPoseSolved;
-inline void PackPoseRow(const PoseRow<float>& row, float* out) {
-  for (int r = 0; r < 4; ++r)
-    for (int j = 0; j < kPoseSolved; ++j) out[kPoseSolved * r + j] = row.j[r][j];
-}
-inline PoseRow<float> UnpackPoseRow(const float* in) {
-  PoseRow<float> row;
-  for (int r = 0; r < 4; ++r) {
-    for (int j = 0; j < kPoseSolved; ++j) row.j[r][j] = in[kPoseSolved * r + j];
-    row.j[r][7] = 0;
-  }
-  return row;
-}
-
 struct Scratch {
   std::vector<SampleRecord<float>> record;  // [max samples a ray]
   std::vector<GridSample<float>> weights;   // [max samples a ray]
@@ -201,7 +195,7 @@ struct LinearizeVisitor {
   AddSink g, d;
   BlockJ* out;         // nullptr: nothing recorded
   ShellJ* out_shells;  // [num_shells] of this ray, exact record
-  float* out_shell_partials;  // [num_shells, 4] of this ray, compact record
+  uint16_t* out_shell_partials;  // [num_shells, 4] of this ray, compact record
   RaySh<float> sh{};   // the ray's spherical harmonics (degree 0: none)
   CellMerger<float, K> merger{};
 

@@ -142,40 +142,56 @@ TEST(CpuBackendTest, JtJpMatchesTheDenseJacobianCachedAndRecomputed) {
   }
 }
 
-// Subsampled Gauss-Newton (SolverOptions::jtj_ray_stride): with jtj = every 3rd ray from an
-// offset, MultiplyJtJ is J_S^T J_S p over those rays' rows alone, recorded (only those rays are
-// kept) and recomputed, and after RestrictJacobian; the three offsets sum to the full product.
 // The compact record (CpuBackendOptions::compact_jacobian, the default): the same samples (their
 // positions recomputed from their march indices; a wrong one would miss by far more than the
 // tolerance) with the colour partials rounded to bfloat16 (2^-9 relative each) and dl made from
-// the ray's dL/dT_box as Backward makes it, and the shells' partials without where the ray meets
-// them (recomputed: a shell looked up on the wrong sphere, or the outermost not opaque, fails
-// it), so J^T J p within a few tenths of a percent of the exact record's. With the fourth residual weighted 100 its dl^2 terms dominate the densities'
-// entries: a dl off by 1 % fails there.
+// the ray's dL/dT_box as Backward makes it, the shells' partials in bfloat16 without where the ray
+// meets them (recomputed: a shell looked up on the wrong sphere, or the outermost not opaque, fails
+// it), and the pose rows in bfloat16 (a row read three rays off fails it; the next pixel's is
+// within the tolerance), so J^T J p within a few tenths of a percent of the exact record's. With
+// the fourth residual weighted 100 its dl^2 terms dominate the densities' entries: a dl off by 1 %
+// fails there.
 TEST(CpuBackendTest, CompactRecordIsTheExactOneRoundedToBfloat16) {
-  const TinyProblem p(3);
-  const std::vector<float> pv = test::RandomDirection(p.shape, 4);
-  for (const float lambda : {0.1f, 100.f}) {
-    SCOPED_TRACE(lambda);
-    std::vector<float> out[2];
-    PassStats stats[2];
-    for (const bool compact : {false, true}) {
-      auto b = Cpu(2, true, compact);
-      b->SetLevel(p.Level(lambda), kVectors);
-      b->Upload(kX, p.x);
-      b->Upload(kP, pv);
-      b->Linearize(kX, 11, kG, kD);
-      stats[compact] = b->MultiplyJtJ(kP, kOut);
-      out[compact].resize(p.shape.ParamCount());
-      b->Download(kOut, out[compact]);
+  TinyProblem posed(3);
+  posed.AddExposures(5);
+  posed.AddPoses(6);
+  for (const TinyProblem& p : {TinyProblem(3), posed}) {
+    SCOPED_TRACE(p.shape.poses > 0 ? "poses refined" : "volume only");
+    const std::vector<float> pv = test::RandomDirection(p.shape, 4);
+    for (const float lambda : {0.1f, 100.f}) {
+      SCOPED_TRACE(lambda);
+      std::vector<float> out[2];
+      PassStats stats[2];
+      for (const bool compact : {false, true}) {
+        auto b = Cpu(2, true, compact);
+        b->SetLevel(p.Level(lambda), kVectors);
+        b->Upload(kX, p.x);
+        b->Upload(kP, pv);
+        b->Linearize(kX, 11, kG, kD);
+        stats[compact] = b->MultiplyJtJ(kP, kOut);
+        out[compact].resize(p.shape.ParamCount());
+        b->Download(kOut, out[compact]);
+      }
+      EXPECT_EQ(stats[1].samples, stats[0].samples);
+      EXPECT_GT(stats[1].samples, 100);
+      // The volume's entries, and the photos' (exposures and poses, on their own scale).
+      const auto photos = static_cast<std::ptrdiff_t>(p.shape.ExposureStart());
+      const std::vector<float> got[2] = {{out[1].begin(), out[1].begin() + photos}, {out[1].begin() + photos, out[1].end()}};
+      const std::vector<double> want[2] = {{out[0].begin(), out[0].begin() + photos}, {out[0].begin() + photos, out[0].end()}};
+      test::ExpectAllClose(got[0], want[0], 3e-3, 3e-3, "compact J^T J p, the volume");
+      EXPECT_NE(out[1], out[0]);  // rounded: not the exact record
+      if (p.shape.poses > 0) {
+        test::ExpectAllClose(got[1], want[1], 3e-3, 3e-3, "compact J^T J p, exposures and poses");
+        const auto at = static_cast<std::ptrdiff_t>(p.shape.PoseStart());
+        EXPECT_FALSE(std::equal(out[1].begin() + at, out[1].end(), out[0].begin() + at));  // rounded too
+      }
     }
-    EXPECT_EQ(stats[1].samples, stats[0].samples);
-    EXPECT_GT(stats[1].samples, 100);
-    test::ExpectAllClose(out[1], std::vector<double>(out[0].begin(), out[0].end()), 3e-3, 3e-3, "compact J^T J p");
-    EXPECT_NE(out[1], out[0]);  // rounded: not the exact record
   }
 }
 
+// Subsampled Gauss-Newton (SolverOptions::jtj_ray_stride): with jtj = every 3rd ray from an
+// offset, MultiplyJtJ is J_S^T J_S p over those rays' rows alone, recorded (only those rays are
+// kept) and recomputed, and after RestrictJacobian; the three offsets sum to the full product.
 TEST(CpuBackendTest, JtJpOnASubsetOfTheRaysUsesTheirRowsAlone) {
   const TinyProblem p(3);
   const uint32_t seed = 11;
