@@ -28,6 +28,13 @@ def peak_mib(path):
         return None
 
 
+def stages_peak_mib(out, name):
+    """The largest peak of a run's stages: NAME.time (reconstruct), NAME.export.time, NAME.eval.time."""
+    peaks = [peak_mib(os.path.join(out, name + suffix)) for suffix in (".time", ".export.time", ".eval.time")]
+    peaks = [p for p in peaks if p is not None]
+    return max(peaks) if peaks else None
+
+
 def time_to(rows, target):
     """Solver seconds at the first iteration whose held-out PSNR reaches target (None: never)."""
     for r in rows:
@@ -42,7 +49,7 @@ def pair(out, a, b, tol):
     scored_b = [r for r in rb if "test_psnr" in r]
     res = {"base": a, "new": b, "tol_db": tol,
            "solver_seconds": [ra[-1]["elapsed"], rb[-1]["elapsed"]],
-           "peak_mib": [peak_mib(os.path.join(out, a + ".time")), peak_mib(os.path.join(out, b + ".time"))]}
+           "peak_mib": [stages_peak_mib(out, a), stages_peak_mib(out, b)]}
     if scored_a and scored_b:
         target = scored_a[-1]["test_psnr"] - tol
         ta, tb = time_to(scored_a, target), time_to(scored_b, target)
