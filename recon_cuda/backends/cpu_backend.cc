@@ -213,10 +213,9 @@ class CpuBackend final : public Backend {
         }
         GridSample<float>* w = s.weights.data();
         SamplePartials<float>* sp = s.partials.data();
+        RecordedSamples read(*row, m, tr.jit, r_row, first);
         for (int j = 0; j < count; ++j) {
-          float t;
-          RecordedSample(*row, m, tr.jit, r, first + j, &t, &sp[j]);
-          w[j] = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(t));
+          w[j] = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(read.Next(&sp[j])));
           if (sh.degree == 0) AddJpSample(pp, w[j], sp[j], u, sh);
           else PrefetchCells(w[j], pp, sh);  // the bands lie apart from the cell: gather after
         }
@@ -336,7 +335,8 @@ class CpuBackend final : public Backend {
                                 AddSink{kDiag ? s.acc.data() : nullptr, 1, 4}, out,
                                 out && !out->compact ? &out->shells[r_out * level_.shape.num_shells] : nullptr,
                                 out && out->compact ? &out->shell_partials[4 * r_out * level_.shape.num_shells]
-                                                    : nullptr};
+                                                    : nullptr,
+                                r_out};
       VolumeU(e, r, v.r);
       GainSquared(e, v.g2);
       v.sh = ShOfRay(vol, ray);

@@ -19,6 +19,8 @@ void BlockJ::Clear(int64_t rays, const VolumeShape& shape, bool compact_samples)
   compact = compact_samples;
   samples.clear();
   packed.clear();
+  steps.clear();
+  first_k.assign(compact ? rays : 0, 0);
   end.assign(rays, 0);
   shells.assign(compact ? 0 : rays * shape.num_shells, ShellJ{{-1, 0.f, 0.f}, {}});
   shell_partials.assign(compact ? 4 * rays * shape.num_shells : 0, 0);
@@ -49,6 +51,30 @@ PoseRow<float> BlockJ::PoseAt(int64_t r) const {
     for (int j = kPoseSolved; j < kPoseValues; ++j) row.j[i][j] = 0;
   }
   return row;
+}
+
+void BlockJ::AppendCompact(int64_t r, int k, const SamplePartials<float>& p, int* last_k) {
+  auto at = static_cast<uint32_t>(packed.size());
+  const int fillers = *last_k < 0 ? 0 : (*last_k - k - 1) / CompactSampleJ::kMaxStep;
+  packed.resize(at + 1 + fillers);
+  steps.resize(at + 1 + fillers);
+  EncodeCompact(r, k, CompactSampleJ::Make(p), &at, last_k);
+}
+
+void BlockJ::EncodeCompact(int64_t r, int k, CompactSampleJ e, uint32_t* at, int* last_k) {
+  PERF_CHECK(k >= 0 && k <= 0xffff && (*last_k < 0 || k < *last_k));
+  if (*last_k < 0) {
+    first_k[r] = static_cast<uint16_t>(k);
+    *last_k = k;
+  }
+  for (; *last_k - k > CompactSampleJ::kMaxStep; *last_k -= CompactSampleJ::kMaxStep, ++*at) {
+    packed[*at] = CompactSampleJ::Filler();
+    steps[*at] = CompactSampleJ::kMaxStep;
+  }
+  packed[*at] = e;
+  steps[*at] = static_cast<uint8_t>(*last_k - k);
+  ++*at;
+  *last_k = k;
 }
 
 const int32_t* PhotoSlots(const LevelProblem& p, int count) {
@@ -94,8 +120,9 @@ int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, bool co
   for (int64_t c : per_block) samples += c;
   // Only every jtj_ray_stride-th ray is recorded.
   const int64_t stride = std::max(1, p.jtj_ray_stride), recorded = (n + stride - 1) / stride;
-  return samples / stride * static_cast<int64_t>(compact ? sizeof(CompactSampleJ) : sizeof(SampleJ)) +
+  return samples / stride * static_cast<int64_t>(compact ? sizeof(CompactSampleJ) + 1 : sizeof(SampleJ)) +
          recorded * (static_cast<int64_t>(sizeof(uint32_t) + (compact ? 5 : 4) * sizeof(float)) +
+                     (compact ? static_cast<int64_t>(sizeof(uint16_t)) : 0) +
               p.shape.num_shells * static_cast<int64_t>(compact ? 4 * sizeof(uint16_t) : sizeof(ShellJ)) +
               (p.shape.poses > 0 ? kPoseRowValues * static_cast<int64_t>(compact ? sizeof(uint16_t) : sizeof(float))
                                  : 0));

@@ -57,28 +57,32 @@ inline ShellPartials<float> LoadShellPartials(const uint16_t* in, int k, int num
 inline constexpr int kPoseRowValues = 4 * kPoseSolved;
 
 // One sample of a ray's Jacobian, as recorded by Linearize: exact, or compact (CpuBackendOptions::
-// compact_jacobian): its march index, whose t and delta StepAt recomputes exactly, and its colour
-// partials in bfloat16 (8 bits of mantissa); its dl is the ray's DlPerDelta times delta, as
-// Backward makes it, so it is not stored. That dl is rounded to bfloat16 as the others are, so the
-// product is the 12-byte record's to the bit (left exact, the two-rank MPI test's cost bound
-// failed; docs/tuning.md "dl not recorded").
+// compact_jacobian): its colour partials in bfloat16 (8 bits of mantissa) and, apart (BlockJ::
+// steps), one byte: how many march steps it lies before the ray's entry before (Backward records a
+// ray back to front), so its march index, whose t and delta StepAt recomputes exactly (9 bytes a
+// sample). Its dl is the ray's DlPerDelta times delta, as Backward makes it, so it is not stored.
+// That dl is rounded to bfloat16 as the others are, so the product is the 12-byte record's to the
+// bit (left exact, the two-rank MPI test's cost bound failed; docs/tuning.md "dl not recorded").
+// A gap of more than kMaxStep steps between two samples of a ray is bridged by fillers: entries
+// whose partials are all 0, dl too, which add exact zeros to J^T J p.
 struct SampleJ {
   float t;
   SamplePartials<float> sp;
 };
 struct CompactSampleJ {
-  uint16_t k;
+  static constexpr int kMaxStep = 255;
+  static constexpr uint16_t kFiller = 0xffff;  // sp[0] of a filler (a bfloat16 NaN)
   uint16_t sp[4];  // dc, ds[3]
-  static CompactSampleJ Make(int k, const SamplePartials<float>& p) {
-    PERF_CHECK(k >= 0 && k <= 0xffff);
-    return {static_cast<uint16_t>(k),
-            {ToBfloat16(p.dc), ToBfloat16(p.ds[0]), ToBfloat16(p.ds[1]), ToBfloat16(p.ds[2])}};
+  static CompactSampleJ Make(const SamplePartials<float>& p) {
+    return {{ToBfloat16(p.dc), ToBfloat16(p.ds[0]), ToBfloat16(p.ds[1]), ToBfloat16(p.ds[2])}};
   }
+  static CompactSampleJ Filler() { return {{kFiller, 0, 0, 0}}; }
   SamplePartials<float> Partials(float dl) const {
+    if (sp[0] == kFiller) return {0.f, {0.f, 0.f, 0.f}, 0.f};
     return {FromBfloat16(sp[0]), {FromBfloat16(sp[1]), FromBfloat16(sp[2]), FromBfloat16(sp[3])}, dl};
   }
 };
-static_assert(sizeof(CompactSampleJ) == 10, "10 bytes a recorded sample");
+static_assert(sizeof(CompactSampleJ) == 8, "8 bytes of partials a recorded sample, and its step");
 struct ShellJ {
   CubeCoord<float> coord;  // face -1: the ray misses this shell
   ShellPartials<float> sp;
@@ -86,9 +90,11 @@ struct ShellJ {
 
 // The recorded Jacobian of one block of rays.
 struct BlockJ {
-  bool compact = false;                 // its samples are in `packed`, else in `samples`
+  bool compact = false;                 // its samples are in `packed` and `steps`, else in `samples`
   std::vector<SampleJ> samples;
   std::vector<CompactSampleJ> packed;
+  std::vector<uint8_t> steps;     // [entries of packed]: march steps back from the ray's entry before (first: 0)
+  std::vector<uint16_t> first_k;  // [rays] when compact: the march index of the ray's first entry (its last sample)
   std::vector<uint32_t> end;  // [rays]: one past the ray's last sample in `samples` (`packed`)
   std::vector<ShellJ> shells;  // [rays, num_shells] when exact
   // [rays, num_shells, 4] when compact: a shell's partials (de, da[3]) in bfloat16; where the ray
@@ -109,6 +115,13 @@ struct BlockJ {
   // Ray r's pose row, stored and read back (rounded to bfloat16 when compact).
   void StorePose(int64_t r, const PoseRow<float>& row);
   PoseRow<float> PoseAt(int64_t r) const;
+  // Compact: appends sample k of ray r (its partials), which lies before the ray's sample last_k
+  // (-1: the ray's first entry); last_k becomes k.
+  void AppendCompact(int64_t r, int k, const SamplePartials<float>& p, int* last_k);
+  // Compact: writes entry e, sample k of ray r, at entry *at (and fillers before it where needed),
+  // after the ray's sample last_k (-1: none); *at moves past it. In place over the ray's own
+  // entries when some are dropped: it never writes past the entry it is given.
+  void EncodeCompact(int64_t r, int k, CompactSampleJ e, uint32_t* at, int* last_k);
 };
 
 // A recorded ray's shells as J^T J p reads them: which the ray meets, their texel weights and
@@ -136,19 +149,34 @@ inline void RecordedShells(const BlockJ& b, int64_t r, const VolumeView<float>& 
   }
 }
 
-// Sample j of a block's record, of its r-th ray (of march m and jitter jit): its position t on
-// the ray and its partials.
-inline void RecordedSample(const BlockJ& b, const March<float>& m, const Jitter& jit, size_t r, uint32_t j,
-                           float* t, SamplePartials<float>* sp) {
-  if (b.compact) {
-    const MarchStep<float> st = StepAt(m, b.packed[j].k, jit);
-    *t = st.t;
-    *sp = b.packed[j].Partials(FromBfloat16(ToBfloat16(b.dl_per_delta[r] * st.delta)));
-  } else {
-    *t = b.samples[j].t;
-    *sp = b.samples[j].sp;
+// A recorded ray's samples in order (the r-th ray of the block's record, of march m and jitter
+// jit, whose first entry is `first`): each one's position t on the ray and its partials.
+class RecordedSamples {
+ public:
+  RecordedSamples(const BlockJ& b, const March<float>& m, const Jitter& jit, int64_t r, uint32_t first)
+      : b_(b), m_(m), jit_(jit), r_(r), j_(first), k_(b.compact ? b.first_k[r] : 0) {}
+  // The next sample's t; its partials into *sp.
+  float Next(SamplePartials<float>* sp) {
+    const uint32_t j = j_++;
+    if (!b_.compact) {
+      *sp = b_.samples[j].sp;
+      return b_.samples[j].t;
+    }
+    k_ -= b_.steps[j];
+    const MarchStep<float> st = StepAt(m_, k_, jit_);
+    *sp = b_.packed[j].Partials(FromBfloat16(ToBfloat16(b_.dl_per_delta[r_] * st.delta)));
+    return st.t;
   }
-}
+  int k() const { return k_; }  // the march index of the last sample read (compact)
+
+ private:
+  const BlockJ& b_;
+  const March<float>& m_;
+  const Jitter& jit_;
+  int64_t r_;
+  uint32_t j_;
+  int k_;
+};
 
 // Drops the samples of a block's record that reach no free parameter with a non-zero value
 // (jacobian.h SkippableSample; free: the free-parameter mask). ray_of(r): its r-th ray (TrainingRay).
@@ -158,19 +186,24 @@ void DropSkippableSamples(const VolumeView<float>& vol, const float* free, RayOf
   for (size_t r = 0; r < block->end.size(); ++r) {
     const TrainingRay tr = ray_of(r);
     const March<float> m = block->compact ? MakeMarch(vol, tr.ray) : March<float>{};
+    RecordedSamples read(*block, m, tr.jit, static_cast<int64_t>(r), first);
+    int last_k = -1;
     for (uint32_t j = first; j < block->end[r]; ++j) {
-      float t;
       SamplePartials<float> sp;
-      RecordedSample(*block, m, tr.jit, r, j, &t, &sp);
+      const float t = read.Next(&sp);
       if (SkippableSample(TrilinearWeights(vol.n, vol.brick_slot, tr.ray.GridPoint(t)), sp, free)) continue;
-      if (block->compact) block->packed[kept++] = block->packed[j];
+      if (block->compact) block->EncodeCompact(static_cast<int64_t>(r), read.k(), block->packed[j], &kept, &last_k);
       else block->samples[kept++] = block->samples[j];
     }
     first = block->end[r];
     block->end[r] = kept;
   }
-  if (block->compact) block->packed.resize(kept);
-  else block->samples.resize(kept);
+  if (block->compact) {
+    block->packed.resize(kept);
+    block->steps.resize(kept);
+  } else {
+    block->samples.resize(kept);
+  }
 }
 
 struct Scratch {
@@ -196,6 +229,8 @@ struct LinearizeVisitor {
   BlockJ* out;         // nullptr: nothing recorded
   ShellJ* out_shells;  // [num_shells] of this ray, exact record
   uint16_t* out_shell_partials;  // [num_shells, 4] of this ray, compact record
+  int64_t out_ray = 0;  // the ray's index in *out
+  int last_k = -1;      // the march index of the ray's last sample recorded (compact)
   RaySh<float> sh{};   // the ray's spherical harmonics (degree 0: none)
   CellMerger<float, K> merger{};
 
@@ -214,7 +249,7 @@ struct LinearizeVisitor {
     } else {
       ScatterJtuSample(gs, sp, r, g, sh);
     }
-    if (out && out->compact) out->packed.push_back(CompactSampleJ::Make(k, sp));
+    if (out && out->compact) out->AppendCompact(out_ray, k, sp, &last_k);
     else if (out) out->samples.push_back({st.t, sp});
   }
   // A cell's merged sums are complete.

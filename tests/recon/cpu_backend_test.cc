@@ -11,6 +11,7 @@
 
 #include "common/errors.h"
 
+#include "recon_cuda/backends/cpu_jacobian_record.h"
 #include "recon_cuda/data/volume.h"
 #include "tests/recon/recon_test_util.h"
 
@@ -155,38 +156,136 @@ TEST(CpuBackendTest, CompactRecordIsTheExactOneRoundedToBfloat16) {
   TinyProblem posed(3);
   posed.AddExposures(5);
   posed.AddPoses(6);
-  for (const TinyProblem& p : {TinyProblem(3), posed}) {
+  for (TinyProblem p : {TinyProblem(3), posed}) {
     SCOPED_TRACE(p.shape.poses > 0 ? "poses refined" : "volume only");
     const std::vector<float> pv = test::RandomDirection(p.shape, 4);
+    // Then with every density held (RestrictJacobian drops the samples whose cells are all empty
+    // and held, and the compact record re-encodes its march steps in place): the first half of
+    // the cells is empty.
+    std::vector<float> free(p.shape.ParamCount(), 1.f), held_p = pv;
+    for (int64_t c = 0; c < p.shape.StoredCells(); ++c) {
+      free[GridParam(c, 3)] = 0.f;
+      held_p[GridParam(c, 3)] = 0.f;
+      if (2 * c < p.shape.StoredCells()) p.x[GridParam(c, 3)] = 0.f;
+    }
     for (const float lambda : {0.1f, 100.f}) {
       SCOPED_TRACE(lambda);
-      std::vector<float> out[2];
-      PassStats stats[2];
+      std::vector<float> out[2][2];  // [restricted][compact]
+      PassStats stats[2][2];
       for (const bool compact : {false, true}) {
         auto b = Cpu(2, true, compact);
         b->SetLevel(p.Level(lambda), kVectors);
         b->Upload(kX, p.x);
         b->Upload(kP, pv);
         b->Linearize(kX, 11, kG, kD);
-        stats[compact] = b->MultiplyJtJ(kP, kOut);
-        out[compact].resize(p.shape.ParamCount());
-        b->Download(kOut, out[compact]);
+        for (const bool restricted : {false, true}) {
+          if (restricted) {
+            b->Upload(kG, free);
+            b->Upload(kP, held_p);
+            b->RestrictJacobian(kG);
+          }
+          stats[restricted][compact] = b->MultiplyJtJ(kP, kOut);
+          out[restricted][compact].resize(p.shape.ParamCount());
+          b->Download(kOut, out[restricted][compact]);
+        }
       }
-      EXPECT_EQ(stats[1].samples, stats[0].samples);
-      EXPECT_GT(stats[1].samples, 100);
-      // The volume's entries, and the photos' (exposures and poses, on their own scale).
-      const auto photos = static_cast<std::ptrdiff_t>(p.shape.ExposureStart());
-      const std::vector<float> got[2] = {{out[1].begin(), out[1].begin() + photos}, {out[1].begin() + photos, out[1].end()}};
-      const std::vector<double> want[2] = {{out[0].begin(), out[0].begin() + photos}, {out[0].begin() + photos, out[0].end()}};
-      test::ExpectAllClose(got[0], want[0], 3e-3, 3e-3, "compact J^T J p, the volume");
-      EXPECT_NE(out[1], out[0]);  // rounded: not the exact record
-      if (p.shape.poses > 0) {
-        test::ExpectAllClose(got[1], want[1], 3e-3, 3e-3, "compact J^T J p, exposures and poses");
-        const auto at = static_cast<std::ptrdiff_t>(p.shape.PoseStart());
-        EXPECT_FALSE(std::equal(out[1].begin() + at, out[1].end(), out[0].begin() + at));  // rounded too
+      for (const bool restricted : {false, true}) {
+        SCOPED_TRACE(restricted ? "restricted" : "every parameter");
+        const std::vector<float>& exact = out[restricted][0];
+        const std::vector<float>& compact = out[restricted][1];
+        EXPECT_EQ(stats[restricted][1].samples, stats[restricted][0].samples);
+        EXPECT_GT(stats[restricted][1].samples, 100);
+        // The volume's entries, and the photos' (exposures and poses, on their own scale).
+        const auto photos = static_cast<std::ptrdiff_t>(p.shape.ExposureStart());
+        test::ExpectAllClose(std::vector<float>(compact.begin(), compact.begin() + photos),
+                             std::vector<double>(exact.begin(), exact.begin() + photos), 3e-3, 3e-3,
+                             "compact J^T J p, the volume");
+        EXPECT_NE(compact, exact);  // rounded: not the exact record
+        if (p.shape.poses > 0) {
+          test::ExpectAllClose(std::vector<float>(compact.begin() + photos, compact.end()),
+                               std::vector<double>(exact.begin() + photos, exact.end()), 3e-3, 3e-3,
+                               "compact J^T J p, exposures and poses");
+          const auto at = static_cast<std::ptrdiff_t>(p.shape.PoseStart());
+          EXPECT_FALSE(std::equal(compact.begin() + at, compact.end(), exact.begin() + at));  // rounded too
+        }
       }
+      EXPECT_LT(stats[1][1].samples, stats[0][1].samples);  // the restriction dropped some
     }
   }
+}
+
+// The compact record's march indices, one byte a sample (the steps back from the ray's entry
+// before: Backward records a ray back to front), across gaps longer than a byte: bridged by
+// fillers (every partial 0, dl too) when recorded, and again when samples are dropped and the
+// rest re-encoded in place (DropSkippableSamples).
+TEST(CpuBackendTest, CompactRecordStepsBridgeLongGaps) {
+  using cpu::BlockJ;
+  const std::vector<std::vector<int>> ks = {{1401, 1400, 600, 4, 3}, {511, 256, 0}, {}, {70}};
+  const std::vector<size_t> entries = {5 + 2 + 3, 3 + 1, 0, 1};  // samples and fillers
+  const March<float> m{0.f, 2000.f, 1.f, 2000, true};           // sample k at t = k + 0.5
+  const Jitter none{0, 0, false, false};
+  const auto partials = [](int k) { return SamplePartials<float>{0.01f * k, {1.f, -2.f, 0.5f * k}, 0.f}; };
+  BlockJ b;
+  b.Clear(static_cast<int64_t>(ks.size()), VolumeShape(4, 2, 2), true);
+  for (size_t r = 0; r < ks.size(); ++r) {
+    int last = -1;
+    for (int k : ks[r]) b.AppendCompact(static_cast<int64_t>(r), k, partials(k), &last);
+    b.end[r] = b.SampleCount();
+    b.dl_per_delta[r] = 2.f;
+  }
+  // The samples of `want` (of every ray) read back in order, with a filler wherever a step is longer.
+  const auto expect_samples = [&](const std::vector<std::vector<int>>& want) {
+    uint32_t first = 0;
+    for (size_t r = 0; r < want.size(); ++r) {
+      SCOPED_TRACE(r);
+      cpu::RecordedSamples read(b, m, none, static_cast<int64_t>(r), first);
+      int last = -1;
+      size_t next = 0;
+      for (uint32_t j = first; j < b.end[r]; ++j) {
+        SamplePartials<float> sp;
+        const float t = read.Next(&sp);
+        ASSERT_LT(next, want[r].size());
+        if (sp.dl == 0.f) {  // a filler: nothing, one full step back
+          EXPECT_EQ(last - read.k(), cpu::CompactSampleJ::kMaxStep);
+          EXPECT_GT(read.k(), want[r][next]);
+          EXPECT_EQ(sp.dc, 0.f);
+          EXPECT_EQ(sp.ds[2], 0.f);
+        } else {
+          const int k = want[r][next++];
+          EXPECT_EQ(read.k(), k);
+          EXPECT_EQ(t, static_cast<float>(k) + 0.5f);
+          const SamplePartials<float> p = partials(k);
+          EXPECT_EQ(sp.dc, cpu::FromBfloat16(cpu::ToBfloat16(p.dc)));
+          EXPECT_EQ(sp.ds[2], cpu::FromBfloat16(cpu::ToBfloat16(p.ds[2])));
+          EXPECT_EQ(sp.dl, 2.f);
+        }
+        last = read.k();
+      }
+      EXPECT_EQ(next, want[r].size());
+      first = b.end[r];
+    }
+  };
+  for (size_t r = 0; r < ks.size(); ++r) EXPECT_EQ(b.end[r] - (r ? b.end[r - 1] : 0), entries[r]) << r;
+  expect_samples(ks);
+  // Drop 600 and 4 of the first ray (1397 steps from 1400 to 3: 5 fillers where there were 7
+  // entries) and 256 of the second, in place as DropSkippableSamples does.
+  const std::vector<std::vector<int>> kept = {{1401, 1400, 3}, {511, 0}, {}, {70}};
+  uint32_t first = 0, at = 0;
+  for (size_t r = 0; r < ks.size(); ++r) {
+    cpu::RecordedSamples read(b, m, none, static_cast<int64_t>(r), first);
+    int last = -1;
+    for (uint32_t j = first; j < b.end[r]; ++j) {
+      SamplePartials<float> sp;
+      read.Next(&sp);
+      const bool keep = sp.dl != 0.f && std::count(kept[r].begin(), kept[r].end(), read.k()) > 0;
+      if (keep) b.EncodeCompact(static_cast<int64_t>(r), read.k(), b.packed[j], &at, &last);
+    }
+    first = b.end[r];
+    b.end[r] = at;
+  }
+  EXPECT_EQ(b.end[0], 3u + 5u);
+  EXPECT_EQ(b.end[1] - b.end[0], 2u + 2u);  // 511 steps: fillers at 256 and 1
+  expect_samples(kept);
 }
 
 // Subsampled Gauss-Newton (SolverOptions::jtj_ray_stride): with jtj = every 3rd ray from an
