@@ -23,7 +23,7 @@ void BlockJ::Clear(int64_t rays, const VolumeShape& shape, bool compact_samples)
   first_k.assign(compact ? rays : 0, 0);
   end.assign(rays, 0);
   shells.assign(compact ? 0 : rays * shape.num_shells, ShellJ{{-1, 0.f, 0.f}, {}});
-  shell_partials.assign(compact ? 4 * rays * shape.num_shells : 0, 0);
+  shell_partials.assign(compact ? 4 * rays * shape.num_shells : 0, 0.f);
   h.assign(3 * rays, 0.f);
   scale.assign(rays, 1.f);
   dl_per_delta.assign(compact ? rays : 0, 0.f);
@@ -123,7 +123,7 @@ int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, bool co
   return samples / stride * static_cast<int64_t>(compact ? sizeof(CompactSampleJ) + 1 : sizeof(SampleJ)) +
          recorded * (static_cast<int64_t>(sizeof(uint32_t) + (compact ? 5 : 4) * sizeof(float)) +
                      (compact ? static_cast<int64_t>(sizeof(uint16_t)) : 0) +
-              p.shape.num_shells * static_cast<int64_t>(compact ? 4 * sizeof(uint16_t) : sizeof(ShellJ)) +
+              p.shape.num_shells * static_cast<int64_t>(compact ? 4 * sizeof(float) : sizeof(ShellJ)) +
               (p.shape.poses > 0 ? kPoseRowValues * static_cast<int64_t>(compact ? sizeof(uint16_t) : sizeof(float))
                                  : 0));
 }

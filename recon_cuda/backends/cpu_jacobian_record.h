@@ -43,14 +43,15 @@ inline uint16_t ToBfloat16(float x) {
 }
 inline float FromBfloat16(uint16_t h) { return std::bit_cast<float>(static_cast<uint32_t>(h) << 16); }
 
-// A shell's partials in the compact record (BlockJ::shell_partials, bfloat16), and back for shell
-// k of a volume of num_shells.
-inline void StoreShellPartials(const ShellPartials<float>& sp, uint16_t* out) {
-  out[0] = ToBfloat16(sp.de);
-  for (int c = 0; c < 3; ++c) out[1 + c] = ToBfloat16(sp.da[c]);
+// A shell's partials in the compact record (BlockJ::shell_partials), and back for shell k of a
+// volume of num_shells. Kept in float: rounded to bfloat16, CG's solution of solver_bounds_test's
+// rank-deficient system missed the exact one by 10-15 % instead of under 1 % (docs/tuning.md).
+inline void StoreShellPartials(const ShellPartials<float>& sp, float* out) {
+  out[0] = sp.de;
+  for (int c = 0; c < 3; ++c) out[1 + c] = sp.da[c];
 }
-inline ShellPartials<float> LoadShellPartials(const uint16_t* in, int k, int num_shells) {
-  return {FromBfloat16(in[0]), {FromBfloat16(in[1]), FromBfloat16(in[2]), FromBfloat16(in[3])}, k == num_shells - 1};
+inline ShellPartials<float> LoadShellPartials(const float* in, int k, int num_shells) {
+  return {in[0], {in[1], in[2], in[3]}, k == num_shells - 1};
 }
 
 // A ray's pose row (pose.h PoseRow) without its padding column: 4 residuals x 7 values.
@@ -97,9 +98,9 @@ struct BlockJ {
   std::vector<uint16_t> first_k;  // [rays] when compact: the march index of the ray's first entry (its last sample)
   std::vector<uint32_t> end;  // [rays]: one past the ray's last sample in `samples` (`packed`)
   std::vector<ShellJ> shells;  // [rays, num_shells] when exact
-  // [rays, num_shells, 4] when compact: a shell's partials (de, da[3]) in bfloat16; where the ray
-  // meets it and whether it does are recomputed (ray_math.h ShellCoordAt), and the outermost is opaque.
-  std::vector<uint16_t> shell_partials;
+  // [rays, num_shells, 4] when compact: a shell's partials (de, da[3]); where the ray meets it and
+  // whether it does are recomputed (ray_math.h ShellCoordAt), and the outermost is opaque.
+  std::vector<float> shell_partials;
   std::vector<float> h;        // [rays, 3] the composited colour H (the exposure's partials)
   std::vector<float> scale;    // [rays] the robust loss's row scale (jacobian.h RobustRowScale)
   std::vector<float> dl_per_delta;  // [rays] when compact: ray_math.h DlPerDelta
@@ -228,7 +229,7 @@ struct LinearizeVisitor {
   AddSink g, d;
   BlockJ* out;         // nullptr: nothing recorded
   ShellJ* out_shells;  // [num_shells] of this ray, exact record
-  uint16_t* out_shell_partials;  // [num_shells, 4] of this ray, compact record
+  float* out_shell_partials;  // [num_shells, 4] of this ray, compact record
   int64_t out_ray = 0;  // the ray's index in *out
   int last_k = -1;      // the march index of the ray's last sample recorded (compact)
   RaySh<float> sh{};   // the ray's spherical harmonics (degree 0: none)

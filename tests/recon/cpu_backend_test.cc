@@ -146,9 +146,9 @@ TEST(CpuBackendTest, JtJpMatchesTheDenseJacobianCachedAndRecomputed) {
 // The compact record (CpuBackendOptions::compact_jacobian, the default): the same samples (their
 // positions recomputed from their march indices; a wrong one would miss by far more than the
 // tolerance) with the colour partials rounded to bfloat16 (2^-9 relative each) and dl made from
-// the ray's dL/dT_box as Backward makes it, the shells' partials in bfloat16 without where the ray
-// meets them (recomputed: a shell looked up on the wrong sphere, or the outermost not opaque, fails
-// it), and the pose rows in bfloat16 (a row read three rays off fails it; the next pixel's is
+// the ray's dL/dT_box as Backward makes it, the shells' partials without where the ray meets them
+// (recomputed: a shell looked up on the wrong sphere, or the outermost not opaque, fails it), and
+// the pose rows in bfloat16 (a row read three rays off fails it; the next pixel's is
 // within the tolerance), so J^T J p within a few tenths of a percent of the exact record's. With
 // the fourth residual weighted 100 its dl^2 terms dominate the densities' entries: a dl off by 1 %
 // fails there.
