@@ -366,6 +366,7 @@ class CpuBackend final : public Backend {
       }
       bs.Add(fwd, robust_, subset.Contains(i));
     }
+    if (record) record->Trim();
     return bs;
   }
 
