@@ -366,7 +366,6 @@ class CpuBackend final : public Backend {
       }
       bs.Add(fwd, robust_, subset.Contains(i));
     }
-    if (record) record->Trim();
     return bs;
   }
 

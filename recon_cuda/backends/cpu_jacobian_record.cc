@@ -53,12 +53,6 @@ PoseRow<float> BlockJ::PoseAt(int64_t r) const {
   return row;
 }
 
-void BlockJ::Trim() {
-  samples.shrink_to_fit();
-  packed.shrink_to_fit();
-  steps.shrink_to_fit();
-}
-
 void BlockJ::AppendCompact(int64_t r, int k, const SamplePartials<float>& p, int* last_k) {
   auto at = static_cast<uint32_t>(packed.size());
   const int fillers = *last_k < 0 ? 0 : (*last_k - k - 1) / CompactSampleJ::kMaxStep;

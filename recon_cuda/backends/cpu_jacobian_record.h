@@ -116,9 +116,6 @@ struct BlockJ {
   // Ray r's pose row, stored and read back (rounded to bfloat16 when compact).
   void StorePose(int64_t r, const PoseRow<float>& row);
   PoseRow<float> PoseAt(int64_t r) const;
-  // Frees the samples' spare capacity: a block's vectors grow by doubling and keep their capacity
-  // from one Linearize to the next, so without this the record holds up to twice its samples.
-  void Trim();
   // Compact: appends sample k of ray r (its partials), which lies before the ray's sample last_k
   // (-1: the ray's first entry); last_k becomes k.
   void AppendCompact(int64_t r, int k, const SamplePartials<float>& p, int* last_k);
