@@ -181,7 +181,6 @@ class CpuBackend final : public Backend {
         int64_t r_row = r;
         uint32_t first = 0;
         const float* h;
-        bool pose_row;
         float scale;
         int count;
         if (recorded_) {
@@ -191,7 +190,6 @@ class CpuBackend final : public Backend {
           count = static_cast<int>(b.end[r] - first);
           h = &b.h[3 * r];
           scale = b.scale[r];
-          pose_row = tr.pose >= 0;
         } else {
           RecomputeRow(vol, tr, i, s);
           row = &s.row;
@@ -199,8 +197,8 @@ class CpuBackend final : public Backend {
           count = static_cast<int>(s.row.samples.size());
           h = s.row.h.data();
           scale = s.row.scale[0];
-          pose_row = tr.pose >= 0;
         }
+        const bool pose_row = tr.pose >= 0;
         const PoseRow<float> pr = pose_row ? row->PoseAt(r_row) : PoseRow<float>{};
         const RayExposure<float> e = ExposureAt(vol, i, h, scale);
         const RaySh<float> sh = ShOfRay(vol, ray);

@@ -53,9 +53,15 @@ PoseRow<float> BlockJ::PoseAt(int64_t r) const {
   return row;
 }
 
+namespace {
+// The fillers between a ray's entry at last_k (-1: none) and its next sample k < last_k: one every
+// kMaxStep steps back, so that no step is longer.
+int FillersBetween(int last_k, int k) { return last_k < 0 ? 0 : (last_k - k - 1) / CompactSampleJ::kMaxStep; }
+}  // namespace
+
 void BlockJ::AppendCompact(int64_t r, int k, const SamplePartials<float>& p, int* last_k) {
   auto at = static_cast<uint32_t>(packed.size());
-  const int fillers = *last_k < 0 ? 0 : (*last_k - k - 1) / CompactSampleJ::kMaxStep;
+  const int fillers = FillersBetween(*last_k, k);
   packed.resize(at + 1 + fillers);
   steps.resize(at + 1 + fillers);
   EncodeCompact(r, k, CompactSampleJ::Make(p), &at, last_k);
@@ -63,13 +69,14 @@ void BlockJ::AppendCompact(int64_t r, int k, const SamplePartials<float>& p, int
 
 void BlockJ::EncodeCompact(int64_t r, int k, CompactSampleJ e, uint32_t* at, int* last_k) {
   PERF_CHECK(k >= 0 && k <= 0xffff && (*last_k < 0 || k < *last_k));
+  for (int f = FillersBetween(*last_k, k); f > 0; --f, ++*at) {
+    packed[*at] = CompactSampleJ::Filler();
+    steps[*at] = CompactSampleJ::kMaxStep;
+    *last_k -= CompactSampleJ::kMaxStep;
+  }
   if (*last_k < 0) {
     first_k[r] = static_cast<uint16_t>(k);
     *last_k = k;
-  }
-  for (; *last_k - k > CompactSampleJ::kMaxStep; *last_k -= CompactSampleJ::kMaxStep, ++*at) {
-    packed[*at] = CompactSampleJ::Filler();
-    steps[*at] = CompactSampleJ::kMaxStep;
   }
   packed[*at] = e;
   steps[*at] = static_cast<uint8_t>(*last_k - k);
