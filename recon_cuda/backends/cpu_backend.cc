@@ -174,7 +174,6 @@ class CpuBackend final : public Backend {
       BlockStats bs;
       AddSink sink{s.acc.data()};
       int64_t r = 0;  // the ray's index in the block's record
-      uint32_t shell_at = 0;  // where its shells start in a compact record
       for (int64_t i = jtj_.FirstFrom(begin); i < end; i += jtj_.stride, ++r) {
         const TrainingRay tr = TrainingRayOf(vol, i, lin_seed_);
         const BoxRay<float>& ray = tr.ray;
@@ -206,7 +205,7 @@ class CpuBackend final : public Backend {
         float u[4] = {0, 0, 0, 0};
         const March<float> m = row->compact ? MakeMarch(vol, ray) : March<float>{};
         RayShellsJ shells;
-        RecordedShells(*row, r_row, vol, ray, m, &shell_at, &shells);
+        RecordedShells(*row, r_row, vol, ray, m, &shells);
         for (int k = 0; k < k_shells; ++k) {
           if (shells.hit[k]) AddJpShell(pp, shells.ts[k], shells.sp[k], u);
         }
@@ -333,7 +332,9 @@ class CpuBackend final : public Backend {
       LinearizeVisitor<kDiag> v{{}, {}, AddSink{s.acc.data(), kDiag ? 1 : 0, 0},
                                 AddSink{kDiag ? s.acc.data() : nullptr, 1, 4}, out,
                                 out && !out->compact ? &out->shells[r_out * level_.shape.num_shells] : nullptr,
-                                r_out, level_.residuals.stop_transmittance};
+                                out && out->compact ? &out->shell_partials[4 * r_out * level_.shape.num_shells]
+                                                    : nullptr,
+                                r_out};
       VolumeU(e, r, v.r);
       GainSquared(e, v.g2);
       v.sh = ShOfRay(vol, ray);

@@ -3,13 +3,18 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-#include <cmath>
 
 #include "common/errors.h"
 #include "recon_cuda/backends/cpu_vectors.h"
 
 namespace perf::recon::cpu {
 
+// Bytes of the recorded Jacobian: every ray's march length (no jitter needed for the count;
+// early termination only shortens it; a sparse grid's march counted sample by sample, plus an
+// eighth for the jittered samples that land differently, on every 4th ray of a block and scaled
+// to the block: an estimate, and a quarter of a march) times the per-sample record, plus the
+// shell records and, when poses are refined, the pose rows; of the recorded rays (every
+// p.jtj_ray_stride-th) only.
 void BlockJ::Clear(int64_t rays, const VolumeShape& shape, bool compact_samples) {
   compact = compact_samples;
   samples.clear();
@@ -18,8 +23,7 @@ void BlockJ::Clear(int64_t rays, const VolumeShape& shape, bool compact_samples)
   first_k.assign(compact ? rays : 0, 0);
   end.assign(rays, 0);
   shells.assign(compact ? 0 : rays * shape.num_shells, ShellJ{{-1, 0.f, 0.f}, {}});
-  shell_partials.clear();
-  shell_mask.assign(compact ? rays : 0, 0);
+  shell_partials.assign(compact ? 4 * rays * shape.num_shells : 0, 0.f);
   h.assign(3 * rays, 0.f);
   scale.assign(rays, 1.f);
   dl_per_delta.assign(compact ? rays : 0, 0.f);
@@ -47,14 +51,6 @@ PoseRow<float> BlockJ::PoseAt(int64_t r) const {
     for (int j = kPoseSolved; j < kPoseValues; ++j) row.j[i][j] = 0;
   }
   return row;
-}
-
-void BlockJ::AppendShell(int64_t r, int k, const ShellPartials<float>& sp, float floor) {
-  const bool below = std::abs(sp.de) < floor && std::abs(sp.da[0]) < floor && std::abs(sp.da[1]) < floor &&
-                     std::abs(sp.da[2]) < floor;
-  if (below) return;
-  shell_mask[r] |= static_cast<uint8_t>(1u << k);
-  shell_partials.insert(shell_partials.end(), {sp.de, sp.da[0], sp.da[1], sp.da[2]});
 }
 
 namespace {
@@ -95,12 +91,6 @@ const int32_t* PhotoSlots(const LevelProblem& p, int count) {
   return p.rays->exposure_slot.data();
 }
 
-// Bytes of the recorded Jacobian: every ray's march length (no jitter needed for the count;
-// early termination only shortens it; a sparse grid's march counted sample by sample, plus an
-// eighth for the jittered samples that land differently, on every 4th ray of a block and scaled
-// to the block: an estimate, and a quarter of a march) times the per-sample record, plus the
-// shell records (every shell of every ray: the compact record keeps fewer, AppendShell) and, when
-// poses are refined, the pose rows; of the recorded rays (every p.jtj_ray_stride-th) only.
 int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, bool compact, const CpuVectors& vectors) {
   constexpr int64_t kSparseStride = 4;
   const VolumeView<float> vol = MakeView(p.shape, p.geometry, nullptr);
@@ -139,7 +129,7 @@ int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, bool co
   const int64_t stride = std::max(1, p.jtj_ray_stride), recorded = (n + stride - 1) / stride;
   return samples / stride * static_cast<int64_t>(compact ? sizeof(CompactSampleJ) + 1 : sizeof(SampleJ)) +
          recorded * (static_cast<int64_t>(sizeof(uint32_t) + (compact ? 5 : 4) * sizeof(float)) +
-                     (compact ? static_cast<int64_t>(sizeof(uint16_t) + sizeof(uint8_t)) : 0) +
+                     (compact ? static_cast<int64_t>(sizeof(uint16_t)) : 0) +
               p.shape.num_shells * static_cast<int64_t>(compact ? 4 * sizeof(float) : sizeof(ShellJ)) +
               (p.shape.poses > 0 ? kPoseRowValues * static_cast<int64_t>(compact ? sizeof(uint16_t) : sizeof(float))
                                  : 0));

@@ -43,9 +43,13 @@ inline uint16_t ToBfloat16(float x) {
 }
 inline float FromBfloat16(uint16_t h) { return std::bit_cast<float>(static_cast<uint32_t>(h) << 16); }
 
-// A shell's partials in the compact record (BlockJ::shell_partials), back for shell k of a volume
-// of num_shells. Kept in float: rounded to bfloat16, CG's solution of solver_bounds_test's
+// A shell's partials in the compact record (BlockJ::shell_partials), and back for shell k of a
+// volume of num_shells. Kept in float: rounded to bfloat16, CG's solution of solver_bounds_test's
 // rank-deficient system missed the exact one by 10-15 % instead of under 1 % (docs/tuning.md).
+inline void StoreShellPartials(const ShellPartials<float>& sp, float* out) {
+  out[0] = sp.de;
+  for (int c = 0; c < 3; ++c) out[1 + c] = sp.da[c];
+}
 inline ShellPartials<float> LoadShellPartials(const float* in, int k, int num_shells) {
   return {in[0], {in[1], in[2], in[3]}, k == num_shells - 1};
 }
@@ -94,13 +98,9 @@ struct BlockJ {
   std::vector<uint16_t> first_k;  // [rays] when compact: the march index of the ray's first entry (its last sample)
   std::vector<uint32_t> end;  // [rays]: one past the ray's last sample in `samples` (`packed`)
   std::vector<ShellJ> shells;  // [rays, num_shells] when exact
-  // When compact: the partials (de, da[3]) of the shells each ray records, 4 floats a shell, ray
-  // after ray, outermost first (AppendShell); bit k of shell_mask[r] says that ray r's shell k is
-  // among them. Where a ray meets a shell and whether it does are recomputed (ray_math.h
-  // ShellCoordAt), and the outermost is opaque.
+  // [rays, num_shells, 4] when compact: a shell's partials (de, da[3]); where the ray meets it and
+  // whether it does are recomputed (ray_math.h ShellCoordAt), and the outermost is opaque.
   std::vector<float> shell_partials;
-  std::vector<uint8_t> shell_mask;  // [rays] when compact
-  static_assert(kMaxShells <= 8, "a ray's shells in shell_mask's 8 bits");
   std::vector<float> h;        // [rays, 3] the composited colour H (the exposure's partials)
   std::vector<float> scale;    // [rays] the robust loss's row scale (jacobian.h RobustRowScale)
   std::vector<float> dl_per_delta;  // [rays] when compact: ray_math.h DlPerDelta
@@ -116,11 +116,6 @@ struct BlockJ {
   // Ray r's pose row, stored and read back (rounded to bfloat16 when compact).
   void StorePose(int64_t r, const PoseRow<float>& row);
   PoseRow<float> PoseAt(int64_t r) const;
-  // Compact: records shell k's partials for ray r (shells come outermost first), unless each of
-  // them is below `floor` in magnitude: then the shell adds less to the ray's colour and alpha
-  // than the march's early termination leaves out (ResidualSettings::stop_transmittance), and
-  // J^T J p takes it as 0. A ray that ends inside the box records no shell.
-  void AppendShell(int64_t r, int k, const ShellPartials<float>& sp, float floor);
   // Compact: appends sample k of ray r (its partials), which lies before the ray's sample last_k
   // (-1: the ray's first entry); last_k becomes k.
   void AppendCompact(int64_t r, int k, const SamplePartials<float>& p, int* last_k);
@@ -130,27 +125,21 @@ struct BlockJ {
   void EncodeCompact(int64_t r, int k, CompactSampleJ e, uint32_t* at, int* last_k);
 };
 
-// A recorded ray's shells as J^T J p reads them: which the ray meets (and the record holds),
-// their texel weights and partials (the compact record recomputes where the ray meets them, from
-// the ray and its march). *shell_at: where ray r's shells start in the compact record's
-// shell_partials, moved past them (a block's rays are read in order, from 0).
+// A recorded ray's shells as J^T J p reads them: which the ray meets, their texel weights and
+// partials (the compact record recomputes where the ray meets them, from the ray and its march).
 struct RayShellsJ {
   bool hit[kMaxShells];
   TexelSample<float> ts[kMaxShells];
   ShellPartials<float> sp[kMaxShells];
 };
 inline void RecordedShells(const BlockJ& b, int64_t r, const VolumeView<float>& vol, const BoxRay<float>& ray,
-                           const March<float>& m, uint32_t* shell_at, RayShellsJ* out) {
+                           const March<float>& m, RayShellsJ* out) {
   const int n = vol.num_shells;
-  for (int k = n - 1; k >= 0; --k) {  // outermost first, as recorded
+  for (int k = 0; k < n; ++k) {
     CubeCoord<float> c{-1, 0.f, 0.f};
     if (b.compact) {
-      const bool recorded = (b.shell_mask[r] >> k) & 1;
-      out->hit[k] = recorded && ShellCoordAt(vol, ray, ShellStart(m), k, &c);
-      if (recorded) {
-        out->sp[k] = LoadShellPartials(&b.shell_partials[*shell_at], k, n);
-        *shell_at += 4;
-      }
+      out->hit[k] = ShellCoordAt(vol, ray, ShellStart(m), k, &c);
+      out->sp[k] = LoadShellPartials(&b.shell_partials[4 * (r * n + k)], k, n);
     } else {
       const ShellJ& sj = b.shells[r * n + k];
       out->hit[k] = sj.coord.face >= 0;
@@ -240,8 +229,8 @@ struct LinearizeVisitor {
   AddSink g, d;
   BlockJ* out;         // nullptr: nothing recorded
   ShellJ* out_shells;  // [num_shells] of this ray, exact record
+  float* out_shell_partials;  // [num_shells, 4] of this ray, compact record
   int64_t out_ray = 0;  // the ray's index in *out
-  float shell_floor = 0;  // the compact record's BlockJ::AppendShell floor
   int last_k = -1;      // the march index of the ray's last sample recorded (compact)
   RaySh<float> sh{};   // the ray's spherical harmonics (degree 0: none)
   CellMerger<float, K> merger{};
@@ -250,7 +239,7 @@ struct LinearizeVisitor {
     ScatterJtuShell(ts, sp, r, g);
     if constexpr (kDiag) AddDiagShell(ts, sp, g2, d);
     if (out_shells) out_shells[k] = {c, sp};
-    if (out && out->compact) out->AppendShell(out_ray, k, sp, shell_floor);
+    if (out_shell_partials) StoreShellPartials(sp, out_shell_partials + 4 * k);
   }
   void Sample(int k, const MarchStep<float>& st, const GridSample<float>& gs, const SamplePartials<float>& sp) {
     if constexpr (kDiag) {
