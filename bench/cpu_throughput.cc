@@ -41,6 +41,9 @@ int main(int argc, char** argv) {
                  "Time one pass alone, for back-to-back comparisons: cost, or jtjp (after one Linearize)")
       ->check(CLI::IsMember({"cost", "jtjp"}));
   app.add_flag("--as-dense", as_dense, "A sparse checkpoint's volume in the dense layout (the same values)");
+  bool exact_record = false;
+  app.add_flag("--exact-record", exact_record,
+               "Record the Jacobian exactly (floats, absolute positions) instead of compactly (the default)");
   bench::CpuHierarchySettings hs;
   std::string modes = "both";
   app.add_option("--levels", hs.levels,
@@ -85,6 +88,7 @@ int main(int argc, char** argv) {
     }
     CpuBackendOptions o;
     o.threads = threads;
+    o.compact_jacobian = !exact_record;
     auto backend = MakeCpuBackend(o);
     backend->SetLevel(LevelProblem{shape, geometry, &rays, {}}, 5);
     backend->Upload(0, x);
