@@ -179,20 +179,21 @@ class RecordedSamples {
   int k_;
 };
 
-// Drops the samples of a block's record that reach no free parameter with a non-zero value
-// (jacobian.h SkippableSample; free: the free-parameter mask). ray_of(r): its r-th ray (TrainingRay).
-template <class RayOf>
-void DropSkippableSamples(const VolumeView<float>& vol, const float* free, RayOf&& ray_of, BlockJ* block) {
+// Keeps, in place, the samples of a block's record for which keep(ray, t, sp, k) holds (t: the
+// sample's position on the ray; k: its march index, compact record only), re-encoding the compact
+// record's march steps. ray_of(r): the block's r-th ray as keep takes it, with its March (`march`,
+// used by the compact record) and Jitter (`jit`).
+template <class RayOf, class Keep>
+void KeepRecordedSamples(RayOf&& ray_of, Keep&& keep, BlockJ* block) {
   uint32_t first = 0, kept = 0;
   for (size_t r = 0; r < block->end.size(); ++r) {
-    const TrainingRay tr = ray_of(r);
-    const March<float> m = block->compact ? MakeMarch(vol, tr.ray) : March<float>{};
-    RecordedSamples read(*block, m, tr.jit, static_cast<int64_t>(r), first);
+    const auto ray = ray_of(r);
+    RecordedSamples read(*block, ray.march, ray.jit, static_cast<int64_t>(r), first);
     int last_k = -1;
     for (uint32_t j = first; j < block->end[r]; ++j) {
       SamplePartials<float> sp;
       const float t = read.Next(&sp);
-      if (SkippableSample(TrilinearWeights(vol.n, vol.brick_slot, tr.ray.GridPoint(t)), sp, free)) continue;
+      if (!keep(ray, t, sp, read.k())) continue;
       if (block->compact) block->EncodeCompact(static_cast<int64_t>(r), read.k(), block->packed[j], &kept, &last_k);
       else block->samples[kept++] = block->samples[j];
     }
@@ -205,6 +206,26 @@ void DropSkippableSamples(const VolumeView<float>& vol, const float* free, RayOf
   } else {
     block->samples.resize(kept);
   }
+}
+
+// Drops the samples of a block's record that reach no free parameter with a non-zero value
+// (jacobian.h SkippableSample; free: the free-parameter mask). ray_of(r): its r-th ray (TrainingRay).
+template <class RayOf>
+void DropSkippableSamples(const VolumeView<float>& vol, const float* free, RayOf&& ray_of, BlockJ* block) {
+  struct Ray {
+    TrainingRay tr;
+    March<float> march;
+    Jitter jit;
+  };
+  KeepRecordedSamples(
+      [&](size_t r) {
+        const TrainingRay tr = ray_of(r);
+        return Ray{tr, block->compact ? MakeMarch(vol, tr.ray) : March<float>{}, tr.jit};
+      },
+      [&](const Ray& ray, float t, const SamplePartials<float>& sp, int) {
+        return !SkippableSample(TrilinearWeights(vol.n, vol.brick_slot, ray.tr.ray.GridPoint(t)), sp, free);
+      },
+      block);
 }
 
 struct Scratch {

@@ -217,7 +217,7 @@ TEST(CpuBackendTest, CompactRecordIsTheExactOneRoundedToBfloat16) {
 // The compact record's march indices, one byte a sample (the steps back from the ray's entry
 // before: Backward records a ray back to front), across gaps longer than a byte: bridged by
 // fillers (every partial 0, dl too) when recorded, and again when samples are dropped and the
-// rest re-encoded in place (DropSkippableSamples).
+// rest re-encoded in place (KeepRecordedSamples, which DropSkippableSamples runs).
 TEST(CpuBackendTest, CompactRecordStepsBridgeLongGaps) {
   using cpu::BlockJ;
   const std::vector<std::vector<int>> ks = {{1401, 1400, 600, 4, 3}, {511, 256, 0}, {}, {70}};
@@ -268,23 +268,22 @@ TEST(CpuBackendTest, CompactRecordStepsBridgeLongGaps) {
   for (size_t r = 0; r < ks.size(); ++r) EXPECT_EQ(b.end[r] - (r ? b.end[r - 1] : 0), entries[r]) << r;
   expect_samples(ks);
   // Drop 600 and 4 of the first ray (1397 steps from 1400 to 3: 5 fillers where there were 7
-  // entries) and 256 of the second, in place as DropSkippableSamples does.
+  // entries) and 256 of the second, in place (KeepRecordedSamples, as DropSkippableSamples does).
   const std::vector<std::vector<int>> kept = {{1401, 1400, 3}, {511, 0}, {}, {70}};
-  uint32_t first = 0, at = 0;
-  for (size_t r = 0; r < ks.size(); ++r) {
-    cpu::RecordedSamples read(b, m, none, static_cast<int64_t>(r), first);
-    int last = -1;
-    for (uint32_t j = first; j < b.end[r]; ++j) {
-      SamplePartials<float> sp;
-      read.Next(&sp);
-      const bool keep = sp.dl != 0.f && std::count(kept[r].begin(), kept[r].end(), read.k()) > 0;
-      if (keep) b.EncodeCompact(static_cast<int64_t>(r), read.k(), b.packed[j], &at, &last);
-    }
-    first = b.end[r];
-    b.end[r] = at;
-  }
+  struct Ray {
+    March<float> march;
+    Jitter jit;
+    size_t r;
+  };
+  cpu::KeepRecordedSamples([&](size_t r) { return Ray{m, none, r}; },
+                           [&](const Ray& ray, float, const SamplePartials<float>& sp, int k) {
+                             return sp.dl != 0.f && std::count(kept[ray.r].begin(), kept[ray.r].end(), k) > 0;
+                           },
+                           &b);
   EXPECT_EQ(b.end[0], 3u + 5u);
   EXPECT_EQ(b.end[1] - b.end[0], 2u + 2u);  // 511 steps: fillers at 256 and 1
+  EXPECT_EQ(b.SampleCount(), b.end.back());  // the vectors cut to the entries kept
+  EXPECT_EQ(b.steps.size(), b.packed.size());
   expect_samples(kept);
 }
 
