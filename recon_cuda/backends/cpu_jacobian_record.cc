@@ -127,12 +127,13 @@ int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, bool co
   for (int64_t c : per_block) samples += c;
   // Only every jtj_ray_stride-th ray is recorded.
   const int64_t stride = std::max(1, p.jtj_ray_stride), recorded = (n + stride - 1) / stride;
-  return samples / stride * static_cast<int64_t>(compact ? sizeof(CompactSampleJ) + 1 : sizeof(SampleJ)) +
-         recorded * (static_cast<int64_t>(sizeof(uint32_t) + (compact ? 5 : 4) * sizeof(float)) +
-                     (compact ? static_cast<int64_t>(sizeof(uint16_t)) : 0) +
-              p.shape.num_shells * static_cast<int64_t>(compact ? 4 * sizeof(float) : sizeof(ShellJ)) +
-              (p.shape.poses > 0 ? kPoseRowValues * static_cast<int64_t>(compact ? sizeof(uint16_t) : sizeof(float))
-                                 : 0));
+  // What BlockJ keeps for a sample and for a recorded ray (the vectors of Clear).
+  const size_t per_sample = compact ? sizeof(CompactSampleJ) + sizeof(uint8_t) : sizeof(SampleJ);  // packed, steps
+  size_t per_ray = sizeof(uint32_t) + 4 * sizeof(float);                     // end, h, scale
+  if (compact) per_ray += sizeof(float) + sizeof(uint16_t);                  // dl_per_delta, first_k
+  per_ray += p.shape.num_shells * (compact ? 4 * sizeof(float) : sizeof(ShellJ));  // shell_partials, shells
+  if (p.shape.poses > 0) per_ray += kPoseRowValues * (compact ? sizeof(uint16_t) : sizeof(float));  // the pose rows
+  return samples / stride * static_cast<int64_t>(per_sample) + recorded * static_cast<int64_t>(per_ray);
 }
 
 }  // namespace perf::recon::cpu
