@@ -202,6 +202,7 @@ class CpuBackend final : public Backend {
         const PoseRow<float> pr = pose_row ? row->PoseAt(r_row) : PoseRow<float>{};
         const RayExposure<float> e = ExposureAt(vol, i, h, scale);
         const RaySh<float> sh = ShOfRay(vol, ray);
+        const RaySh<float> grid_only{};  // the samples' cells' 4 values; their bands go through s.bands
         float u[4] = {0, 0, 0, 0};
         const March<float> m = row->compact ? MakeMarch(vol, ray) : March<float>{};
         RayShellsJ shells;
@@ -212,12 +213,17 @@ class CpuBackend final : public Backend {
         GridSample<float>* w = s.weights.data();
         SamplePartials<float>* sp = s.partials.data();
         RecordedSamples read(*row, m, tr.jit, r_row, first);
+        CellMerger<float, 1> band_merger;  // with SH: the cells' summed dc (RayBandCells)
+        if (sh.degree > 0) s.bands.Begin(pp, s.acc.data(), sh);
         for (int j = 0; j < count; ++j) {
           w[j] = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(read.Next(&sp[j])));
-          if (sh.degree == 0) AddJpSample(pp, w[j], sp[j], u, sh);
-          else PrefetchCells(w[j], pp, sh);  // the bands lie apart from the cell: gather after
+          AddJpSample(pp, w[j], sp[j], u, grid_only);
+          if (sh.degree > 0) band_merger.Sample(w[j], {sp[j].dc}, s.bands);
         }
-        if (sh.degree > 0) for (int j = 0; j < count; ++j) AddJpSample(pp, w[j], sp[j], u, sh);
+        if (sh.degree > 0) {
+          band_merger.Finish(s.bands);
+          s.bands.AddJp(u);
+        }
         if (pose_row) AddJpPose(pr, pp, tr.pose, u);
         FinishJp(e, pp, u);
         float uv[4];
@@ -225,21 +231,9 @@ class CpuBackend final : public Backend {
         for (int k = 0; k < k_shells; ++k) {
           if (shells.hit[k]) ScatterJtuShell(shells.ts[k], shells.sp[k], uv, sink);
         }
-        if (sh.degree == 0) {
-          // Direct scatter: measured faster here than merging cells (CellMerger) first.
-          for (int j = 0; j < count; ++j) ScatterJtuSample(w[j], sp[j], uv, sink, sh);
-        } else {
-          // With spherical harmonics each cell's bands are written once per ray from its merged
-          // colour values, not once per sample (3 to 5 samples reach a cell).
-          MergedScatter flush{sink, sh};
-          CellMerger<float, 4> merger;
-          for (int j = 0; j < count; ++j) {
-            float v[4];
-            JtuValues(sp[j], uv, v);
-            merger.Sample(w[j], v, flush);
-          }
-          merger.Finish(flush);
-        }
+        // Direct scatter: measured faster here than merging cells (CellMerger) first.
+        for (int j = 0; j < count; ++j) ScatterJtuSample(w[j], sp[j], uv, sink, grid_only);
+        if (sh.degree > 0) s.bands.ScatterJtu(uv);
         ScatterJtuExposure(e, u, sink);
         if (pose_row) ScatterJtuPose(pr, tr.pose, uv, sink);
         bs.rays += 1;

@@ -228,6 +228,59 @@ void DropSkippableSamples(const VolumeView<float>& vol, const float* free, RayOf
       block);
 }
 
+// The spherical harmonics' share of one recorded ray's J^T J p, cell by cell. A sample's bands
+// enter J p and J^T u through its colour partial dc alone (jacobian.h AddJpSample, JtuValues),
+// so what a cell's bands see over the whole ray is one number, A = sum_j w_jq dc_j over the
+// samples j that reach it (corner q): its bands are read once and written once per ray instead of
+// once per sample (3 to 5 samples reach a cell). The list is filled by a CellMerger<float, 1> of
+// the samples' dc (this is its flush), which also asks for the cells' band lines ahead of AddJp.
+struct RayBandCells {
+  struct Cell {
+    int64_t cell;
+    float a;
+  };
+  std::vector<Cell> cells;
+  const float* p = nullptr;  // the vector AddJp reads
+  float* sums = nullptr;     // the per-thread sums ScatterJtu adds to (both for the prefetch)
+  RaySh<float> sh{};
+
+  void Begin(const float* p_in, float* sums_in, const RaySh<float>& sh_in) {
+    cells.clear();
+    p = p_in;
+    sums = sums_in;
+    sh = sh_in;
+  }
+  void operator()(int64_t cell, const float* a) {
+    const int64_t at = ShParam(sh.start, sh.degree, cell, 0, 0), last = ShStride(sh.degree) - 1;
+    __builtin_prefetch(p + at);
+    __builtin_prefetch(p + at + last);  // a cell's bands may span two lines
+    __builtin_prefetch(sums + at, 1);
+    __builtin_prefetch(sums + at + last, 1);
+    cells.push_back({cell, a[0]});
+  }
+  // u[c] += sum over the cells of A y_k p(band k, channel c): AddShColour's share of J p.
+  void AddJp(float u[4]) const {
+    for (const Cell& c : cells) {
+      const float* b = p + ShParam(sh.start, sh.degree, c.cell, 0, 0);
+      float v[3] = {0, 0, 0};
+      for (int k = 0; k < sh.bands; ++k)
+        for (int ch = 0; ch < 3; ++ch) v[ch] += sh.y[k] * b[3 * k + ch];
+      for (int ch = 0; ch < 3; ++ch) u[ch] += c.a * v[ch];
+    }
+  }
+  // Band k, channel c of each cell += y_k A uv[c]: ScatterSh's share of J^T uv, added to the
+  // sums in place (through ScatterSh's staged groups of 4 the pass measured ~15 % slower).
+  void ScatterJtu(const float uv[4]) const {
+    for (const Cell& c : cells) {
+      float* b = sums + ShParam(sh.start, sh.degree, c.cell, 0, 0);
+      for (int k = 0; k < sh.bands; ++k) {
+        const float ya = sh.y[k] * c.a;
+        for (int ch = 0; ch < 3; ++ch) b[3 * k + ch] += ya * uv[ch];
+      }
+    }
+  }
+};
+
 struct Scratch {
   std::vector<SampleRecord<float>> record;  // [max samples a ray]
   std::vector<GridSample<float>> weights;   // [max samples a ray]
@@ -235,6 +288,7 @@ struct Scratch {
   BlockJ row;                               // one ray, when recomputing
   std::vector<float> acc;                   // per-thread sums (Linearize: g and diag interleaved)
   std::vector<double> pose_blocks;          // per-thread sums of the pose blocks (kPoseBlock a photo)
+  RayBandCells bands;                       // MultiplyJtJ with SH: a ray's cells and their summed dc
   uint64_t pass = 0;                        // the pass acc was zeroed for
 };
 
@@ -288,16 +342,6 @@ struct LinearizeVisitor {
   }
 };
 
-// A cell's merged J^T u values (JtuValues summed along the ray) into the grid and its bands.
-struct MergedScatter {
-  AddSink& sink;
-  const RaySh<float>& sh;
-  void operator()(int64_t cell, const float* acc) {
-    sink.Add4(GridParam(cell, 0), acc[0], acc[1], acc[2], acc[3]);
-    ScatterSh(sh, cell, acc, sink);
-  }
-};
-
 // Records a ray's partials without scattering anything.
 struct RecordOnly {
   BlockJ* row;
@@ -308,20 +352,6 @@ struct RecordOnly {
     row->samples.push_back({st.t, sp});
   }
 };
-
-// Asks for the cache lines of a sample's cells in p and their SH bands ahead of the gathers and
-// scatters of J^T J p: a ray's cells are found first, then read, so the misses overlap (with SH;
-// at degree 0 the fused loop measured faster).
-inline void PrefetchCells(const GridSample<float>& gs, const float* p, const RaySh<float>& sh) {
-  const int last = ShStride(sh.degree) - 1;  // a cell's bands may span two lines
-  for (int q = 0; q < 8; ++q) {
-    if (gs.cell[q] < 0) continue;
-    const float* bands = p + ShParam(sh.start, sh.degree, gs.cell[q], 0, 0);
-    __builtin_prefetch(p + GridParam(gs.cell[q], 0));
-    __builtin_prefetch(bands);
-    __builtin_prefetch(bands + last);
-  }
-}
 
 // The photo slots the level's rays read (RaySet::exposure_slot: the exposures' and the poses'),
 // checked against `count` photos, or nullptr when the level solves none (count 0).
