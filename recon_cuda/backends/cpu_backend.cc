@@ -332,6 +332,7 @@ class CpuBackend final : public Backend {
       VolumeU(e, r, v.r);
       GainSquared(e, v.g2);
       v.sh = ShOfRay(vol, ray);
+      v.BeginAhead(s.record.data(), fwd.count);
       if (tr.pose >= 0) {
         GeometryVisitor<float> geometry(vol, ray, jit);
         BothVisitors<LinearizeVisitor<kDiag>, GeometryVisitor<float>> both{v, geometry};

@@ -309,6 +309,35 @@ struct LinearizeVisitor {
   int last_k = -1;      // the march index of the ray's last sample recorded (compact)
   RaySh<float> sh{};   // the ray's spherical harmonics (degree 0: none)
   CellMerger<float, K> merger{};
+  // GN: the Forward record that Backward walks back to front, and the next of its samples whose
+  // cells' sums lines are asked for (PrefetchAhead), a few samples ahead of the merged scatter.
+  const SampleRecord<float>* ahead = nullptr;
+  int next_ahead = -1;
+  int prefetched_lo[3] = {-1, -1, -1};
+
+  // Starts the prefetch for a ray whose Forward recorded `count` samples in `record`.
+  void BeginAhead(const SampleRecord<float>* record, int count) {
+    ahead = record;
+    next_ahead = count - 1;
+    prefetched_lo[0] = -1;
+    for (int i = 0; i < kPrefetchSamples; ++i) PrefetchAhead();
+  }
+  void PrefetchAhead() {
+    if (!kDiag || next_ahead < 0) return;
+    const GridSample<float>& gs = ahead[next_ahead--].gs;
+    if (gs.lo[0] == prefetched_lo[0] && gs.lo[1] == prefetched_lo[1] && gs.lo[2] == prefetched_lo[2]) return;
+    for (int a = 0; a < 3; ++a) prefetched_lo[a] = gs.lo[a];
+    const int band_floats = 2 * ShStride(sh.degree);  // g and diag interleaved (shift 1)
+    for (int q = 0; q < 8; ++q) {
+      if (gs.cell[q] < 0) continue;
+      __builtin_prefetch(g.a + (GridParam(gs.cell[q], 0) << 1), 1);
+      if (band_floats == 0) continue;
+      const float* b = g.a + (ShParam(sh.start, sh.degree, gs.cell[q], 0, 0) << 1);
+      for (int o = 0; o < band_floats; o += 16) __builtin_prefetch(b + o, 1);
+      __builtin_prefetch(b + band_floats - 1, 1);
+    }
+  }
+  static constexpr int kPrefetchSamples = 3;
 
   void Shell(int k, const CubeCoord<float>& c, const TexelSample<float>& ts, const ShellPartials<float>& sp) {
     ScatterJtuShell(ts, sp, r, g);
@@ -318,6 +347,7 @@ struct LinearizeVisitor {
   }
   void Sample(int k, const MarchStep<float>& st, const GridSample<float>& gs, const SamplePartials<float>& sp) {
     if constexpr (kDiag) {
+      PrefetchAhead();
       float v[K];
       JtuValues(sp, r, v);
       RowValues(sp, v + 4);
