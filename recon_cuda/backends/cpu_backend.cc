@@ -202,7 +202,6 @@ class CpuBackend final : public Backend {
         const PoseRow<float> pr = pose_row ? row->PoseAt(r_row) : PoseRow<float>{};
         const RayExposure<float> e = ExposureAt(vol, i, h, scale);
         const RaySh<float> sh = ShOfRay(vol, ray);
-        const RaySh<float> grid_only{};  // the samples' cells' 4 values; their bands go through s.bands
         float u[4] = {0, 0, 0, 0};
         const March<float> m = row->compact ? MakeMarch(vol, ray) : March<float>{};
         RayShellsJ shells;
@@ -210,19 +209,23 @@ class CpuBackend final : public Backend {
         for (int k = 0; k < k_shells; ++k) {
           if (shells.hit[k]) AddJpShell(pp, shells.ts[k], shells.sp[k], u);
         }
+        RecordedSamples read(*row, m, tr.jit, r_row, first);
         GridSample<float>* w = s.weights.data();
         SamplePartials<float>* sp = s.partials.data();
-        RecordedSamples read(*row, m, tr.jit, r_row, first);
-        CellMerger<float, 1> band_merger;  // with SH: the cells' summed dc (RayBandCells)
-        if (sh.degree > 0) s.bands.Begin(pp, s.acc.data(), sh);
+        CellMerger<float, RayCells::K> merger;  // with SH: the ray's cells, merged (RayCells)
+        if (sh.degree > 0) s.cells.Begin(pp, s.acc.data(), sh);
         for (int j = 0; j < count; ++j) {
-          w[j] = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(read.Next(&sp[j])));
-          AddJpSample(pp, w[j], sp[j], u, grid_only);
-          if (sh.degree > 0) band_merger.Sample(w[j], {sp[j].dc}, s.bands);
+          const GridSample<float> gs = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(read.Next(&sp[j])));
+          if (sh.degree > 0) {
+            merger.Sample(gs, {sp[j].dc, sp[j].ds[0], sp[j].ds[1], sp[j].ds[2], sp[j].dl}, s.cells);
+          } else {
+            w[j] = gs;
+            AddJpSample(pp, gs, sp[j], u, sh);
+          }
         }
         if (sh.degree > 0) {
-          band_merger.Finish(s.bands);
-          s.bands.AddJp(u);
+          merger.Finish(s.cells);
+          s.cells.AddJp(u);
         }
         if (pose_row) AddJpPose(pr, pp, tr.pose, u);
         FinishJp(e, pp, u);
@@ -231,9 +234,12 @@ class CpuBackend final : public Backend {
         for (int k = 0; k < k_shells; ++k) {
           if (shells.hit[k]) ScatterJtuShell(shells.ts[k], shells.sp[k], uv, sink);
         }
-        // Direct scatter: measured faster here than merging cells (CellMerger) first.
-        for (int j = 0; j < count; ++j) ScatterJtuSample(w[j], sp[j], uv, sink, grid_only);
-        if (sh.degree > 0) s.bands.ScatterJtu(uv);
+        if (sh.degree > 0) {
+          s.cells.ScatterJtu(uv);
+        } else {
+          // Direct scatter: at degree 0 measured faster than merging cells (RayCells) first.
+          for (int j = 0; j < count; ++j) ScatterJtuSample(w[j], sp[j], uv, sink, sh);
+        }
         ScatterJtuExposure(e, u, sink);
         if (pose_row) ScatterJtuPose(pr, tr.pose, uv, sink);
         bs.rays += 1;

@@ -228,20 +228,23 @@ void DropSkippableSamples(const VolumeView<float>& vol, const float* free, RayOf
       block);
 }
 
-// The spherical harmonics' share of one recorded ray's J^T J p, cell by cell. A sample's bands
-// enter J p and J^T u through its colour partial dc alone (jacobian.h AddJpSample, JtuValues),
-// so what a cell's bands see over the whole ray is one number, A = sum_j w_jq dc_j over the
-// samples j that reach it (corner q): its bands are read once and written once per ray instead of
-// once per sample (3 to 5 samples reach a cell). The list is filled by a CellMerger<float, 1> of
-// the samples' dc (this is its flush), which also asks for the cells' band lines ahead of AddJp.
-struct RayBandCells {
+// One recorded ray's J^T J p on its volume cells, merged, with spherical harmonics (jacobian.h
+// AddJpSample, AddShColour, ScatterJtuSample, ScatterSh): a sample enters J p and J^T u through
+// its five partials (dc, ds[3], dl) times its cells' trilinear weights, so what a cell sees over
+// the whole ray is five numbers, K = sum_j w_jq (dc, ds[0], ds[1], ds[2], dl)_j over the samples j
+// that reach it (corner q). Each cell and its bands are read once and written once per ray
+// instead of once per sample (3 to 5 samples reach a cell). Filled by a CellMerger<float, 5> of the
+// samples' partials (this is its flush), which also asks for the cells' lines ahead of AddJp and
+// ScatterJtu. At degree 0 the merge costs more than it saves (docs/tuning.md "CPU speed").
+struct RayCells {
+  static constexpr int K = 5;
   struct Cell {
     int64_t cell;
-    float a;
+    float k[K];
   };
   std::vector<Cell> cells;
   const float* p = nullptr;  // the vector AddJp reads
-  float* sums = nullptr;     // the per-thread sums ScatterJtu adds to (both for the prefetch)
+  float* sums = nullptr;     // the per-thread sums ScatterJtu adds to
   RaySh<float> sh{};
 
   void Begin(const float* p_in, float* sums_in, const RaySh<float>& sh_in) {
@@ -250,33 +253,40 @@ struct RayBandCells {
     sums = sums_in;
     sh = sh_in;
   }
-  void operator()(int64_t cell, const float* a) {
-    const int64_t at = ShParam(sh.start, sh.degree, cell, 0, 0), last = ShStride(sh.degree) - 1;
+  void operator()(int64_t cell, const float* k) {
+    const int64_t at = GridParam(cell, 0);
     __builtin_prefetch(p + at);
-    __builtin_prefetch(p + at + last);  // a cell's bands may span two lines
     __builtin_prefetch(sums + at, 1);
-    __builtin_prefetch(sums + at + last, 1);
-    cells.push_back({cell, a[0]});
+    const int64_t b = ShParam(sh.start, sh.degree, cell, 0, 0), last = ShStride(sh.degree) - 1;
+    __builtin_prefetch(p + b);
+    __builtin_prefetch(p + b + last);  // a cell's bands may span two lines
+    __builtin_prefetch(sums + b, 1);
+    __builtin_prefetch(sums + b + last, 1);
+    cells.push_back({cell, {k[0], k[1], k[2], k[3], k[4]}});
   }
-  // u[c] += sum over the cells of A y_k p(band k, channel c): AddShColour's share of J p.
+  // u += the ray's J p on its cells: u[c] += dc p_c + ds[c] p_sigma, u[3] += dl p_sigma (summed).
   void AddJp(float u[4]) const {
     for (const Cell& c : cells) {
+      const float* g = p + GridParam(c.cell, 0);
       const float* b = p + ShParam(sh.start, sh.degree, c.cell, 0, 0);
-      float v[3] = {0, 0, 0};
+      float colour[3] = {g[0], g[1], g[2]};
       for (int k = 0; k < sh.bands; ++k)
-        for (int ch = 0; ch < 3; ++ch) v[ch] += sh.y[k] * b[3 * k + ch];
-      for (int ch = 0; ch < 3; ++ch) u[ch] += c.a * v[ch];
+        for (int ch = 0; ch < 3; ++ch) colour[ch] += sh.y[k] * b[3 * k + ch];
+      for (int ch = 0; ch < 3; ++ch) u[ch] += c.k[0] * colour[ch] + c.k[1 + ch] * g[3];
+      u[3] += c.k[4] * g[3];
     }
   }
-  // Band k, channel c of each cell += y_k A uv[c]: ScatterSh's share of J^T uv, added to the
-  // sums in place (through ScatterSh's staged groups of 4 the pass measured ~15 % slower).
+  // The ray's J^T uv into its cells: colour c += dc uv[c] (band k: times y_k), sigma += ds . uv + dl uv[3].
   void ScatterJtu(const float uv[4]) const {
     for (const Cell& c : cells) {
+      float* g = sums + GridParam(c.cell, 0);
+      const float colour[3] = {c.k[0] * uv[0], c.k[0] * uv[1], c.k[0] * uv[2]};
+      for (int ch = 0; ch < 3; ++ch) g[ch] += colour[ch];
+      g[3] += c.k[1] * uv[0] + c.k[2] * uv[1] + c.k[3] * uv[2] + c.k[4] * uv[3];
+      // Added in place: through ScatterSh's groups of 4, staged in an array, the pass measured ~15 % slower.
       float* b = sums + ShParam(sh.start, sh.degree, c.cell, 0, 0);
-      for (int k = 0; k < sh.bands; ++k) {
-        const float ya = sh.y[k] * c.a;
-        for (int ch = 0; ch < 3; ++ch) b[3 * k + ch] += ya * uv[ch];
-      }
+      for (int k = 0; k < sh.bands; ++k)
+        for (int ch = 0; ch < 3; ++ch) b[3 * k + ch] += sh.y[k] * colour[ch];
     }
   }
 };
@@ -288,7 +298,7 @@ struct Scratch {
   BlockJ row;                               // one ray, when recomputing
   std::vector<float> acc;                   // per-thread sums (Linearize: g and diag interleaved)
   std::vector<double> pose_blocks;          // per-thread sums of the pose blocks (kPoseBlock a photo)
-  RayBandCells bands;                       // MultiplyJtJ with SH: a ray's cells and their summed dc
+  RayCells cells;                           // MultiplyJtJ: a ray's cells and their summed partials
   uint64_t pass = 0;                        // the pass acc was zeroed for
 };
 
