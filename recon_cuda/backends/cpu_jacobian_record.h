@@ -337,12 +337,12 @@ struct LinearizeVisitor {
     const GridSample<float>& gs = ahead[next_ahead--].gs;
     if (gs.lo[0] == prefetched_lo[0] && gs.lo[1] == prefetched_lo[1] && gs.lo[2] == prefetched_lo[2]) return;
     for (int a = 0; a < 3; ++a) prefetched_lo[a] = gs.lo[a];
-    const int band_floats = 2 * ShStride(sh.degree);  // g and diag interleaved (shift 1)
+    const int band_floats = ShStride(sh.degree) << g.shift;  // g and diag interleaved (AddSink)
     for (int q = 0; q < 8; ++q) {
       if (gs.cell[q] < 0) continue;
-      __builtin_prefetch(g.a + (GridParam(gs.cell[q], 0) << 1), 1);
+      __builtin_prefetch(g.a + (GridParam(gs.cell[q], 0) << g.shift), 1);
       if (band_floats == 0) continue;
-      const float* b = g.a + (ShParam(sh.start, sh.degree, gs.cell[q], 0, 0) << 1);
+      const float* b = g.a + (ShParam(sh.start, sh.degree, gs.cell[q], 0, 0) << g.shift);
       for (int o = 0; o < band_floats; o += 16) __builtin_prefetch(b + o, 1);
       __builtin_prefetch(b + band_floats - 1, 1);
     }
