@@ -4,7 +4,7 @@
 # `perf_bench_cpu`) in git worktrees under .data/speed/, runs each scenario on each build in turn
 # and prints the ratios; the JSON of every run goes to $OUT/cpu_speed.json.
 #
-#   bench/cpu_speed.sh [SCENARIO ...]      scenarios: lego200 sh lego50 passes bonsai (default: lego200 sh passes)
+#   bench/cpu_speed.sh [SCENARIO ...]      scenarios: lego200 lego200sh sh lego50 passes bonsai (default: lego200 sh passes)
 #
 # Environment: BASE (default da0c75a, the last commit before issue 33's work), NEW (default HEAD),
 # NEW_ARGS (extra `perf reconstruct`/`perf run` options for the new build, e.g. "--jtj-ray-stride 1"
@@ -13,6 +13,8 @@
 #
 #   lego200  lego 200x200 (--downscale 4), 4 levels to 256^3, 4,4,4,8 iterations, 12 CG, held-out
 #            PSNR after every iteration: solver seconds to reach the base's final PSNR - TOL
+#   lego200sh  lego200, then a third run: the new build with --sh-degree 1 (bands at 256^3), the
+#            base's final PSNR - TOL reached with view dependence against without
 #   lego50   the same at 50x50 (--downscale 16), 3 levels, 8 iterations each: a quick check
 #   sh       lego 50x50, --sh-degree 0 against 1 on each build: the ratio of solver seconds
 #   passes   perf_bench_cpu on the new build's lego200 128^3 checkpoint: samples/s of the sparse
@@ -33,7 +35,8 @@ NEW_ARGS=${NEW_ARGS:-}
 SCENARIOS=("$@")
 [ ${#SCENARIOS[@]} -gt 0 ] || SCENARIOS=(lego200 sh passes)
 for s in "${SCENARIOS[@]}"; do
-  case $s in lego200|lego50|sh|passes|bonsai) ;; *) echo "cpu_speed.sh: unknown scenario '$s' (lego200 lego50 sh passes bonsai)" >&2; exit 2;; esac
+  case $s in lego200|lego200sh|lego50|sh|passes|bonsai) ;;
+    *) echo "cpu_speed.sh: unknown scenario '$s' (lego200 lego200sh lego50 sh passes bonsai)" >&2; exit 2;; esac
 done
 [ -d "$DATA/lego" ] || { echo "cpu_speed.sh: $DATA/lego not found (set DATA to the shared data folder)" >&2; exit 2; }
 export CCACHE_BASEDIR=${CCACHE_BASEDIR:-$(dirname "$ROOT")}
@@ -96,7 +99,9 @@ summary() {  # summary TAG...: time to quality and peaks from the kept logs
 
 for s in "${SCENARIOS[@]}"; do
   case $s in
-    lego200|lego50)
+    lego200|lego200sh|lego50)
+      with_sh=false
+      [ "$s" = lego200sh ] && { s=lego200; with_sh=true; }
       if [ "$s" = lego200 ]; then
         import lego200 --nerf "$DATA/lego/transforms_train.json" --downscale 4
         args=(--levels 4 --level-iterations 4,4,4,8 --max-cg-iterations 12 --eval-every 1)
@@ -110,6 +115,11 @@ for s in "${SCENARIOS[@]}"; do
       echo "== $s new"; reconstruct "$s-new" "$B_NEW" "$ws" "${args[@]}" $NEW_ARGS
       [ "$s" = lego200 ] && { rm -rf "$OUT/lego200-new-recon"; cp -a "$ws/recon" "$OUT/lego200-new-recon"; }
       summary --pair "$s-base" "$s-new"
+      if $with_sh; then
+        ws=$(fresh "$s")
+        echo "== $s new --sh-degree 1"; reconstruct "$s-newsh" "$B_NEW" "$ws" "${args[@]}" $NEW_ARGS --sh-degree 1
+        summary --pair "$s-base" "$s-newsh"
+      fi
       ;;
     sh)
       import lego50 --nerf "$DATA/lego/transforms_train.json" --downscale 16

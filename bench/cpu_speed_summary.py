@@ -137,6 +137,8 @@ def main():
             if os.path.exists(os.path.join(a.out, f"{name}-base.log.jsonl")) and \
                     os.path.exists(os.path.join(a.out, f"{name}-new.log.jsonl")):
                 every[name] = pair(a.out, f"{name}-base", f"{name}-new", a.tol)
+        if os.path.exists(os.path.join(a.out, "lego200-newsh.log.jsonl")):  # scenario lego200sh
+            every["lego200_sh"] = pair(a.out, "lego200-base", "lego200-newsh", a.tol)
         tmp = a.json + ".tmp"
         with open(tmp, "w") as f:
             json.dump(every, f, indent=2)
