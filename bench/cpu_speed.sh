@@ -37,6 +37,10 @@ SCENARIOS=("$@")
 for s in "${SCENARIOS[@]}"; do
   case $s in lego200|lego200sh|lego50|sh|passes|bonsai) ;;
     *) echo "cpu_speed.sh: unknown scenario '$s' (lego200 lego200sh lego50 sh passes bonsai)" >&2; exit 2;; esac
+  if [ "$s" = lego200sh ] && [[ " $NEW_ARGS " == *" --sh-degree"* ]]; then
+    echo "cpu_speed.sh: lego200sh sets --sh-degree 1 for its third run; leave --sh-degree out of NEW_ARGS" >&2
+    exit 2
+  fi
 done
 [ -d "$DATA/lego" ] || { echo "cpu_speed.sh: $DATA/lego not found (set DATA to the shared data folder)" >&2; exit 2; }
 export CCACHE_BASEDIR=${CCACHE_BASEDIR:-$(dirname "$ROOT")}
