@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -38,6 +39,11 @@ enum class PoseChoice { kAuto, kOn, kOff };
 // The grid's smoothness weight chosen where the background is learned (--smooth-grid's default
 // there; 0 where it is fixed).
 inline constexpr double kAutoSmoothGrid = 0.3;
+// The pose prior's default (--pose-prior, SolverOptions::pose_prior). 0.03 recovers perturbed lego
+// cameras better than 0.1 and keeps exact ones; with per-photo focal lengths 0.1, which holds the
+// distance that a focal length trades against (docs/tuning.md "Camera refinement").
+inline constexpr double kDefaultPosePrior = 0.03;
+inline constexpr double kFocalPosePrior = 0.1;
 
 // --cost-tolerance's default (SolverOptions::cost_tolerance): a level ends once its cost fell by
 // less than 2 % in 4 iterations (docs/tuning.md "A level ends when its cost flattens").
@@ -68,9 +74,12 @@ struct ReconstructOptions {
   BackgroundChoice background = BackgroundChoice::kAuto;
   // Per-photo exposure; solver.exposure_prior weighs its prior.
   ExposureChoice exposure = ExposureChoice::kAuto;
-  // Camera refinement; solver.pose_prior weighs its prior. Levels before refine_poses_from (1:
-  // the first, as the log numbers them) fit the volume on the imported poses, the others refine them.
+  // Camera refinement. Levels before refine_poses_from (1: the first, as the log numbers them) fit
+  // the volume on the imported poses, the others refine them. pose_prior weighs the prior toward
+  // the imported poses (solver.pose_prior); unset: kDefaultPosePrior, or kFocalPosePrior with
+  // refine_focal.
   PoseChoice poses = PoseChoice::kAuto;
+  std::optional<double> pose_prior;
   int refine_poses_from = 1;
   // With refined poses, also each training photo's focal length (--refine-intrinsics focal): a
   // scale of fx and fy (PoseParam's value 3), its own per photo; false: the imported intrinsics.

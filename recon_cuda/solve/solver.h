@@ -87,7 +87,8 @@ struct SolverOptions {
   // data likewise: this times the mean of diag(J^T J) over the rotations (the centres), so 1
   // holds a pose as firmly as the average photo's pixels do, and a correction the photos pin
   // down is shrunk by 1 / (1 + this). Fixes the gauge (every camera moving with the volume).
-  double pose_prior = 0.1;
+  // perf reconstruct's default: reconstruct_options.h kDefaultPosePrior.
+  double pose_prior = 0.03;
 
   AdamSettings adam;
 

@@ -68,7 +68,24 @@ TEST(ReconstructOptionsTest, TheHierarchyIsDerivedForTheScene) {
   EXPECT_EQ(h.solver.smooth_grid, kAutoSmoothGrid);
   EXPECT_EQ(h.solver.smooth_shells, o.solver.smooth_shells);
   EXPECT_EQ(h.exposures, 3) << "one per training photo";
+  EXPECT_EQ(h.poses, 3) << "COLMAP photos: refined";
   EXPECT_EQ(h.background[2], 0.75f);
+  // The pose prior: its default, the focal lengths' default, or the given weight.
+  EXPECT_EQ(h.solver.pose_prior, kDefaultPosePrior);
+  ReconstructOptions focal = o;
+  focal.refine_focal = true;
+  EXPECT_EQ(focal.Hierarchy(scene, automatic).solver.pose_prior, kFocalPosePrior);
+  focal.pose_prior = 0.5;
+  EXPECT_EQ(focal.Hierarchy(scene, automatic).solver.pose_prior, 0.5) << "a given weight is kept";
+  focal.workspace = "ws";
+  EXPECT_NO_THROW(focal.Check());
+  focal.pose_prior = -0.5;
+  try {
+    focal.Check();
+    ADD_FAILURE() << "a negative --pose-prior was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("--pose-prior"), std::string::npos) << e.what();
+  }
 
   // Every photo with alpha: fixed shells, no grid smoothness unless asked for; given levels run all.
   for (SceneImage& im : scene.images) im.alpha_path = "alpha/" + im.name;

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <numbers>
+#include <optional>
 #include <random>
 
 #include "export/evaluate.h"
@@ -26,7 +27,9 @@ namespace {
 
 namespace fs = std::filesystem;
 
-ReconstructResult Fit(const fs::path& workspace, bool refine, bool focal = false) {
+// prior: --pose-prior (unset: the default, which depends on `focal`).
+ReconstructResult Fit(const fs::path& workspace, bool refine, bool focal = false,
+                      std::optional<double> prior = std::nullopt) {
   ReconstructOptions o;
   o.workspace = workspace;
   o.device = DeviceChoice::kCpu;
@@ -35,6 +38,7 @@ ReconstructResult Fit(const fs::path& workspace, bool refine, bool focal = false
   o.solver.cost_tolerance = 0;  // every iteration, with and without refinement alike
   o.poses = refine ? PoseChoice::kOn : PoseChoice::kOff;
   o.refine_focal = focal;
+  o.pose_prior = prior;
   return Reconstruct(o);
 }
 
@@ -195,13 +199,13 @@ TEST(LegoPoses, RefinementRecoversPerturbedCamerasAndKeepsExactOnes) {
       on_eval.mean_psnr_pose_fit, before.median_degrees, 100 * before.median_fraction, before.median_pixels,
       after.median_degrees, 100 * after.median_fraction, after.median_pixels, off.solve_seconds, on.solve_seconds);
   EXPECT_NEAR(before.median_degrees, 1.0, 1e-6);
-  // Measured 2026-12-03 (pose prior 0.1): 1.28 -> 0.31 px, 1.0 -> 0.64 deg, 2.0 -> 1.08 %; the
-  // pictures line up, the orbit direction stays where the prior holds it (the 0.1 deg /
-  // 0.3 % are not reached at 50 pixels; docs/tuning.md "Camera refinement"). Held-out after the
-  // test-time fit 28.29 dB against 28.30 on exact poses, 20.13 without refinement; exact poses
-  // refined 28.35 dB.
+  // Measured 2026-12-05 (pose prior 0.03, the default): 1.28 -> 0.30 px, 1.0 -> 0.47 deg, 2.0 ->
+  // 0.94 % (prior 0.1: 0.64 deg, 1.09 %); the pictures line up, the orbit direction stays where
+  // the prior holds it (the 0.1 deg / 0.3 % are not reached at 50 pixels; docs/tuning.md
+  // "Camera refinement"). Held-out after the test-time fit 28.51 dB against 28.30 on exact poses,
+  // 20.13 without refinement; exact poses refined 28.29 dB (prior 0.01: 28.10, over the bound).
   EXPECT_LT(after.median_pixels, 0.35 * before.median_pixels);
-  EXPECT_LT(after.median_degrees, 0.75 * before.median_degrees);
+  EXPECT_LT(after.median_degrees, 0.6 * before.median_degrees);
   EXPECT_LT(after.median_fraction, 0.75 * before.median_fraction);
   EXPECT_TRUE(on_eval.pose_fit);
   EXPECT_GT(on_eval.mean_psnr_pose_fit, exact_off.test_psnr - 0.3);
@@ -241,7 +245,9 @@ TEST(LegoPoses, FocalRefinementRecoversWrongFocalLengths) {
     WriteScene(ws / "scene.json", s);
   }
   const ReconstructResult off = Fit(dir.path() / "off", false);
-  const ReconstructResult poses = Fit(dir.path() / "poses", true);
+  // Poses alone at the prior focal refinement uses by default, so the two differ by the focal
+  // lengths alone (a weaker prior lets the distance absorb more of a focal error: a dolly zoom).
+  const ReconstructResult poses = Fit(dir.path() / "poses", true, false, kFocalPosePrior);
   const ReconstructResult focal = Fit(dir.path() / "focal", true, true);
   // The median over training photos of |refined focal / true focal - 1|.
   std::vector<double> errors;
