@@ -67,7 +67,8 @@ struct ReconstructOptions {
   // The solver of every level (max_iterations and seed are set per level). Its smoothness
   // weights: smooth_shells 0.1; smooth_grid < 0 (the default) is chosen for the scene,
   // kAutoSmoothGrid where the background is learned and 0 where it is fixed. Adam runs none.
-  // Gauss-Newton leaves a level early once its cost flattens (kDefaultCostTolerance).
+  // Gauss-Newton leaves a level early once its cost flattens (kDefaultCostTolerance). Its
+  // pose_prior is replaced by pose_prior below.
   SolverOptions solver = DefaultSolver();
   InitOptions init;
   bool init_shells_from_photos = false;  // shells start at the training photos' mean colour
