@@ -50,12 +50,12 @@ PERF_HD_INLINE void AddShColour(const T* params, const RaySh<T>& sh, const GridS
 template <class T>
 PERF_HD_INLINE void PrefetchShBands(const T* params, const RaySh<T>& sh, const GridSample<T>& gs) {
 #if !defined(__CUDA_ARCH__)
-  const int last = ShStride(sh.degree) - 1;
+  const int stride = ShStride(sh.degree);
   for (int q = 0; q < 8; ++q) {
     if (gs.cell[q] < 0) continue;
-    const T* p = params + sh.start + (last + 1) * gs.cell[q];
-    __builtin_prefetch(p);
-    __builtin_prefetch(p + last);
+    const T* p = params + sh.start + stride * gs.cell[q];
+    __builtin_prefetch(p);               // a block's first line
+    __builtin_prefetch(p + stride - 1);  // and its last, where it crosses one
   }
 #endif
 }
