@@ -43,9 +43,6 @@ void ReconstructOptions::Check() const {
     Fail("--refine-poses", "on", "refines poses in Gauss-Newton only", "use --solver gn, or --refine-poses off");
   }
   CheckCameraRefinement(poses, refine_focal);
-  if (pose_prior && !(*pose_prior >= 0 && std::isfinite(*pose_prior))) {
-    Fail("--pose-prior", StrCat(*pose_prior), "must be finite and >= 0 (0: no prior)");
-  }
   if (sh_from_level < 0 || sh_from_level > 6) {
     Fail("--sh-from-level", std::to_string(sh_from_level), "must be a level, 1 (the first) to 6, or 0 (the last)");
   }
@@ -73,6 +70,7 @@ void ReconstructOptions::Check() const {
   }
   SolverOptions chosen = solver;  // the automatic grid weight is valid whatever it becomes
   chosen.smooth_grid = std::max(0.0, chosen.smooth_grid);
+  chosen.pose_prior = PosePrior();  // checked as the solver will see it
   chosen.Check();
 }
 
@@ -106,8 +104,12 @@ HierarchyOptions ReconstructOptions::Hierarchy(const Scene& scene, const LevelCh
          "add --refine-poses on");
   }
   h.refine_focal = refine_focal;
-  h.solver.pose_prior = pose_prior.value_or(refine_focal ? kFocalPosePrior : kDefaultPosePrior);
+  h.solver.pose_prior = PosePrior();
   return h;
+}
+
+double ReconstructOptions::PosePrior() const {
+  return pose_prior.value_or(refine_focal ? kFocalPosePrior : kDefaultPosePrior);
 }
 
 bool FixedBackground(BackgroundChoice background, const Scene& scene) {

@@ -124,6 +124,9 @@ struct ReconstructOptions {
   // memory only where the levels were chosen automatically.
   HierarchyOptions Hierarchy(const Scene& scene, const LevelChoice& levels) const;
 
+  // The pose prior's weight the solver gets: pose_prior, or its default for refine_focal.
+  double PosePrior() const;
+
   static SolverOptions DefaultSolver();
 };
 
