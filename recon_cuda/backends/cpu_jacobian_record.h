@@ -334,10 +334,15 @@ struct LinearizeVisitor {
   }
   void PrefetchAhead() {
     if (!kDiag || next_ahead < 0) return;
-    const GridSample<float>& gs = ahead[next_ahead--].gs;
+    const SampleRecord<float>& rec = ahead[next_ahead--];
+    const GridSample<float>& gs = rec.gs;
     if (gs.lo[0] == prefetched_lo[0] && gs.lo[1] == prefetched_lo[1] && gs.lo[2] == prefetched_lo[2]) return;
-    for (int a = 0; a < 3; ++a) prefetched_lo[a] = gs.lo[a];
-    const int band_floats = ShStride(sh.degree) << g.shift;  // g and diag interleaved (AddSink)
+    // keep = 1: the sample's dc is 0 and it adds nothing to its cells' bands (ScatterSh, AddDiagSh);
+    // its cells are not marked as asked for, so that a next sample there asks for the bands.
+    const bool no_bands = rec.keep == 1.f;
+    if (!no_bands)
+      for (int a = 0; a < 3; ++a) prefetched_lo[a] = gs.lo[a];
+    const int band_floats = no_bands ? 0 : ShStride(sh.degree) << g.shift;  // g and diag interleaved (AddSink)
     for (int q = 0; q < 8; ++q) {
       if (gs.cell[q] < 0) continue;
       __builtin_prefetch(g.a + (GridParam(gs.cell[q], 0) << g.shift), 1);

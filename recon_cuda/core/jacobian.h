@@ -19,7 +19,7 @@ PERF_HD_INLINE void AddJpSample(const T* p, const GridSample<T>& gs, const Sampl
                                 const RaySh<T>& sh) {
   T pb[4];
   GatherGrid(p, gs, pb);
-  if (sh.degree > 0) AddShColour(p, sh, gs, pb);
+  if (sh.degree > 0 && sp.dc != T(0)) AddShColour(p, sh, gs, pb);  // with dc = 0 the bands add 0 dc
   for (int c = 0; c < 3; ++c) u[c] += sp.dc * pb[c] + sp.ds[c] * pb[3];
   u[3] += sp.dl * pb[3];
 }
@@ -41,9 +41,11 @@ PERF_HD_INLINE void AddShBands(const RaySh<T>& sh, int64_t cell, const T* a, int
 
 // The spherical harmonics' share of a cell's J^T u: colour[c] is what the cell's colour channel
 // c receives (JtuValues times the weight, or their merged sum along the ray); band k of channel c
-// receives y_k colour[c].
+// receives y_k colour[c]. Nothing is written when colour is 0 (a sample or cell whose partial dc
+// is 0, which the density's lower bound makes common: a third of the cells of a ray).
 template <class T, class Sink>
 PERF_HD_INLINE void ScatterSh(const RaySh<T>& sh, int64_t cell, const T* colour, Sink& sink) {
+  if (colour[0] == T(0) && colour[1] == T(0) && colour[2] == T(0)) return;
   AddShBands(sh, cell, colour, 1, sink);
 }
 
@@ -51,6 +53,7 @@ PERF_HD_INLINE void ScatterSh(const RaySh<T>& sh, int64_t cell, const T* colour,
 // ray's, RowValues): band k of channel c gets g_c^2 (y_k dc)^2.
 template <class T, class Sink>
 PERF_HD_INLINE void AddDiagSh(const RaySh<T>& sh, int64_t cell, T dc, const T* g2, Sink& sink) {
+  if (dc == T(0)) return;  // zeros (ScatterSh)
   const T sq[3] = {g2[0] * dc * dc, g2[1] * dc * dc, g2[2] * dc * dc};
   AddShBands(sh, cell, sq, 2, sink);
 }
