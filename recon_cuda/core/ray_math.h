@@ -212,8 +212,10 @@ PERF_HD RayOutput<T> Forward(const VolumeView<T>& vol, const BoxRay<T>& ray, con
     const GridSample<T> gs = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(st.t));
     if (sh.degree > 0) PrefetchShBands(vol.params, sh, gs);
     GatherGrid(vol.params, gs, v);
-    if (sh.degree > 0) AddShColour(vol.params, sh, gs, v);
     const T od = v[3] * st.delta;
+    // A sample with no density adds nothing to h; its colour is needed only by Backward's
+    // density partial, from the record.
+    if (sh.degree > 0 && (record || od != T(0))) AddShColour(vol.params, sh, gs, v);
     const T keep = Exp(-od);
     const T weight = trans * (1 - keep);
     for (int c = 0; c < 3; ++c) out.h[c] += weight * v[c];
