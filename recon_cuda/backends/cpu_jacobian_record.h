@@ -264,29 +264,42 @@ struct RayCells {
     __builtin_prefetch(sums + b + last, 1);
     cells.push_back({cell, {k[0], k[1], k[2], k[3], k[4]}});
   }
-  // u += the ray's J p on its cells: u[c] += dc p_c + ds[c] p_sigma, u[3] += dl p_sigma (summed).
-  void AddJp(float u[4]) const {
-    for (const Cell& c : cells) {
-      const float* g = p + GridParam(c.cell, 0);
-      const float* b = p + ShParam(sh.start, sh.degree, c.cell, 0, 0);
-      float colour[3] = {g[0], g[1], g[2]};
-      for (int k = 0; k < sh.bands; ++k)
-        for (int ch = 0; ch < 3; ++ch) colour[ch] += sh.y[k] * b[3 * k + ch];
-      for (int ch = 0; ch < 3; ++ch) u[ch] += c.k[0] * colour[ch] + c.k[1 + ch] * g[3];
-      u[3] += c.k[4] * g[3];
+  // y[0 .. stride) += a x[0 .. stride); the degree-1 stride as a constant, so that the compiler
+  // makes it three vector multiply-adds.
+  static void AddScaled(int stride, float a, const float* x, float* y) {
+    if (stride == ShStride(1)) {
+      for (int i = 0; i < ShStride(1); ++i) y[i] += a * x[i];
+    } else {
+      for (int i = 0; i < stride; ++i) y[i] += a * x[i];
     }
   }
-  // The ray's J^T uv into its cells: colour c += dc uv[c] (band k: times y_k), sigma += ds . uv + dl uv[3].
+  // u += the ray's J p on its cells: u[c] += dc (p_c + sum_k y_k band_kc) + ds[c] p_sigma,
+  // u[3] += dl p_sigma. The bands are summed with dc over the cells first (all of a block, in
+  // fours: the compiler's vector adds), then dotted with the ray's y once.
+  void AddJp(float u[4]) const {
+    const int stride = ShStride(sh.degree);
+    float bands[kMaxShStride] = {};
+    for (const Cell& c : cells) {
+      const float* g = p + GridParam(c.cell, 0);
+      for (int ch = 0; ch < 3; ++ch) u[ch] += c.k[0] * g[ch] + c.k[1 + ch] * g[3];
+      u[3] += c.k[4] * g[3];
+      AddScaled(stride, c.k[0], p + ShParam(sh.start, sh.degree, c.cell, 0, 0), bands);
+    }
+    for (int k = 0; k < sh.bands; ++k)
+      for (int ch = 0; ch < 3; ++ch) u[ch] += sh.y[k] * bands[3 * k + ch];
+  }
+  // The ray's J^T uv into its cells: colour c += dc uv[c], band k of c += dc y_k uv[c] (y_k uv[c]
+  // formed once a ray; the padding gets zeros), sigma += ds . uv + dl uv[3].
   void ScatterJtu(const float uv[4]) const {
+    const int stride = ShStride(sh.degree);
+    float yuv[kMaxShStride] = {};
+    for (int k = 0; k < sh.bands; ++k)
+      for (int ch = 0; ch < 3; ++ch) yuv[3 * k + ch] = sh.y[k] * uv[ch];
     for (const Cell& c : cells) {
       float* g = sums + GridParam(c.cell, 0);
-      const float colour[3] = {c.k[0] * uv[0], c.k[0] * uv[1], c.k[0] * uv[2]};
-      for (int ch = 0; ch < 3; ++ch) g[ch] += colour[ch];
+      for (int ch = 0; ch < 3; ++ch) g[ch] += c.k[0] * uv[ch];
       g[3] += c.k[1] * uv[0] + c.k[2] * uv[1] + c.k[3] * uv[2] + c.k[4] * uv[3];
-      // Added in place: through ScatterSh's groups of 4, staged in an array, the pass measured ~15 % slower.
-      float* b = sums + ShParam(sh.start, sh.degree, c.cell, 0, 0);
-      for (int k = 0; k < sh.bands; ++k)
-        for (int ch = 0; ch < 3; ++ch) b[3 * k + ch] += sh.y[k] * colour[ch];
+      AddScaled(stride, c.k[0], yuv, sums + ShParam(sh.start, sh.degree, c.cell, 0, 0));
     }
   }
 };
