@@ -337,7 +337,7 @@ class CpuBackend final : public Backend {
                                 r_out};
       VolumeU(e, r, v.r);
       GainSquared(e, v.g2);
-      v.sh = ShOfRay(vol, ray);
+      v.SetSh(ShOfRay(vol, ray));
       v.BeginAhead(s.record.data(), fwd.count);
       if (tr.pose >= 0) {
         GeometryVisitor<float> geometry(vol, ray, jit);

@@ -330,7 +330,8 @@ struct LinearizeVisitor {
   float* out_shell_partials;  // [num_shells, 4] of this ray, compact record
   int64_t out_ray = 0;  // the ray's index in *out
   int last_k = -1;      // the march index of the ray's last sample recorded (compact)
-  RaySh<float> sh{};   // the ray's spherical harmonics (degree 0: none)
+  RaySh<float> sh{};   // the ray's spherical harmonics (degree 0: none; SetSh)
+  float yr[kMaxShStride] = {}, yg2[kMaxShStride] = {};  // SetSh's y_k r_c and y_k^2 g2_c at 3 k + c
   CellMerger<float, K> merger{};
   // GN: the Forward record that Backward walks back to front, and the next of its samples whose
   // cells' sums lines are asked for (PrefetchAhead), a few samples ahead of the merged scatter.
@@ -386,14 +387,40 @@ struct LinearizeVisitor {
     if (out && out->compact) out->AppendCompact(out_ray, k, sp, &last_k);
     else if (out) out->samples.push_back({st.t, sp});
   }
+  // Sets the ray's spherical harmonics, after r and g2: with the diagonal, a cell's bands get
+  // dc y_k r_c in J^T r and dc^2 y_k^2 g2_c in the diagonal (its merged J^T r colour is dc r_c,
+  // ScatterSh and AddDiagSh), so both are formed here once a ray (padding 0).
+  void SetSh(const RaySh<float>& ray_sh) {
+    sh = ray_sh;
+    if (!kDiag || sh.degree == 0) return;
+    for (int i = 0; i < ShStride(sh.degree); ++i) yr[i] = yg2[i] = 0.f;
+    for (int k = 0; k < sh.bands; ++k)
+      for (int c = 0; c < 3; ++c) {
+        yr[3 * k + c] = sh.y[k] * r[c];
+        yg2[3 * k + c] = sh.y[k] * sh.y[k] * g2[c];
+      }
+  }
   // A cell's merged sums are complete.
   void operator()(int64_t cell, const float* acc) {
     g.Add4(GridParam(cell, 0), acc[0], acc[1], acc[2], acc[3]);
     AddDiagFromRow(cell, acc + 4, g2, d);
-    if (sh.degree > 0) {
-      ScatterSh(sh, cell, acc, g);
-      AddDiagSh(sh, cell, acc[4], g2, d);
-    }
+    if (sh.degree > 0 && acc[4] != 0.f) AddBands(ShParam(sh.start, sh.degree, cell, 0, 0), acc[4]);
+  }
+  // The bands' J^T r and diagonal of a cell whose merged dc is `dc`, band block at `base` (a
+  // multiple of 4): g and d interleave in fours (AddSink shift 1, offsets 0 and 4), so the
+  // block's sums are one run of 2 stride floats; the degree-1 stride as a constant (vector adds).
+  void AddBands(int64_t base, float dc) {
+    float* b = g.a + (base << 1);
+    const float dc2 = dc * dc;
+    const auto add = [&](int stride) {
+      for (int j = 0; j < stride; j += 4)
+        for (int l = 0; l < 4; ++l) {
+          b[2 * j + l] += dc * yr[j + l];
+          b[2 * j + 4 + l] += dc2 * yg2[j + l];
+        }
+    };
+    if (ShStride(sh.degree) == ShStride(1)) add(ShStride(1));
+    else add(ShStride(sh.degree));
   }
   void Finish() {
     if constexpr (kDiag) merger.Finish(*this);
