@@ -325,13 +325,16 @@ std::string PresetSettings::Describe() const {
 }
 
 PresetSettings PresetFor(const RunOptions& o) {
-  // preview: a first look in a minute or two on a laptop CPU (the README's example);
-  // default: the paper's 30 iterations per level at a size a CPU still manages;
+  // preview: a first look in a minute or two on a laptop CPU (the README's example), with
+  // view-dependent colour (degree 1 at the last level: +0.26 dB held-out on the example at 1.3x
+  // the time; docs/tuning.md "View dependence by default where it stays within the bars");
+  // default: the paper's 30 iterations per level at a size a CPU still manages; no view
+  // dependence (on bonsai it took 1.7x the reconstruct, +0.43 dB, and a peak over half issue 33's base);
   // high: full-size images, one more level (meant for a GPU) and view-dependent colour (degree 1
   // at the last level: +0.44 dB held-out on bonsai at 1.9x the time, docs/tuning.md).
   PresetSettings p;
   if (o.preset == "preview") {
-    p = {128, 2, 0, 8, 0, 24};
+    p = {128, 2, 0, 8, 1, 24};
   } else if (o.preset == "high") {
     p = {0, 0, 1024, 30, 1, 120};
   } else {
