@@ -351,7 +351,7 @@ struct LinearizeVisitor {
     const SampleRecord<float>& rec = ahead[next_ahead--];
     const GridSample<float>& gs = rec.gs;
     if (gs.lo[0] == prefetched_lo[0] && gs.lo[1] == prefetched_lo[1] && gs.lo[2] == prefetched_lo[2]) return;
-    // keep = 1: the sample's dc is 0 and it adds nothing to its cells' bands (ScatterSh, AddDiagSh);
+    // keep = 1: the sample's dc is 0 and it adds nothing to its cells' bands (AddBands);
     // its cells are not marked as asked for, so that a next sample there asks for the bands.
     const bool no_bands = rec.keep == 1.f;
     if (!no_bands)
@@ -388,8 +388,9 @@ struct LinearizeVisitor {
     else if (out) out->samples.push_back({st.t, sp});
   }
   // Sets the ray's spherical harmonics, after r and g2: with the diagonal, a cell's bands get
-  // dc y_k r_c in J^T r and dc^2 y_k^2 g2_c in the diagonal (its merged J^T r colour is dc r_c,
-  // ScatterSh and AddDiagSh), so both are formed here once a ray (padding 0).
+  // dc y_k r_c in J^T r and dc^2 y_k^2 g2_c in the diagonal (what jacobian.h's ScatterSh and
+  // AddDiagSh add, as its merged J^T r colour is dc r_c), so both are formed here once a ray
+  // (padding 0) for AddBands.
   void SetSh(const RaySh<float>& ray_sh) {
     sh = ray_sh;
     if (!kDiag || sh.degree == 0) return;
