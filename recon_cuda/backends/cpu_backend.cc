@@ -332,8 +332,6 @@ class CpuBackend final : public Backend {
       LinearizeVisitor<kDiag> v{{}, {}, AddSink{s.acc.data(), kDiag ? 1 : 0, 0},
                                 AddSink{kDiag ? s.acc.data() : nullptr, 1, 4}, out,
                                 out && !out->compact ? &out->shells[r_out * level_.shape.num_shells] : nullptr,
-                                out && out->compact ? &out->shell_partials[4 * r_out * level_.shape.num_shells]
-                                                    : nullptr,
                                 r_out};
       VolumeU(e, r, v.r);
       GainSquared(e, v.g2);
@@ -360,7 +358,10 @@ class CpuBackend final : public Backend {
         out->end[r_out] = out->SampleCount();
         for (int c = 0; c < 3; ++c) out->h[3 * r_out + c] = fwd.h[c];
         out->scale[r_out] = scale;
-        if (out->compact) out->dl_per_delta[r_out] = DlPerDelta(fwd);  // as Backward makes it
+        if (out->compact) {
+          out->dl_per_delta[r_out] = DlPerDelta(fwd);  // as Backward makes it
+          out->t_box[r_out] = fwd.t_box;               // the shells' partials (RecordedShells)
+        }
         ++r_out;
       }
       bs.Add(fwd, robust_, subset.Contains(i));

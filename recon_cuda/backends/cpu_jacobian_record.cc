@@ -23,7 +23,7 @@ void BlockJ::Clear(int64_t rays, const VolumeShape& shape, bool compact_samples)
   first_k.assign(compact ? rays : 0, 0);
   end.assign(rays, 0);
   shells.assign(compact ? 0 : rays * shape.num_shells, ShellJ{{-1, 0.f, 0.f}, {}});
-  shell_partials.assign(compact ? 4 * rays * shape.num_shells : 0, 0.f);
+  t_box.assign(compact ? rays : 0, 0.f);
   h.assign(3 * rays, 0.f);
   scale.assign(rays, 1.f);
   dl_per_delta.assign(compact ? rays : 0, 0.f);
@@ -130,8 +130,8 @@ int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, bool co
   // What BlockJ keeps for a sample and for a recorded ray (the vectors of Clear).
   const size_t per_sample = compact ? sizeof(CompactSampleJ) + sizeof(uint8_t) : sizeof(SampleJ);  // packed, steps
   size_t per_ray = sizeof(uint32_t) + 4 * sizeof(float);                     // end, h, scale
-  if (compact) per_ray += sizeof(float) + sizeof(uint16_t);                  // dl_per_delta, first_k
-  per_ray += p.shape.num_shells * (compact ? 4 * sizeof(float) : sizeof(ShellJ));  // shell_partials, shells
+  if (compact) per_ray += 2 * sizeof(float) + sizeof(uint16_t);  // dl_per_delta, t_box, first_k
+  if (!compact) per_ray += p.shape.num_shells * sizeof(ShellJ);    // shells
   if (p.shape.poses > 0) per_ray += kPoseRowValues * (compact ? sizeof(uint16_t) : sizeof(float));  // the pose rows
   return samples / stride * static_cast<int64_t>(per_sample) + recorded * static_cast<int64_t>(per_ray);
 }

@@ -43,17 +43,6 @@ inline uint16_t ToBfloat16(float x) {
 }
 inline float FromBfloat16(uint16_t h) { return std::bit_cast<float>(static_cast<uint32_t>(h) << 16); }
 
-// A shell's partials in the compact record (BlockJ::shell_partials), and back for shell k of a
-// volume of num_shells. Kept in float: rounded to bfloat16, CG's solution of solver_bounds_test's
-// rank-deficient system missed the exact one by 10-15 % instead of under 1 % (docs/tuning.md).
-inline void StoreShellPartials(const ShellPartials<float>& sp, float* out) {
-  out[0] = sp.de;
-  for (int c = 0; c < 3; ++c) out[1 + c] = sp.da[c];
-}
-inline ShellPartials<float> LoadShellPartials(const float* in, int k, int num_shells) {
-  return {in[0], {in[1], in[2], in[3]}, k == num_shells - 1};
-}
-
 // A ray's pose row (pose.h PoseRow) without its padding column: 4 residuals x 7 values.
 inline constexpr int kPoseRowValues = 4 * kPoseSolved;
 
@@ -98,9 +87,10 @@ struct BlockJ {
   std::vector<uint16_t> first_k;  // [rays] when compact: the march index of the ray's first entry (its last sample)
   std::vector<uint32_t> end;  // [rays]: one past the ray's last sample in `samples` (`packed`)
   std::vector<ShellJ> shells;  // [rays, num_shells] when exact
-  // [rays, num_shells, 4] when compact: a shell's partials (de, da[3]); where the ray meets it and
-  // whether it does are recomputed (ray_math.h ShellCoordAt), and the outermost is opaque.
-  std::vector<float> shell_partials;
+  // [rays] when compact: the ray's box transmittance T_box, from which and the shells' values at
+  // the linearisation point RecordedShells recomputes the shells' partials (64 bytes a ray with 4
+  // shells, stored in float before; bfloat16 was too coarse: docs/tuning.md "Shells recomputed").
+  std::vector<float> t_box;
   std::vector<float> h;        // [rays, 3] the composited colour H (the exposure's partials)
   std::vector<float> scale;    // [rays] the robust loss's row scale (jacobian.h RobustRowScale)
   std::vector<float> dl_per_delta;  // [rays] when compact: ray_math.h DlPerDelta
@@ -132,21 +122,28 @@ struct RayShellsJ {
   TexelSample<float> ts[kMaxShells];
   ShellPartials<float> sp[kMaxShells];
 };
+// vol: at the linearisation point (the compact record recomputes the shells' lookups and values
+// there, as Backward made them: the same partials to the bit).
 inline void RecordedShells(const BlockJ& b, int64_t r, const VolumeView<float>& vol, const BoxRay<float>& ray,
                            const March<float>& m, RayShellsJ* out) {
   const int n = vol.num_shells;
-  for (int k = 0; k < n; ++k) {
-    CubeCoord<float> c{-1, 0.f, 0.f};
-    if (b.compact) {
-      out->hit[k] = ShellCoordAt(vol, ray, ShellStart(m), k, &c);
-      out->sp[k] = LoadShellPartials(&b.shell_partials[4 * (r * n + k)], k, n);
-    } else {
-      const ShellJ& sj = b.shells[r * n + k];
-      out->hit[k] = sj.coord.face >= 0;
-      c = sj.coord;
-      out->sp[k] = sj.sp;
+  if (b.compact) {
+    ShellStack<float> st;
+    EvalShells(vol, ray, m, &st);
+    float behind[3] = {0.f, 0.f, 0.f};
+    for (int k = n - 1; k >= 0; --k) {
+      out->hit[k] = st.hit[k];
+      if (!st.hit[k]) continue;
+      out->sp[k] = ShellPartialsAt(st, k, n, b.t_box[r], behind);
+      out->ts[k] = TexelWeights(vol.GridParams(), vol.m, k, st.coord[k]);
     }
-    if (out->hit[k]) out->ts[k] = TexelWeights(vol.GridParams(), vol.m, k, c);
+    return;
+  }
+  for (int k = 0; k < n; ++k) {
+    const ShellJ& sj = b.shells[r * n + k];
+    out->hit[k] = sj.coord.face >= 0;
+    out->sp[k] = sj.sp;
+    if (out->hit[k]) out->ts[k] = TexelWeights(vol.GridParams(), vol.m, k, sj.coord);
   }
 }
 
@@ -326,8 +323,7 @@ struct LinearizeVisitor {
   float g2[3];         // the squared gains of the ray's photo (jacobian.h GainSquared)
   AddSink g, d;
   BlockJ* out;         // nullptr: nothing recorded
-  ShellJ* out_shells;  // [num_shells] of this ray, exact record
-  float* out_shell_partials;  // [num_shells, 4] of this ray, compact record
+  ShellJ* out_shells;  // [num_shells] of this ray, exact record (the compact one recomputes them)
   int64_t out_ray = 0;  // the ray's index in *out
   int last_k = -1;      // the march index of the ray's last sample recorded (compact)
   RaySh<float> sh{};   // the ray's spherical harmonics (degree 0: none; SetSh)
@@ -372,7 +368,6 @@ struct LinearizeVisitor {
     ScatterJtuShell(ts, sp, r, g);
     if constexpr (kDiag) AddDiagShell(ts, sp, g2, d);
     if (out_shells) out_shells[k] = {c, sp};
-    if (out_shell_partials) StoreShellPartials(sp, out_shell_partials + 4 * k);
   }
   void Sample(int k, const MarchStep<float>& st, const GridSample<float>& gs, const SamplePartials<float>& sp) {
     if constexpr (kDiag) {

@@ -270,6 +270,23 @@ PERF_HD_INLINE T DlPerDelta(const RayOutput<T>& fwd) {
   return -fwd.dl_dt * fwd.t_box;
 }
 
+// The partials of shell k, hit by a ray of box transmittance tb (Backward's derivation below),
+// from the ray's shells (EvalShells) and the colour behind shell k, B_k, in `behind`, which
+// becomes B_{k-1}: call it for the shells hit, outermost first, from behind = 0. Backward's, and
+// the compact record's recomputation of them (cpu_jacobian_record.h RecordedShells).
+template <class T>
+PERF_HD_INLINE ShellPartials<T> ShellPartialsAt(const ShellStack<T>& shells, int k, int num_shells, T tb,
+                                                T behind[3]) {
+  const T* e = shells.e[k];
+  const T a = shells.a[k];
+  ShellPartials<T> sp;
+  sp.de = tb * shells.p[k] * a;
+  sp.opaque = k == num_shells - 1;
+  for (int c = 0; c < 3; ++c) sp.da[c] = tb * shells.p[k] * (e[c] - behind[c]);
+  for (int c = 0; c < 3; ++c) behind[c] = a * e[c] + (1 - a) * behind[c];
+  return sp;
+}
+
 // Backward sweep (paper Algorithm 1). Calls
 //   visit.Shell(k, const CubeCoord<T>&, const TexelSample<T>&, const ShellPartials<T>&)
 //                                                                    for each shell hit, outermost first;
@@ -307,14 +324,8 @@ PERF_HD void Backward(const VolumeView<T>& vol, const BoxRay<T>& ray, const Jitt
   T behind[3] = {0, 0, 0};  // B_k
   for (int k = vol.num_shells - 1; k >= 0; --k) {
     if (!shells.hit[k]) continue;  // transparent: B passes through unchanged
-    const T* e = shells.e[k];
-    const T a = shells.a[k];
-    ShellPartials<T> sp;
-    sp.de = tb * shells.p[k] * a;
-    sp.opaque = k == vol.num_shells - 1;
-    for (int c = 0; c < 3; ++c) sp.da[c] = tb * shells.p[k] * (e[c] - behind[c]);
+    const ShellPartials<T> sp = ShellPartialsAt(shells, k, vol.num_shells, tb, behind);
     visit.Shell(k, shells.coord[k], TexelWeights(vol.GridParams(), vol.m, k, shells.coord[k]), sp);
-    for (int c = 0; c < 3; ++c) behind[c] = a * e[c] + (1 - a) * behind[c];
   }
 
   T g[3];
