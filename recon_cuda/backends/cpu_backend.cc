@@ -78,6 +78,11 @@ class CpuBackend final : public Backend {
 
   const LevelProblem& level() const override { return level_; }
   bool CachesJacobian() const override { return cache_; }
+  void ReleaseJacobian() override {
+    for (BlockJ& b : blocks_) b = BlockJ{};
+    scratch_.clear();
+    linearized_ = false;
+  }
 
   void Upload(VecId v, std::span<const float> host) override { vectors_.Upload(v, host); }
   void Download(VecId v, std::span<float> host) const override { vectors_.Download(v, host); }

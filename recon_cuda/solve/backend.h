@@ -178,6 +178,10 @@ class Backend {
   virtual const LevelProblem& level() const = 0;
   // Whether MultiplyJtJ reuses the partials of Linearize (false: it recomputes them).
   virtual bool CachesJacobian() const = 0;
+  // Frees what MultiplyJtJ reuses of the last Linearize (the recorded Jacobian, a level's largest
+  // buffer, and the per-thread sums); MultiplyJtJ then needs a Linearize first. The hierarchy calls
+  // it when a level's solve is done, so that the level's checkpoint and scores run without it.
+  virtual void ReleaseJacobian() {}
 
   // Vector operations; every vector has level().shape.ParamCount() floats.
   virtual void Upload(VecId v, std::span<const float> host) = 0;

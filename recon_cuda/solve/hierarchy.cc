@@ -86,6 +86,7 @@ std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geomet
       throw Error(StrCat("level ", level, ": the solver failed: ", summary.message,
                          "; check the workspace images, or try --damping 0.1"));
     }
+    backend->ReleaseJacobian();  // not needed for what follows: the level's checkpoint, scores, next level
     if (cb.level_done) cb.level_done(h, summary, x);
     if (stopped) break;
     if (level + 1 < o.levels) {

@@ -143,11 +143,37 @@ TEST(CpuBackendTest, JtJpMatchesTheDenseJacobianCachedAndRecomputed) {
   }
 }
 
+// ReleaseJacobian (the hierarchy's, after a level's solve) frees the record: MultiplyJtJ is then
+// refused until a Linearize, which records it again, and the product is the one before, bit for
+// bit on one thread (exact and compact records).
+TEST(CpuBackendTest, AReleasedJacobianIsRecordedAgain) {
+  const TinyProblem p(3);
+  const std::vector<float> pv = test::RandomDirection(p.shape, 4);
+  for (bool compact : {false, true}) {
+    auto b = Cpu(1, true, compact);
+    b->SetLevel(p.Level(), kVectors);
+    b->Upload(kX, p.x);
+    b->Upload(kP, pv);
+    std::vector<float> before(p.shape.ParamCount()), after(p.shape.ParamCount());
+    b->Linearize(kX, 11, kG, kD);
+    b->MultiplyJtJ(kP, kOut);
+    b->Download(kOut, before);
+    b->ReleaseJacobian();
+    EXPECT_THROW(b->MultiplyJtJ(kP, kOut), InternalError) << "compact " << compact;
+    b->Linearize(kX, 11, kG, kD);
+    b->MultiplyJtJ(kP, kOut);
+    b->Download(kOut, after);
+    EXPECT_EQ(after, before) << "compact " << compact;
+    EXPECT_GT(*std::max_element(after.begin(), after.end()), 0.f);
+  }
+}
+
 // The compact record (CpuBackendOptions::compact_jacobian, the default): the same samples (their
 // positions recomputed from their march indices; a wrong one would miss by far more than the
 // tolerance) with the colour partials rounded to bfloat16 (2^-9 relative each) and dl made from
-// the ray's dL/dT_box as Backward makes it, the shells' partials without where the ray meets them
-// (recomputed: a shell looked up on the wrong sphere, or the outermost not opaque, fails it), and
+// the ray's dL/dT_box as Backward makes it, the shells' partials recomputed from the ray's T_box
+// and the shells' values at the linearisation point (a T_box 10 % off, or the colour behind a
+// shell left at 0, fails it; so does solver_bounds_test's step), and
 // the pose rows in bfloat16 (a row read three rays off fails it; the next pixel's is
 // within the tolerance), so J^T J p within a few tenths of a percent of the exact record's. With
 // the fourth residual weighted 100 its dl^2 terms dominate the densities' entries: a dl off by 1 %
