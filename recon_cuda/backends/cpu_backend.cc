@@ -6,7 +6,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <fstream>
 
 #include "common/errors.h"
 #include "common/stopwatch.h"
@@ -18,7 +17,6 @@
 #include "recon_cuda/solve/pose_blocks.h"
 
 namespace perf::recon {
-
 namespace {
 
 using namespace cpu;  // the sinks and the Jacobian record (cpu_jacobian_record.h)
@@ -363,10 +361,8 @@ class CpuBackend final : public Backend {
         out->end[r_out] = out->SampleCount();
         for (int c = 0; c < 3; ++c) out->h[3 * r_out + c] = fwd.h[c];
         out->scale[r_out] = scale;
-        if (out->compact) {
-          out->dl_per_delta[r_out] = DlPerDelta(fwd);  // as Backward makes it
-          out->t_box[r_out] = fwd.t_box;               // the shells' partials (RecordedShells)
-        }
+        if (out->compact) out->dl_per_delta[r_out] = DlPerDelta(fwd);  // as Backward makes it
+        if (out->compact) out->t_box[r_out] = fwd.t_box;  // the shells' partials (RecordedShells)
         ++r_out;
       }
       bs.Add(fwd, robust_, subset.Contains(i));
