@@ -329,7 +329,8 @@ PresetSettings PresetFor(const RunOptions& o) {
   // view-dependent colour (degree 1 at the last level: +0.26 dB held-out on the example at 1.3x
   // the time; docs/tuning.md "View dependence by default where it stays within the bars");
   // default: the paper's 30 iterations per level at a size a CPU still manages; no view
-  // dependence (on bonsai it took 1.7x the reconstruct, +0.43 dB, and a peak over half issue 33's base);
+  // dependence (on bonsai +0.43 dB for 1.7x the reconstruct, and its first 128^3 step, where it
+  // passes issue 33's base PSNR, 1.66x that base's time instead of 2.33x; docs/tuning.md);
   // high: full-size images, one more level (meant for a GPU) and view-dependent colour (degree 1
   // at the last level: +0.44 dB held-out on bonsai at 1.9x the time, docs/tuning.md).
   PresetSettings p;

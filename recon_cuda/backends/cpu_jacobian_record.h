@@ -129,13 +129,12 @@ inline void RecordedShells(const BlockJ& b, int64_t r, const VolumeView<float>& 
   const int n = vol.num_shells;
   if (b.compact) {
     ShellStack<float> st;
-    EvalShells(vol, ray, m, &st);
+    EvalShells(vol, ray, m, &st, out->ts);
     float behind[3] = {0.f, 0.f, 0.f};
     for (int k = n - 1; k >= 0; --k) {
       out->hit[k] = st.hit[k];
       if (!st.hit[k]) continue;
       out->sp[k] = ShellPartialsAt(st, k, n, b.t_box[r], behind);
-      out->ts[k] = TexelWeights(vol.GridParams(), vol.m, k, st.coord[k]);
     }
     return;
   }

@@ -87,9 +87,11 @@ PERF_HD_INLINE bool ShellCoordAt(const VolumeView<T>& vol, const BoxRay<T>& ray,
   return true;
 }
 
+// weights: when given, [num_shells] the texel weights of each shell hit (the compact record's
+// J^T J p needs them too; Forward and Backward leave them out of their registers).
 template <class T>
 PERF_HD_INLINE void EvalShells(const VolumeView<T>& vol, const BoxRay<T>& ray, const March<T>& march,
-                               ShellStack<T>* st) {
+                               ShellStack<T>* st, TexelSample<T>* weights = nullptr) {
   const T t_start = ShellStart(march);
   T p = 1;
   for (int c = 0; c < 3; ++c) st->s[c] = 0;
@@ -102,7 +104,9 @@ PERF_HD_INLINE void EvalShells(const VolumeView<T>& vol, const BoxRay<T>& ray, c
       continue;
     }
     T v[4];
-    GatherTexels(vol.params, TexelWeights(vol.GridParams(), vol.m, k, st->coord[k]), v);
+    const TexelSample<T> ts = TexelWeights(vol.GridParams(), vol.m, k, st->coord[k]);
+    if (weights) weights[k] = ts;
+    GatherTexels(vol.params, ts, v);
     st->a[k] = k == vol.num_shells - 1 ? T(1) : v[3];
     for (int c = 0; c < 3; ++c) {
       st->e[k][c] = v[c];
