@@ -51,11 +51,7 @@ void AddSolverOptions(CLI::App* cmd, recon::SolverOptions* solver) {
 // --sh-degree and the level its bands join.
 void AddViewDependenceOptions(CLI::App* cmd, recon::ReconstructOptions& o) {
   AddShDegreeOption(cmd, &o.sh_degree);
-  cmd->add_option("--sh-from-level", o.sh_from_level,
-                  "With --sh-degree: the first level (1 to 6) that solves the spherical harmonics, or 0: the last "
-                  "level alone (with automatic levels, the last planned; a run that stops a level early for memory "
-                  "ends without them); the levels before fit a view-independent colour")
-      ->capture_default_str();
+  AddShFromLevelOption(cmd, &o.sh_from_level);
 }
 
 // --refine-poses and its settings.

@@ -84,6 +84,22 @@ void AddShDegreeOption(CLI::App* cmd, int* sh_degree, const std::string& default
   }
 }
 
+namespace {
+const char kShFromLevelHelp[] =
+    "With --sh-degree: the first level that solves the spherical harmonics, 1 (the first) to 6, or counted from "
+    "the last: 0 the last level alone, -1 the last two, down to -5 (with levels from the photos, from the last "
+    "planned; a run that stops a level early for memory ends without them); the levels before fit a "
+    "view-independent colour";
+}  // namespace
+
+void AddShFromLevelOption(CLI::App* cmd, int* sh_from_level) {
+  cmd->add_option("--sh-from-level", *sh_from_level, kShFromLevelHelp)->capture_default_str();
+}
+
+void AddShFromLevelOption(CLI::App* cmd, std::optional<int>* sh_from_level, const std::string& default_text) {
+  cmd->add_option("--sh-from-level", *sh_from_level, kShFromLevelHelp)->default_str(default_text);
+}
+
 void AddCostToleranceOption(CLI::App* cmd, double* cost_tolerance) {
   cmd->add_option("--cost-tolerance", *cost_tolerance,
                   "Gauss-Newton leaves a level early once its cost fell by less than this fraction over the last 4 "

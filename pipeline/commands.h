@@ -5,6 +5,7 @@
 #include <atomic>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 
@@ -62,6 +63,10 @@ void AddCameraRefinementOptions(CLI::App* cmd, recon::PoseChoice* poses, bool* r
 // --sh-degree: view-dependent colour, the same for perf run and perf reconstruct; `default_text`
 // replaces the shown default (empty: *sh_degree's value).
 void AddShDegreeOption(CLI::App* cmd, int* sh_degree, const std::string& default_text = "");
+// --sh-from-level: the level the bands join (recon::ShFromLevelIndex); perf reconstruct's with its
+// default, perf run's unset unless given (the preset's, shown as `default_text`).
+void AddShFromLevelOption(CLI::App* cmd, int* sh_from_level);
+void AddShFromLevelOption(CLI::App* cmd, std::optional<int>* sh_from_level, const std::string& default_text);
 
 // --cost-tolerance: when a level's Gauss-Newton ends early, the same for perf run and perf reconstruct.
 void AddCostToleranceOption(CLI::App* cmd, double* cost_tolerance);

@@ -273,6 +273,7 @@ recon::ReconstructOptions RunOptions::ReconstructStage(const PresetSettings& pre
   ro.poses = poses;
   ro.refine_focal = refine_focal;
   ro.sh_degree = preset.sh_degree;
+  ro.sh_from_level = preset.sh_from_level;
   ro.solver.cost_tolerance = cost_tolerance;
   ro.preview_every = live != nullptr ? 1 : 0;  // the live page shows the newest
   ro.preview_image = view_image;
@@ -299,6 +300,7 @@ void RunOptions::Check() const {
   if (max_resolution < 0) throw InputError(kCommandLine, "--max-resolution", StrCat(max_resolution), "must be >= 0");
   // The reconstruction's own checks of what perf run passes it, before the import.
   if (sh_degree != -1) recon::CheckShDegree(sh_degree);  // -1: the preset's
+  if (sh_from_level) recon::CheckShFromLevel(*sh_from_level);
   recon::SolverOptions solver;
   solver.cost_tolerance = cost_tolerance;
   solver.Check();
@@ -307,6 +309,15 @@ void RunOptions::Check() const {
     if (!p->empty() && !fs::exists(*p)) throw IoError(p->string(), "does not exist", "check the path");
   }
 }
+
+namespace {
+// Where the bands are solved, in words (recon::ShFromLevelIndex says how the value counts).
+std::string ShLevels(int sh_from_level) {
+  if (sh_from_level == 0) return "at the last level";
+  if (sh_from_level < 0) return StrCat("at the last ", 1 - sh_from_level, " levels");
+  return StrCat("from level ", sh_from_level);
+}
+}  // namespace
 
 std::string PresetSettings::Describe() const {
   using recon::BackendKind;
@@ -319,7 +330,7 @@ std::string PresetSettings::Describe() const {
     << (levels > 0 ? std::to_string(levels) + " levels" : "levels from the photos (finest grid " + finest + ")")
     << " x at most " << iterations
     << " Gauss-Newton iterations, "
-    << (sh_degree > 0 ? StrCat("view-dependent colour (degree ", sh_degree, ") at the last level, ") : "")
+    << (sh_degree > 0 ? StrCat("view-dependent colour (degree ", sh_degree, ") ", ShLevels(sh_from_level), ", ") : "")
     << orbit_frames << " orbit frames";
   return s.str();
 }
@@ -328,18 +339,20 @@ PresetSettings PresetFor(const RunOptions& o) {
   // preview: a first look in a minute or two on a laptop CPU (the README's example), with
   // view-dependent colour (degree 1 at the last level: +0.26 dB held-out on the example at 1.3x
   // the time; docs/tuning.md "View dependence by default where it stays within the bars");
-  // default: the paper's 30 iterations per level at a size a CPU still manages; no view
-  // dependence (on bonsai +0.43 dB for 1.7x the reconstruct, and its first 128^3 step, where it
-  // passes issue 33's base PSNR, 1.66x that base's time instead of 2.33x; docs/tuning.md);
+  // default: the paper's 30 iterations per level at a size a CPU still manages, view-dependent
+  // colour from the level before the last (bonsai: 21.73 / 21.96 dB against 21.27 / 21.20
+  // without, issue 33's base PSNR 5.7x sooner than that base; docs/tuning.md "Bonsai's bands from
+  // the 64^3 level");
   // high: full-size images, one more level (meant for a GPU) and view-dependent colour (degree 1
   // at the last level: +0.44 dB held-out on bonsai at 1.9x the time, docs/tuning.md).
   PresetSettings p;
   if (o.preset == "preview") {
-    p = {128, 2, 0, 8, 1, 24};
+    p = {.max_size = 128, .levels = 2, .iterations = 8, .sh_degree = 1, .sh_from_level = 0, .orbit_frames = 24};
   } else if (o.preset == "high") {
-    p = {0, 0, 1024, 30, 1, 120};
+    p = {.max_size = 0, .levels = 0, .max_resolution = 1024, .iterations = 30, .sh_degree = 1, .sh_from_level = 0,
+         .orbit_frames = 120};
   } else {
-    p = {400, 0, 0, 30, 0, 60};
+    p = {.max_size = 400, .levels = 0, .iterations = 30, .sh_degree = 1, .sh_from_level = -1, .orbit_frames = 60};
   }
   if (o.max_resolution > 0) {  // levels from the photos, within this
     p.max_resolution = o.max_resolution;
@@ -349,6 +362,7 @@ PresetSettings PresetFor(const RunOptions& o) {
   if (o.levels > 0) p.levels = o.levels;
   if (o.iterations > 0) p.iterations = o.iterations;
   if (o.sh_degree >= 0) p.sh_degree = o.sh_degree;
+  if (o.sh_from_level) p.sh_from_level = *o.sh_from_level;
   return p;
 }
 

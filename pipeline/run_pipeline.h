@@ -13,6 +13,7 @@
 #include <atomic>
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -40,7 +41,8 @@ struct RunOptions {
   double cost_tolerance = recon::kDefaultCostTolerance;  // reconstruct: a level ends once its cost flattens
   // Overrides of the preset (0: the preset's).
   int max_size = 0, levels = 0, iterations = 0, max_resolution = 0;
-  int sh_degree = -1;  // reconstruct: view-dependent colour at the last level (-1: the preset's)
+  int sh_degree = -1;  // reconstruct: view-dependent colour (-1: the preset's)
+  std::optional<int> sh_from_level;  // reconstruct: the level its bands join (unset: the preset's)
   bool quiet = false;
   std::filesystem::path log_json;  // JSON lines of stage events for scripts (empty: none)
   const std::atomic<bool>* stop = nullptr;  // set (by a signal handler) to stop at a safe point
@@ -66,7 +68,8 @@ struct PresetSettings {
   int levels = 0;       // reconstruct: hierarchy levels (0: from the photos, level_choice.h)
   int max_resolution = 0;  // with levels 0: the finest grid at most (0: the backend's default)
   int iterations = 30;  // per level
-  int sh_degree = 0;    // reconstruct: view-dependent colour, its bands solved at the last level (0: none)
+  int sh_degree = 0;    // reconstruct: view-dependent colour (0: none)
+  int sh_from_level = 0;  // the level its bands join (recon::ShFromLevelIndex; 0: the last alone)
   int orbit_frames = 60;
   std::string Describe() const;
 };

@@ -1,5 +1,6 @@
 #include "recon_cuda/run/reconstruct_options.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "common/errors.h"
@@ -43,9 +44,7 @@ void ReconstructOptions::Check() const {
     Fail("--refine-poses", "on", "refines poses in Gauss-Newton only", "use --solver gn, or --refine-poses off");
   }
   CheckCameraRefinement(poses, refine_focal);
-  if (sh_from_level < 0 || sh_from_level > 6) {
-    Fail("--sh-from-level", std::to_string(sh_from_level), "must be a level, 1 (the first) to 6, or 0 (the last)");
-  }
+  CheckShFromLevel(sh_from_level);
   if (refine_poses_from < 1 || refine_poses_from > 6) {
     Fail("--refine-poses-from", std::to_string(refine_poses_from), "must be a level, 1 (the first) to 6");
   }
@@ -88,7 +87,7 @@ HierarchyOptions ReconstructOptions::Hierarchy(const Scene& scene, const LevelCh
   h.sparse = !dense;
   h.occupancy = occupancy;
   h.sh_degree = sh_degree;
-  h.sh_from_level = sh_from_level > 0 ? sh_from_level - 1 : h.levels - 1;
+  h.sh_from_level = ShFromLevelIndex(sh_from_level, choice);
   SetHierarchyBackground(background, scene, &h);
   if (h.solver.smooth_grid < 0) h.solver.smooth_grid = h.fixed_background ? 0.0 : kAutoSmoothGrid;
   if (solver.type == SolverType::kAdam) h.solver.smooth_grid = h.solver.smooth_shells = 0;  // Gauss-Newton only
@@ -118,6 +117,24 @@ bool FixedBackground(BackgroundChoice background, const Scene& scene) {
 
 void CheckShDegree(int sh_degree) {
   if (sh_degree < 0 || sh_degree > 2) Fail("--sh-degree", std::to_string(sh_degree), "must be 0, 1 or 2");
+}
+
+void CheckShFromLevel(int sh_from_level) {
+  if (sh_from_level < -5 || sh_from_level > 6) {
+    Fail("--sh-from-level", std::to_string(sh_from_level),
+         "must be a level, 1 (the first) to 6, or counted from the last: 0 (the last), -1 (the last two) to -5");
+  }
+}
+
+int ShFromLevelIndex(int sh_from_level, const LevelChoice& choice) {
+  const int last = choice.levels - 1;
+  if (sh_from_level <= 0) return std::max(0, last + sh_from_level);  // the last levels, or all there are
+  if (sh_from_level - 1 > last && !choice.automatic) {
+    Fail("--sh-from-level", std::to_string(sh_from_level),
+         StrCat("is past the last of the ", choice.levels, " levels: no level would solve the bands"),
+         StrCat("use 1 to ", choice.levels, ", or 0 for the last level"));
+  }
+  return std::min(sh_from_level - 1, last);  // levels from the photos: at most their last
 }
 
 void CheckCameraRefinement(PoseChoice poses, bool refine_focal) {

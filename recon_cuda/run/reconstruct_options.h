@@ -86,8 +86,8 @@ struct ReconstructOptions {
   // scale of fx and fy (PoseParam's value 3), its own per photo; false: the imported intrinsics.
   bool refine_focal = false;
   // View-dependent colour: spherical harmonics of this degree (0, 1 or 2) beyond each cell's
-  // colour (ray_types.h ShParam); 0: none. Solved from level sh_from_level on (1: the first; 0,
-  // the default: the last level alone, which measured faster and better on lego, docs/tuning.md).
+  // colour (ray_types.h ShParam); 0: none. Solved from level sh_from_level on (1: the first;
+  // counted from the last: 0, the default, the last level alone, -1 the last two; ShFromLevelIndex).
   int sh_degree = 0;
   int sh_from_level = 0;
   ResidualSettings residuals;
@@ -139,6 +139,10 @@ void CheckCameraRefinement(PoseChoice poses, bool refine_focal);
 
 // Throws InputError (naming --sh-degree) unless the degree is 0, 1 or 2.
 void CheckShDegree(int sh_degree);
+void CheckShFromLevel(int sh_from_level);  // -5 to 6
+// The 0-based level the bands join: sh_from_level 1..6 counts from the first (past the last: an
+// InputError with set levels, the last with levels from the photos), 0..-5 back from the last.
+int ShFromLevelIndex(int sh_from_level, const LevelChoice& choice);
 
 // Whether `exposure` solves the photos' exposures for this scene (kAuto: COLMAP photos).
 bool SolvesExposures(ExposureChoice exposure, const Scene& scene);

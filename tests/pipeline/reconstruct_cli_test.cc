@@ -239,7 +239,7 @@ TEST_F(ReconstructCli, BadInputsAreNamed) {
   // Each bad value is refused (exit 2) naming its option.
   for (const std::string choice : {"--solver sgd", "--device tpu", "--background sky", "--device CPU", "--levels 9",
                                    "--smooth-shells -1", "--smooth-grid inf", "--init-opacity 1", "--lambda inf",
-                                   "--alpha-weight inf", "--lr-density inf", "--sh-from-level 7",
+                                   "--alpha-weight inf", "--lr-density inf", "--sh-from-level 7", "--sh-from-level -6",
                                    "--cost-tolerance -0.1"}) {
     r = RunCommand(Perf("reconstruct " + ws_.string() + " " + choice));
     EXPECT_EQ(r.exit_code, 2) << choice << ": " << r.output;
@@ -251,6 +251,11 @@ TEST_F(ReconstructCli, BadInputsAreNamed) {
   EXPECT_NE(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("--view-image"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("nosuch.png"), std::string::npos) << r.output;
+  EXPECT_EQ(ReadFileToString(ws_ / "recon" / "log.jsonl"), log_before);
+  // Bands from a level past the set ones would be no bands at all: refused before anything runs.
+  r = RunCommand(Perf("reconstruct " + ws_.string() + " --levels 2 --start-resolution 8 --sh-degree 1 --sh-from-level 3"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("past the last of the 2 levels"), std::string::npos) << r.output;
   EXPECT_EQ(ReadFileToString(ws_ / "recon" / "log.jsonl"), log_before);
   r = RunCommand(Perf("render " + ws_.string() + " --split val"));
   EXPECT_EQ(r.exit_code, 2) << r.output;

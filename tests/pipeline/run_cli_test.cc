@@ -81,7 +81,7 @@ TEST_F(RunCli, RunsEveryStageThenSkipsWhatIsUpToDate) {
   r = RunCommand(test::PerfBinary() + " run --workspace " + ws_.string());
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("--images"), std::string::npos) << r.output;
-  for (const std::string bad : {"--preset fast", "--sh-degree 3", "--cost-tolerance 1"}) {
+  for (const std::string bad : {"--preset fast", "--sh-degree 3", "--sh-from-level -6", "--cost-tolerance 1"}) {
     r = RunCommand(test::PerfBinary() + " run --nerf " + (dir_ / "transforms.json").string() + " --workspace " +
                    ws_.string() + " " + bad);
     EXPECT_EQ(r.exit_code, 2) << bad << ": " << r.output;
@@ -89,9 +89,9 @@ TEST_F(RunCli, RunsEveryStageThenSkipsWhatIsUpToDate) {
   }
 }
 
-// The preview and high presets solve view-dependent colour at their last level (default does
-// not), and --sh-degree overrides the preset's.
-TEST_F(RunCli, PreviewAndHighPresetsSolveViewDependence) {
+// Every preset solves view-dependent colour (preview and high at their last level, default from
+// the level before), and --sh-degree and --sh-from-level override the preset's.
+TEST_F(RunCli, PresetsSolveViewDependence) {
   const auto sh_degree = [&](const std::string& extra) {
     const auto r = RunCommand(test::PerfBinary() + " run --nerf " + (dir_ / "transforms.json").string() +
                               " --workspace " + ws_.string() + " --levels 1 --iterations 2 --max-size 24 --force " +
@@ -104,10 +104,24 @@ TEST_F(RunCli, PreviewAndHighPresetsSolveViewDependence) {
   };
   EXPECT_EQ(sh_degree("--preset high"), 1);
   EXPECT_EQ(sh_degree("--preset high --sh-degree 0"), 0);
-  EXPECT_EQ(sh_degree("--preset default"), 0);
-  EXPECT_EQ(sh_degree("--preset default --sh-degree 1"), 1);
+  EXPECT_EQ(sh_degree("--preset default"), 1);
+  EXPECT_EQ(sh_degree("--preset default --sh-degree 0"), 0);
   EXPECT_EQ(sh_degree("--preset preview"), 1);
   EXPECT_EQ(sh_degree("--preset preview --sh-degree 0"), 0);
+  // The level the bands join (recon.json's is 1-based): the default preset's the last two, the
+  // preview preset's the last alone, or --sh-from-level's.
+  const auto from_level = [&](const std::string& extra, const std::string& said) {
+    const auto r = RunCommand(test::PerfBinary() + " run --nerf " + (dir_ / "transforms.json").string() +
+                              " --workspace " + ws_.string() + " --levels 2 --iterations 1 --max-size 24 --force " +
+                              extra);
+    EXPECT_EQ(r.exit_code, 0) << extra << ": " << r.output;
+    EXPECT_NE(r.output.find("view-dependent colour (degree 1) " + said), std::string::npos) << extra << ": " << r.output;
+    return nlohmann::json::parse(ReadFileToString(ws_ / "recon" / "recon.json"))["sh_from_level"].get<int>();
+  };
+  EXPECT_EQ(from_level("--preset default", "at the last 2 levels"), 1);
+  EXPECT_EQ(from_level("--preset preview", "at the last level"), 2);
+  EXPECT_EQ(from_level("--preset preview --sh-from-level -1", "at the last 2 levels"), 1);
+  EXPECT_EQ(from_level("--preset default --sh-from-level 2", "from level 2"), 2);
 }
 
 // Stops `perf run` with `sig` once level 0's checkpoint is written (the solve is then inside level 1).

@@ -63,6 +63,9 @@ TEST(ReconstructOptionsTest, TheHierarchyIsDerivedForTheScene) {
   ReconstructOptions from_first = o;
   from_first.sh_from_level = 1;
   EXPECT_EQ(from_first.Hierarchy(scene, automatic).sh_from_level, 0);
+  ReconstructOptions last_two = o;
+  last_two.sh_from_level = -1;
+  EXPECT_EQ(last_two.Hierarchy(scene, automatic).sh_from_level, h.levels - 2) << "-1: the last two levels";
   // COLMAP photos without alpha: learned shells, the automatic grid smoothness, exposures solved.
   EXPECT_FALSE(h.fixed_background);
   EXPECT_EQ(h.solver.smooth_grid, kAutoSmoothGrid);
@@ -166,6 +169,29 @@ TEST_F(HierarchyMemoryTest, ALevelThatDoesNotFitEndsAutomaticLevelsAtTheOneBefor
   // Levels as given: the level that does not fit is an error.
   o.stop_when_out_of_memory = false;
   EXPECT_THROW(SolveHierarchy(backend.get(), scene.geometry, views, o, {}, {}), ResourceError);
+}
+
+// --sh-from-level: 1..6 from the first level, 0..-5 back from the last; past the last level an
+// error with set levels, the last with levels from the photos.
+TEST(HierarchyOptionsTest, ShFromLevelCountsFromEitherEnd) {
+  const LevelChoice set{.levels = 3, .automatic = false};
+  const LevelChoice automatic{.levels = 3, .automatic = true};
+  EXPECT_EQ(ShFromLevelIndex(1, set), 0);
+  EXPECT_EQ(ShFromLevelIndex(3, set), 2);
+  EXPECT_EQ(ShFromLevelIndex(0, set), 2);
+  EXPECT_EQ(ShFromLevelIndex(-1, set), 1);
+  EXPECT_EQ(ShFromLevelIndex(-2, set), 0);
+  EXPECT_EQ(ShFromLevelIndex(-5, set), 0) << "more levels back than there are: all of them";
+  EXPECT_EQ(ShFromLevelIndex(6, automatic), 2) << "levels from the photos: at most the last";
+  try {
+    ShFromLevelIndex(4, set);
+    ADD_FAILURE() << "level 4 of 3 accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("--sh-from-level"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("past the last of the 3 levels"), std::string::npos) << e.what();
+  }
+  for (int bad : {-6, 7}) EXPECT_THROW(CheckShFromLevel(bad), InputError) << bad;
+  for (int good : {-5, 0, 6}) EXPECT_NO_THROW(CheckShFromLevel(good)) << good;
 }
 
 // View dependence from a later level (HierarchyOptions::sh_from_level): the levels before carry
