@@ -19,7 +19,7 @@
 #   sh       lego 50x50, --sh-degree 0 against 1 on each build: the ratio of solver seconds
 #   passes   perf_bench_cpu on the new build's lego200 128^3 checkpoint: samples/s of the sparse
 #            passes against the same volume dense (--as-dense), each build
-#   bonsai   ../shared/data/bonsai as `perf run --preset default` runs it (import at 400 px, then
+#   bonsai   ../shared/data/bonsai as each build's `perf run --preset default` runs it (import at 400 px, then
 #            each build's reconstruct with held-out PSNR after every iteration, export and eval;
 #            about 45 min for the base, 15 for the new): time to the base's final PSNR - TOL,
 #            held-out and in-mask PSNR of eval, peak resident memory of the stages (/usr/bin/time)
@@ -154,14 +154,17 @@ for s in "${SCENARIOS[@]}"; do
       [ -d "$DATA/bonsai" ] || { echo "bonsai: $DATA/bonsai not found" >&2; exit 2; }
       # perf run --preset default's stages one by one, so that the solve logs the held-out PSNR
       # after every iteration: its import (once, by the new build), then each build's reconstruct
-      # (the preset's settings are perf reconstruct's defaults), export and eval. Peak: the
-      # largest of the three stages'.
+      # (the preset's settings: perf reconstruct's defaults, and since ee2268c the new build's
+      # view-dependent colour from the level before the last; the base's preset had none),
+      # export and eval. Peak: the largest of the three stages'.
       import bonsai --colmap "$DATA/bonsai/sparse/0" --images "$DATA/bonsai/images" --max-size 400
       for side in base new; do
         side $side
         ws=$(fresh bonsai)
         echo "== bonsai $side"
-        reconstruct "bonsai-$side" "$b" "$ws" --eval-every 1 "${extra[@]}"
+        preset=()
+        [ $side = new ] && [[ " $NEW_ARGS " != *" --sh-"* ]] && preset=(--sh-degree 1 --sh-from-level -1)
+        reconstruct "bonsai-$side" "$b" "$ws" --eval-every 1 "${preset[@]}" "${extra[@]}"
         for stage in export eval; do
           /usr/bin/time -v -o "$OUT/bonsai-$side.$stage.time" "$b/perf" $stage "$ws" -q
         done
