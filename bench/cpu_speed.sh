@@ -155,7 +155,7 @@ for s in "${SCENARIOS[@]}"; do
       # perf run --preset default's stages one by one, so that the solve logs the held-out PSNR
       # after every iteration: its import (once, by the new build), then each build's reconstruct
       # (the preset's settings: perf reconstruct's defaults, and since ee2268c the new build's
-      # view-dependent colour from the level before the last; the base's preset had none),
+      # view-dependent colour from level 2; the base's preset had none),
       # export and eval. Peak: the largest of the three stages'.
       import bonsai --colmap "$DATA/bonsai/sparse/0" --images "$DATA/bonsai/images" --max-size 400
       for side in base new; do
@@ -163,7 +163,7 @@ for s in "${SCENARIOS[@]}"; do
         ws=$(fresh bonsai)
         echo "== bonsai $side"
         preset=()
-        [ $side = new ] && [[ " $NEW_ARGS " != *" --sh-"* ]] && preset=(--sh-degree 1 --sh-from-level -1)
+        [ $side = new ] && [[ " $NEW_ARGS " != *" --sh-"* ]] && preset=(--sh-degree 1 --sh-from-level 2)
         reconstruct "bonsai-$side" "$b" "$ws" --eval-every 1 "${preset[@]}" "${extra[@]}"
         for stage in export eval; do
           /usr/bin/time -v -o "$OUT/bonsai-$side.$stage.time" "$b/perf" $stage "$ws" -q

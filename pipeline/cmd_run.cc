@@ -48,7 +48,7 @@ void AddRunCommand(CLI::App& app) {
                   "Solve each photo's exposure (gain and offset per channel; auto: for COLMAP photos)");
   AddCameraRefinementOptions(cmd, &o.poses, &o.refine_focal);
   AddShDegreeOption(cmd, &o.sh_degree, "the preset's: 1");
-  AddShFromLevelOption(cmd, &o.sh_from_level, "the preset's: -1 (the last two levels) for default, 0 for preview and high");
+  AddShFromLevelOption(cmd, &o.sh_from_level, "the preset's: 2 for default (the last level when there are fewer), 0 for preview and high");
   AddCostToleranceOption(cmd, &o.cost_tolerance);
   cmd->add_flag("--keep-bad-poses", o.keep_bad_poses,
                 "Train and score on COLMAP photos whose pose looks wrong too (by default they are left out and named)");

@@ -311,11 +311,12 @@ void RunOptions::Check() const {
 }
 
 namespace {
-// Where the bands are solved, in words (recon::ShFromLevelIndex says how the value counts).
-std::string ShLevels(int sh_from_level) {
+// Where the bands are solved, in words (recon::ShFromLevelIndex says how the value counts);
+// levels 0: from the photos.
+std::string ShLevels(int sh_from_level, int levels) {
   if (sh_from_level == 0) return "at the last level";
   if (sh_from_level < 0) return StrCat("at the last ", 1 - sh_from_level, " levels");
-  return StrCat("from level ", sh_from_level);
+  return StrCat("from level ", sh_from_level, levels == 0 ? " (or the last, if there are fewer)" : "");
 }
 }  // namespace
 
@@ -330,7 +331,7 @@ std::string PresetSettings::Describe() const {
     << (levels > 0 ? std::to_string(levels) + " levels" : "levels from the photos (finest grid " + finest + ")")
     << " x at most " << iterations
     << " Gauss-Newton iterations, "
-    << (sh_degree > 0 ? StrCat("view-dependent colour (degree ", sh_degree, ") ", ShLevels(sh_from_level), ", ") : "")
+    << (sh_degree > 0 ? StrCat("view-dependent colour (degree ", sh_degree, ") ", ShLevels(sh_from_level, levels), ", ") : "")
     << orbit_frames << " orbit frames";
   return s.str();
 }
@@ -340,9 +341,10 @@ PresetSettings PresetFor(const RunOptions& o) {
   // view-dependent colour (degree 1 at the last level: +0.26 dB held-out on the example at 1.3x
   // the time; docs/tuning.md "View dependence by default where it stays within the bars");
   // default: the paper's 30 iterations per level at a size a CPU still manages, view-dependent
-  // colour from the level before the last (bonsai: 21.73 / 21.96 dB against 21.27 / 21.20
-  // without, issue 33's base PSNR 5.7x sooner than that base; docs/tuning.md "Bonsai's bands from
-  // the 64^3 level");
+  // colour from level 2 (64^3) on, or at the last level when there are fewer (bonsai: 21.73 /
+  // 21.96 dB against 21.27 / 21.20 without, issue 33's base PSNR 5.7x sooner than that base; the
+  // example's 2 levels lose 0.28 dB with bands at 32^3; docs/tuning.md "The default preset solves
+  // the bands from 64^3");
   // high: full-size images, one more level (meant for a GPU) and view-dependent colour (degree 1
   // at the last level: +0.44 dB held-out on bonsai at 1.9x the time, docs/tuning.md).
   PresetSettings p;
@@ -352,7 +354,7 @@ PresetSettings PresetFor(const RunOptions& o) {
     p = {.max_size = 0, .levels = 0, .max_resolution = 1024, .iterations = 30, .sh_degree = 1, .sh_from_level = 0,
          .orbit_frames = 120};
   } else {
-    p = {.max_size = 400, .levels = 0, .iterations = 30, .sh_degree = 1, .sh_from_level = -1, .orbit_frames = 60};
+    p = {.max_size = 400, .levels = 0, .iterations = 30, .sh_degree = 1, .sh_from_level = 2, .orbit_frames = 60};
   }
   if (o.max_resolution > 0) {  // levels from the photos, within this
     p.max_resolution = o.max_resolution;
@@ -362,7 +364,11 @@ PresetSettings PresetFor(const RunOptions& o) {
   if (o.levels > 0) p.levels = o.levels;
   if (o.iterations > 0) p.iterations = o.iterations;
   if (o.sh_degree >= 0) p.sh_degree = o.sh_degree;
-  if (o.sh_from_level) p.sh_from_level = *o.sh_from_level;
+  if (o.sh_from_level) {
+    p.sh_from_level = *o.sh_from_level;  // the reconstruction checks it against the levels
+  } else if (p.levels > 0 && p.sh_from_level > p.levels) {
+    p.sh_from_level = 0;  // the preset's level past the set ones: the last
+  }
   return p;
 }
 

@@ -90,7 +90,8 @@ TEST_F(RunCli, RunsEveryStageThenSkipsWhatIsUpToDate) {
 }
 
 // Every preset solves view-dependent colour (preview and high at their last level, default from
-// the level before), and --sh-degree and --sh-from-level override the preset's.
+// level 2, or the last when there are fewer), and --sh-degree and --sh-from-level override the
+// preset's.
 TEST_F(RunCli, PresetsSolveViewDependence) {
   const auto sh_degree = [&](const std::string& extra) {
     const auto r = RunCommand(test::PerfBinary() + " run --nerf " + (dir_ / "transforms.json").string() +
@@ -108,8 +109,8 @@ TEST_F(RunCli, PresetsSolveViewDependence) {
   EXPECT_EQ(sh_degree("--preset default --sh-degree 0"), 0);
   EXPECT_EQ(sh_degree("--preset preview"), 1);
   EXPECT_EQ(sh_degree("--preset preview --sh-degree 0"), 0);
-  // The level the bands join (recon.json's is 1-based): the default preset's the last two, the
-  // preview preset's the last alone, or --sh-from-level's.
+  // The level the bands join (recon.json's is 1-based): the default preset's level 2 (with one
+  // level, the sh_degree cases above, the last), the preview preset's the last, or --sh-from-level's.
   const auto from_level = [&](const std::string& extra, const std::string& said) {
     const auto r = RunCommand(test::PerfBinary() + " run --nerf " + (dir_ / "transforms.json").string() +
                               " --workspace " + ws_.string() + " --levels 2 --iterations 1 --max-size 24 --force " +
@@ -118,10 +119,10 @@ TEST_F(RunCli, PresetsSolveViewDependence) {
     EXPECT_NE(r.output.find("view-dependent colour (degree 1) " + said), std::string::npos) << extra << ": " << r.output;
     return nlohmann::json::parse(ReadFileToString(ws_ / "recon" / "recon.json"))["sh_from_level"].get<int>();
   };
-  EXPECT_EQ(from_level("--preset default", "at the last 2 levels"), 1);
+  EXPECT_EQ(from_level("--preset default", "from level 2"), 2);
   EXPECT_EQ(from_level("--preset preview", "at the last level"), 2);
   EXPECT_EQ(from_level("--preset preview --sh-from-level -1", "at the last 2 levels"), 1);
-  EXPECT_EQ(from_level("--preset default --sh-from-level 2", "from level 2"), 2);
+  EXPECT_EQ(from_level("--preset default --sh-from-level 1", "from level 1"), 1);
 }
 
 // Stops `perf run` with `sig` once level 0's checkpoint is written (the solve is then inside level 1).
