@@ -21,7 +21,7 @@
 #            passes against the same volume dense (--as-dense), each build
 #   bonsai   ../shared/data/bonsai as each build's `perf run --preset default` runs it (import at 400 px, then
 #            each build's reconstruct with held-out PSNR after every iteration, export and eval;
-#            about 45 min for the base, 15 for the new): time to the base's final PSNR - TOL,
+#            about 45 min for the base, 25 for the new): time to the base's final PSNR - TOL,
 #            held-out and in-mask PSNR of eval, peak resident memory of the stages (/usr/bin/time)
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -73,6 +73,7 @@ void AddRunCommand(CLI::App& app) {
     o.comm = &World();
     const bool root = o.comm->IsRoot();
     if (!root) o.quiet = true;
+    o.Check();  // before the lock, which makes the folder: a bad command line leaves no workspace
     std::unique_ptr<WorkspaceLock> lock;
     if (root) lock = LockWorkspace(o.workspace, "run", true);
     const StopOnCtrlC ctrl_c;

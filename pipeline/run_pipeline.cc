@@ -16,6 +16,7 @@
 #include "export/export.h"
 #include "pipeline/stage_progress.h"
 #include "recon_cuda/data/checkpoint.h"
+#include "recon_cuda/run/level_choice.h"
 #include "recon_cuda/run/reconstruct.h"
 #include "sfm_import/colmap_runner.h"
 #include "sfm_import/importer.h"
@@ -300,7 +301,11 @@ void RunOptions::Check() const {
   if (max_resolution < 0) throw InputError(kCommandLine, "--max-resolution", StrCat(max_resolution), "must be >= 0");
   // The reconstruction's own checks of what perf run passes it, before the import.
   if (sh_degree != -1) recon::CheckShDegree(sh_degree);  // -1: the preset's
-  if (sh_from_level) recon::CheckShFromLevel(*sh_from_level);
+  if (sh_from_level) {
+    recon::CheckShFromLevel(*sh_from_level);
+    const int set_levels = PresetFor(*this).levels;  // 0: from the photos, known after the import
+    if (set_levels > 0) recon::ShFromLevelIndex(*sh_from_level, {.levels = set_levels, .automatic = false});
+  }
   recon::SolverOptions solver;
   solver.cost_tolerance = cost_tolerance;
   solver.Check();

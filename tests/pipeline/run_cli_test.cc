@@ -123,6 +123,13 @@ TEST_F(RunCli, PresetsSolveViewDependence) {
   EXPECT_EQ(from_level("--preset preview", "at the last level"), 2);
   EXPECT_EQ(from_level("--preset preview --sh-from-level -1", "at the last 2 levels"), 1);
   EXPECT_EQ(from_level("--preset default --sh-from-level 1", "from level 1"), 1);
+  // A level past the preset's set ones is refused before anything is written.
+  const fs::path fresh = dir_ / "never_written";
+  const auto r = RunCommand(test::PerfBinary() + " run --nerf " + (dir_ / "transforms.json").string() +
+                            " --workspace " + fresh.string() + " --preset preview --sh-from-level 3");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("past the last of the 2 levels"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(fresh)) << r.output;
 }
 
 // Stops `perf run` with `sig` once level 0's checkpoint is written (the solve is then inside level 1).
