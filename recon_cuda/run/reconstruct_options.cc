@@ -129,7 +129,7 @@ void CheckShFromLevel(int sh_from_level) {
 int ShFromLevelIndex(int sh_from_level, const LevelChoice& choice) {
   const int last = choice.levels - 1;
   if (sh_from_level <= 0) return std::max(0, last + sh_from_level);  // the last levels, or all there are
-  if (sh_from_level - 1 > last && !choice.automatic) {
+  if (sh_from_level > choice.levels && !choice.automatic) {
     Fail("--sh-from-level", std::to_string(sh_from_level),
          StrCat("is past the last of the ", choice.levels, " levels: no level would solve the bands"),
          StrCat("use 1 to ", choice.levels, ", or 0 for the last level"));

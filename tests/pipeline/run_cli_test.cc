@@ -27,10 +27,12 @@ using test::RunCommand;
 class RunCli : public ::testing::Test {
  protected:
   void SetUp() override { test::MakeSyntheticWorkspace(dir_.path(), dir_ / "imported"); }
-  std::string Run(const std::string& extra) {
-    return test::PerfBinary() + " run --nerf " + (dir_ / "transforms.json").string() + " --workspace " + ws_.string() +
-           " --preset preview " + extra;
+  // `perf run` on the synthetic scene into `ws`; Run: into ws_ with the preview preset.
+  std::string RunIn(const fs::path& ws, const std::string& extra) {
+    return test::PerfBinary() + " run --nerf " + (dir_ / "transforms.json").string() + " --workspace " + ws.string() +
+           " " + extra;
   }
+  std::string Run(const std::string& extra) { return RunIn(ws_, "--preset preview " + extra); }
   nlohmann::json RunJson() { return nlohmann::json::parse(ReadFileToString(ws_ / "run.json")); }
   // Every output is there and reads back: scene, checkpoints, manifests, report.
   void ExpectCompleteWorkspace(int levels) {
@@ -82,8 +84,7 @@ TEST_F(RunCli, RunsEveryStageThenSkipsWhatIsUpToDate) {
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("--images"), std::string::npos) << r.output;
   for (const std::string bad : {"--preset fast", "--sh-degree 3", "--sh-from-level -6", "--cost-tolerance 1"}) {
-    r = RunCommand(test::PerfBinary() + " run --nerf " + (dir_ / "transforms.json").string() + " --workspace " +
-                   ws_.string() + " " + bad);
+    r = RunCommand(RunIn(ws_, bad));
     EXPECT_EQ(r.exit_code, 2) << bad << ": " << r.output;
     EXPECT_NE(r.output.find(bad.substr(0, bad.find(' '))), std::string::npos) << r.output;
   }
@@ -93,14 +94,17 @@ TEST_F(RunCli, RunsEveryStageThenSkipsWhatIsUpToDate) {
 // level 2, or the last when there are fewer), and --sh-degree and --sh-from-level override the
 // preset's.
 TEST_F(RunCli, PresetsSolveViewDependence) {
-  const auto sh_degree = [&](const std::string& extra) {
-    const auto r = RunCommand(test::PerfBinary() + " run --nerf " + (dir_ / "transforms.json").string() +
-                              " --workspace " + ws_.string() + " --levels 1 --iterations 2 --max-size 24 --force " +
-                              extra);
+  // A quick run of every stage again with `extra`: what it printed and its recon.json.
+  const auto run = [&](const std::string& extra) {
+    const auto r = RunCommand(RunIn(ws_, "--max-size 24 --force " + extra));
     EXPECT_EQ(r.exit_code, 0) << extra << ": " << r.output;
-    const bool said = r.output.find("view-dependent colour (degree 1)") != std::string::npos;
-    const int degree = nlohmann::json::parse(ReadFileToString(ws_ / "recon" / "recon.json"))["sh_degree"];
-    EXPECT_EQ(said, degree == 1) << extra << ": " << r.output;
+    return std::pair{r.output, nlohmann::json::parse(ReadFileToString(ws_ / "recon" / "recon.json"))};
+  };
+  const auto sh_degree = [&](const std::string& extra) {
+    const auto [output, recon] = run("--levels 1 --iterations 2 " + extra);
+    const bool said = output.find("view-dependent colour (degree 1)") != std::string::npos;
+    const int degree = recon["sh_degree"];
+    EXPECT_EQ(said, degree == 1) << extra << ": " << output;
     return degree;
   };
   EXPECT_EQ(sh_degree("--preset high"), 1);
@@ -112,12 +116,9 @@ TEST_F(RunCli, PresetsSolveViewDependence) {
   // The level the bands join (recon.json's is 1-based): the default preset's level 2 (with one
   // level, the sh_degree cases above, the last), the preview preset's the last, or --sh-from-level's.
   const auto from_level = [&](const std::string& extra, const std::string& said) {
-    const auto r = RunCommand(test::PerfBinary() + " run --nerf " + (dir_ / "transforms.json").string() +
-                              " --workspace " + ws_.string() + " --levels 2 --iterations 1 --max-size 24 --force " +
-                              extra);
-    EXPECT_EQ(r.exit_code, 0) << extra << ": " << r.output;
-    EXPECT_NE(r.output.find("view-dependent colour (degree 1) " + said), std::string::npos) << extra << ": " << r.output;
-    return nlohmann::json::parse(ReadFileToString(ws_ / "recon" / "recon.json"))["sh_from_level"].get<int>();
+    const auto [output, recon] = run("--levels 2 --iterations 1 " + extra);
+    EXPECT_NE(output.find("view-dependent colour (degree 1) " + said), std::string::npos) << extra << ": " << output;
+    return recon["sh_from_level"].get<int>();
   };
   EXPECT_EQ(from_level("--preset default", "from level 2"), 2);
   EXPECT_EQ(from_level("--preset preview", "at the last level"), 2);
@@ -125,8 +126,7 @@ TEST_F(RunCli, PresetsSolveViewDependence) {
   EXPECT_EQ(from_level("--preset default --sh-from-level 1", "from level 1"), 1);
   // A level past the preset's set ones is refused before anything is written.
   const fs::path fresh = dir_ / "never_written";
-  const auto r = RunCommand(test::PerfBinary() + " run --nerf " + (dir_ / "transforms.json").string() +
-                            " --workspace " + fresh.string() + " --preset preview --sh-from-level 3");
+  const auto r = RunCommand(RunIn(fresh, "--preset preview --sh-from-level 3"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("past the last of the 2 levels"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(fresh)) << r.output;
