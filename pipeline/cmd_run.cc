@@ -27,7 +27,8 @@ void AddRunCommand(CLI::App& app) {
   CLI::App* cmd = app.add_subcommand(
       "run",
       "Photos (or a COLMAP model, or a NeRF transforms.json) to masks, volume, mesh and report: runs sfm, import, "
-      "reconstruct, export and eval, skipping stages whose outputs are up to date. Ctrl-C stops cleanly; run the same "
+      "reconstruct, export and eval, skipping stages whose outputs are up to date and made with the same settings. "
+      "Ctrl-C stops cleanly; run the same "
       "command again to resume.");
   cmd->add_option("--images", args->images, "Folder of photos (alone: runs COLMAP first; with --colmap: its photos)");
   cmd->add_option("--colmap", args->colmap, "Existing COLMAP sparse model folder (e.g. project/sparse/0)");

@@ -147,10 +147,14 @@ class Runner {
   void Import(const fs::path& model, StageReport* s) {
     const fs::path input = o_.nerf.empty() ? model : o_.nerf;
     const fs::path scene = o_.workspace / "scene.json";
-    if (!o_.force && NewerThan(scene, NewestInput(input)) && !(o_.keep_bad_poses && AnyExcluded(ReadScene(scene)))) {
-      s->skipped = true;
-      s->reason = "scene.json is newer than " + input.filename().string();
-      return;
+    if (!o_.force && NewerThan(scene, NewestInput(input))) {
+      const std::string changed = ImportChanges(scene, input);
+      if (changed.empty()) {
+        s->skipped = true;
+        s->reason = "scene.json is newer than " + input.string();
+        return;
+      }
+      Say("import: " + changed + ": importing again");
     }
     ImportOptions io;
     if (o_.nerf.empty()) {
@@ -174,6 +178,38 @@ class Runner {
     s->reason = StrCat(r.scene.images.size(), " images");
   }
 
+  // Why the workspace's scene.json is not what this command would import from `input`: another
+  // source, photo size or bad-pose rule (empty: it is). An unreadable one is imported again.
+  std::string ImportChanges(const fs::path& scene_path, const fs::path& input) const {
+    Scene scene;
+    try {
+      scene = ReadScene(scene_path);
+    } catch (const Error& e) {
+      return "scene.json cannot be read (" + std::string(e.what()) + ")";
+    }
+    const SceneSource& src = scene.source;
+    const auto same_path = [](const std::string& recorded, const fs::path& p) {
+      return recorded == fs::absolute(p).lexically_normal().string();
+    };
+    if (src.type != (o_.nerf.empty() ? "colmap" : "nerf") || !same_path(src.path, input)) {
+      return "scene.json was imported from " + src.path;
+    }
+    if (o_.nerf.empty() && !o_.images.empty() && !same_path(src.images, o_.images)) {
+      return "scene.json's photos are from " + src.images;
+    }
+    if (src.max_size != preset_.max_size) {
+      const auto size = [](int max_size, int downscale) {
+        if (max_size < 0) return std::string("a size it does not record (an older perf)");
+        return max_size > 0 ? StrCat("at most ", max_size, " px") : downscale > 1 ? StrCat("1/", downscale, " size")
+                                                                                  : std::string("full size");
+      };
+      return "scene.json holds photos of " + size(src.max_size, src.downscale) + ", this run asks for " +
+             size(preset_.max_size, 1);
+    }
+    if (o_.keep_bad_poses && AnyExcluded(scene)) return "scene.json leaves out photos that --keep-bad-poses keeps";
+    return {};
+  }
+
   void Reconstruct(StageReport* s) {
     recon::ReconstructOptions ro = o_.ReconstructStage(preset_);
     if (o_.comm != nullptr) o_.comm->Barrier();  // the other ranks start from this workspace (RunAsRank)
@@ -192,6 +228,8 @@ class Runner {
     if (r.already_complete) {
       s->skipped = true;
       s->reason = "every level is checkpointed";
+    } else if (!r.settings_changed.empty()) {
+      s->reason = "from the start: the settings changed (" + r.settings_changed + ")";
     } else {
       s->reason = ro.resume ? "resumed after the last checkpoint" : "from the start";
     }
@@ -200,11 +238,15 @@ class Runner {
   void Export(StageReport* s) {
     const auto checkpoint_time = ModTime(r_->final_checkpoint);
     if (!o_.force && NewerThan(o_.workspace / "export.json", checkpoint_time)) {
-      s->skipped = true;
-      s->reason = "export.json is newer than the checkpoint";
       const nlohmann::json j = nlohmann::json::parse(ReadFileToString(o_.workspace / "export.json"), nullptr, false);
-      if (j.is_object() && j.contains("masks")) r_->mask_coverage = j["masks"].value("mean_coverage", 0.0);
-      return;
+      // The preset's orbit: another frame count is exported again.
+      const int orbit = j.is_object() && j.contains("renders") ? j["renders"].value("orbit", -1) : -1;
+      if (orbit == preset_.orbit_frames) {
+        s->skipped = true;
+        s->reason = "export.json is newer than the checkpoint";
+        if (j.contains("masks")) r_->mask_coverage = j["masks"].value("mean_coverage", 0.0);
+        return;
+      }
     }
     exporter::ExportOptions eo;
     eo.workspace = o_.workspace;
@@ -279,6 +321,7 @@ recon::ReconstructOptions RunOptions::ReconstructStage(const PresetSettings& pre
   ro.preview_every = live != nullptr ? 1 : 0;  // the live page shows the newest
   ro.preview_image = view_image;
   ro.resume = fresh && !force;
+  ro.restart_if_settings_changed = true;  // the outputs must be what this command line asks for
   return ro;
 }
 

@@ -317,7 +317,7 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
             [](const SceneImage& a, const SceneImage& b) { return a.name < b.name; });
   r->scene.source = {"colmap", fs::absolute(model_dir).lexically_normal().string(),
                      fs::absolute(photos.dir).lexically_normal().string(),
-                     format == colmap::ModelFormat::kBinary ? "binary" : "text", o.downscale};
+                     format == colmap::ModelFormat::kBinary ? "binary" : "text", o.downscale, o.max_size};
   std::vector<BoundsPoint> points;
   points.reserve(rec.points3D.size());
   for (const auto& [id, p] : rec.points3D) {
@@ -385,7 +385,7 @@ void ImportNerf(const ImportOptions& o, ImportResult* r) {
     r->scene.images.push_back(std::move(si));
   }
   r->scene.source = {"nerf", fs::absolute(o.nerf_json).lexically_normal().string(),
-                     fs::absolute(base).lexically_normal().string(), "json", o.downscale};
+                     fs::absolute(base).lexically_normal().string(), "json", o.downscale, o.max_size};
   ImportOptions no = o;
   no.bounds.align_to_up = false;  // the json's world frame is meaningful: keep its axes
   PlaceBoundsAndShells(no, {}, source, r);

@@ -124,7 +124,8 @@ std::string SceneToJson(const Scene& scene) {
                  {"path", scene.source.path},
                  {"images", scene.source.images},
                  {"format", scene.source.format},
-                 {"downscale", scene.source.downscale}};
+                 {"downscale", scene.source.downscale},
+                 {"max_size", scene.source.max_size}};
   j["color"] = {{"encoding", scene.color_encoding}, {"background", Vec3ToJson(scene.background)}};
   j["box"] = {{"center", Vec3ToJson(scene.box.center)},
               {"size", Vec3ToJson(scene.box.size)},
@@ -190,6 +191,8 @@ Scene SceneFromJson(const std::string& text, const std::string& name) {
   s.source.images = r.String(r.Get(src, "images", "source"), "source.images");
   s.source.format = r.String(r.Get(src, "format", "source"), "source.format");
   s.source.downscale = r.Int(r.Get(src, "downscale", "source"), "source.downscale");
+  // Recorded since 2026-12-06; -1 in older scenes.
+  s.source.max_size = src.contains("max_size") ? r.Int(src["max_size"], "source.max_size") : -1;
   const json& color = r.Get(j, "color", "");
   s.color_encoding = r.String(r.Get(color, "encoding", "color"), "color.encoding");
   s.background = r.Vec3(r.Get(color, "background", "color"), "color.background");

@@ -79,6 +79,7 @@ struct SceneSource {
   std::string images;  // the image folder (absolute)
   std::string format;  // "binary", "text" or "json"
   int downscale = 1;   // the integer factor applied on import (1: none)
+  int max_size = 0;    // or the longest side the photos were fitted into on import (0: none; -1: not recorded)
 };
 
 struct Scene {

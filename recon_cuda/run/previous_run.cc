@@ -12,10 +12,11 @@ namespace fs = std::filesystem;
 namespace perf::recon {
 namespace {
 
-// The files of a run in recon/: checkpoints (checkpoint.h's names), recon.json, log.jsonl.
+// The files of a run in recon/: checkpoints (checkpoint.h's names), recon.json, log.jsonl and
+// settings.json (run_settings.h).
 bool IsRunFile(const fs::path& p) {
   const std::string name = p.filename().string();
-  return name == "recon.json" || name == "log.jsonl" ||
+  return name == "recon.json" || name == "log.jsonl" || name == "settings.json" ||
          (name.rfind("level_", 0) == 0 && p.extension() == ".perfvol");
 }
 

@@ -11,6 +11,7 @@
 #include "recon_cuda/data/checkpoint.h"
 #include "recon_cuda/run/level_monitor.h"
 #include "recon_cuda/run/reconstruct_run.h"
+#include "recon_cuda/run/run_settings.h"
 
 namespace perf::recon {
 namespace {
@@ -156,7 +157,7 @@ class Reconstruction {
                        StrCat("rank ", comm.rank(), " sees other checkpoints than another rank"),
                        "every rank must see the same workspace (a shared file system)");
     }
-    if (!o_.resume || last < 0) return true;
+    if (!o_.resume || last < 0 || !ResumesTheSameFit()) return true;
     const HierarchyOptions& ho = run_.hierarchy;
     const fs::path path = CheckpointPath(o_.workspace, last);
     Checkpoint c = ReadCheckpoint(path);
@@ -181,6 +182,29 @@ class Reconstruction {
     // Constants of this run, whatever an earlier run (perhaps with learned shells) left there.
     if (ho.fixed_background) SetBackgroundShells(start->shape, ho.background.data(), start->x);
     run_.Say(StrCat("resuming after level ", last, " (", path.string(), ")"));
+    return true;
+  }
+
+  // Whether the checkpoints to resume were fitted with these settings (recon/settings.json). When
+  // not, perf run (restart_if_settings_changed) starts over and perf reconstruct --resume
+  // continues; either says what changed. Rank 0 reads the record; every rank takes its answer.
+  bool ResumesTheSameFit() {
+    std::string changes;
+    if (run_.root) {
+      const std::optional<nlohmann::json> before = ReadRunSettings(o_.workspace);
+      if (!before) {
+        changes = "not recorded by the run that made them";
+      } else {
+        for (const std::string& c : SettingsChanges(*before, RunSettings(o_))) changes += (changes.empty() ? "" : ", ") + c;
+      }
+    }
+    if (!run_.comm.Any(!changes.empty())) return true;
+    run_.result.settings_changed = changes;
+    if (o_.restart_if_settings_changed) {
+      run_.Say(StrCat("the checkpoints' settings differ from this run's (", changes, "): fitting from the start"));
+      return false;
+    }
+    run_.Say(StrCat("resuming checkpoints made with other settings (", changes, "); the levels done keep theirs"));
     return true;
   }
 
@@ -220,7 +244,10 @@ class Reconstruction {
       throw InputError((o_.workspace / "scene.json").string(), "--view-image", o_.preview_image,
                        "no training or held-out photo of that name", "use an image name from scene.json");
     }
-    if (start_level == 0 && run_.root) run_.previous.emplace(o_.workspace);
+    if (start_level == 0 && run_.root) {
+      run_.previous.emplace(o_.workspace);
+      WriteFileAtomically(RunSettingsPath(o_.workspace), RunSettings(o_).dump(2) + "\n");
+    }
     if (run_.root) run_.log = JsonLog(o_.workspace / "recon" / "log.jsonl", start_level > 0, "reconstruction log");
     if (start_level > 0) run_.log.Write({{"event", "resume"}, {"level", start_level}});
   }

@@ -8,6 +8,7 @@
 //   recon/level_<k>.perfvol   checkpoint after level k (checkpoint.h)
 //   recon/log.jsonl           one JSON line per solver iteration (and one per level / resume)
 //   recon/recon.json          summary: levels done, final checkpoint, settings, held-out PSNR
+//   recon/settings.json       the options a fresh run started with (run_settings.h), for resumes
 //   preview/recon_l<k>_i<j>.png  with preview_every: a held-out view during the solve
 #pragma once
 
@@ -45,6 +46,9 @@ struct ReconstructResult {
   double test_psnr = 0;             // held-out PSNR of the final level (0: no held-out views)
   std::filesystem::path final_checkpoint;
   bool already_complete = false;    // --resume found every level done
+  // Resume asked for, but the last run's settings differ from this one's (run_settings.h): what
+  // changed, and (restart_if_settings_changed) this run started over; empty: the same or no resume.
+  std::string settings_changed;
   LevelChoice levels_choice;        // how many levels and why
   int ranks = 1;                    // processes that fitted the photos (ReconstructOptions::comm)
   int exposures = 0;                // photos whose exposure was solved (0: none)

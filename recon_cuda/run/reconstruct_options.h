@@ -103,6 +103,10 @@ struct ReconstructOptions {
   PhotoFitOptions photo_fit;
   OccupancyOptions occupancy;  // which bricks a sparse level keeps
   bool resume = false;          // continue after the last checkpoint instead of starting over
+  // With resume: start over instead when the last run's recorded settings (run_settings.h) differ
+  // from these (perf run, whose outputs must be what its command line asks for); false: resume
+  // anyway and name the differences (perf reconstruct --resume, which may add a level).
+  bool restart_if_settings_changed = false;
   int preview_every = 0;        // write a held-out preview every K iterations (0: never)
   std::string preview_image;    // the photo the previews show (scene.json name); empty: the first held-out one
   int eval_every = 0;           // held-out PSNR every K iterations (0: at the end of each level)

@@ -141,6 +141,9 @@ TEST_F(ReconstructCli, ResumeContinuesAfterTheLastLevel) {
   r = RunCommand(Perf("reconstruct " + ws_.string() + " --levels 2 --start-resolution 8 --iterations 2 --resume"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("resuming after level 0"), std::string::npos) << r.output;
+  // An explicit --resume goes on with other settings (here a level more), and names them.
+  EXPECT_NE(r.output.find("resuming checkpoints made with other settings (levels 1 -> 2); the levels done keep theirs"),
+            std::string::npos) << r.output;
   EXPECT_TRUE(fs::exists(ws_ / "recon" / "level_1.perfvol"));
   const std::vector<nlohmann::json> log = ReadLog(ws_ / "recon" / "log.jsonl");
   int resumes = 0, iterations = 0;

@@ -1,5 +1,6 @@
 // `perf run` as a user runs it on a small synthetic capture (NeRF-style transforms.json): every
-// stage runs, a second run skips them all, a newer input re-runs from import; and a run stopped
+// stage runs, a second run skips them all, a newer input re-runs from import, other settings re-run
+// the stages they shape; and a run stopped
 // mid-reconstruction (Ctrl-C, or killed outright) resumes after the last checkpoint and ends
 // with a complete workspace in which no file is damaged; a forced run that fails before its first
 // level leaves the previous result as it was.
@@ -8,9 +9,12 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <thread>
+#include <tuple>
 
 #include "common/atomic_file.h"
 #include "recon_cuda/data/checkpoint.h"
@@ -132,6 +136,52 @@ TEST_F(RunCli, PresetsSolveViewDependence) {
   EXPECT_FALSE(fs::exists(fresh)) << r.output;
 }
 
+// A run whose settings differ from the workspace's runs the stages they shape again, and says
+// why: before, an up-to-date workspace kept the earlier run's photos, fit and orbit whatever the
+// preset or the options asked for.
+TEST_F(RunCli, ChangedSettingsRunTheStagesTheyShape) {
+  const auto stages = [&](const std::string& extra) {
+    const auto r = RunCommand(Run("--levels 1 --iterations 2 " + extra));
+    EXPECT_EQ(r.exit_code, 0) << extra << ": " << r.output;
+    std::map<std::string, std::pair<bool, std::string>> s;  // stage: skipped, reason
+    const nlohmann::json run = RunJson();
+    for (const auto& st : run["stages"]) {
+      s[st["stage"].get<std::string>()] = {st["skipped"].get<bool>(), st["reason"].get<std::string>()};
+    }
+    return std::pair{r.output, s};
+  };
+  stages("--max-size 24");
+  auto [output, s] = stages("--max-size 24 --sh-degree 0");
+  EXPECT_TRUE(s["import"].first) << output;
+  EXPECT_FALSE(s["reconstruct"].first) << output;
+  EXPECT_NE(s["reconstruct"].second.find("sh_degree 1 -> 0"), std::string::npos) << s["reconstruct"].second;
+  EXPECT_NE(output.find("settings differ from this run's (sh_degree 1 -> 0): fitting from the start"),
+            std::string::npos) << output;
+  EXPECT_EQ(nlohmann::json::parse(ReadFileToString(ws_ / "recon" / "recon.json"))["sh_degree"], 0);
+  EXPECT_FALSE(s["export"].first) << "a new fit is exported";
+
+  std::tie(output, s) = stages("--max-size 24 --sh-degree 0");  // the same again: nothing to do
+  for (const auto& [name, st] : s) EXPECT_TRUE(st.first) << name << ": " << st.second;
+
+  // Another photo size: imported again (the old scene.json said nothing, and the fit went on at 24 px).
+  std::tie(output, s) = stages("--max-size 16 --sh-degree 0");
+  EXPECT_FALSE(s["import"].first) << output;
+  EXPECT_NE(output.find("photos of at most 24 px, this run asks for at most 16 px: importing again"), std::string::npos)
+      << output;
+  const Scene scene = ReadScene(ws_ / "scene.json");
+  EXPECT_EQ(scene.source.max_size, 16);
+  EXPECT_LE(std::max(scene.cameras.front().width, scene.cameras.front().height), 16);
+  EXPECT_FALSE(s["reconstruct"].first) << output;
+
+  // The export of another orbit (a preset's frame count) is made again.
+  nlohmann::json manifest = nlohmann::json::parse(ReadFileToString(ws_ / "export.json"));
+  manifest["renders"]["orbit"] = manifest["renders"]["orbit"].get<int>() + 1;
+  WriteFileAtomically(ws_ / "export.json", manifest.dump());
+  std::tie(output, s) = stages("--max-size 16 --sh-degree 0");
+  EXPECT_TRUE(s["reconstruct"].first) << output;
+  EXPECT_FALSE(s["export"].first) << output;
+}
+
 // Stops `perf run` with `sig` once level 0's checkpoint is written (the solve is then inside level 1).
 int StopDuringLevel1(const std::string& command, const fs::path& ws, int sig) {
   return test::StopWhenExists(command, recon::CheckpointPath(ws, 0), sig);
@@ -170,8 +220,10 @@ TEST_F(RunCli, KilledMidReconstructionResumesWithNoDamagedFile) {
 TEST_F(RunCli, ForcedRunStoppedBeforeItsFirstLevelLeavesThePreviousResult) {
   auto r = RunCommand(Run("--levels 1 --iterations 3"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  const fs::path level0 = recon::CheckpointPath(ws_, 0), summary = ws_ / "recon" / "recon.json";
-  const std::string checkpoint = ReadFileToString(level0), recon_json = ReadFileToString(summary);
+  const fs::path level0 = recon::CheckpointPath(ws_, 0), summary = ws_ / "recon" / "recon.json",
+                 settings = ws_ / "recon" / "settings.json";
+  const std::string checkpoint = ReadFileToString(level0), recon_json = ReadFileToString(summary),
+                    settings_json = ReadFileToString(settings);
 
   const int status =
       test::StopWhenExists(Run("--force --levels 1 --iterations 400"), ws_ / "recon" / "previous", SIGINT);
@@ -180,6 +232,7 @@ TEST_F(RunCli, ForcedRunStoppedBeforeItsFirstLevelLeavesThePreviousResult) {
   ASSERT_TRUE(fs::exists(level0)) << "the forced run destroyed the last good result";
   EXPECT_EQ(ReadFileToString(level0), checkpoint) << "stopped too late to test anything, or the result changed";
   EXPECT_EQ(ReadFileToString(summary), recon_json);
+  EXPECT_EQ(ReadFileToString(settings), settings_json) << "the record must be the checkpoints' (3 iterations, not 400)";
   EXPECT_FALSE(fs::exists(ws_ / "recon" / "previous"));
   EXPECT_TRUE(fs::exists(ws_ / "export.json"));
 }
