@@ -41,7 +41,7 @@ void AddSfmCommand(CLI::App& app) {
   cmd->add_option("--colmap-idle-timeout", o->idle_timeout_seconds,
                   "Seconds a COLMAP step may print nothing before it is stopped as stuck")
       ->capture_default_str();
-  cmd->add_flag("--force", o->force, "Run again even if WORKSPACE/sparse/0 exists");
+  cmd->add_flag("--force", o->force, "Run again even if WORKSPACE/sparse/0 exists and was made from these photos");
   cmd->add_flag("-q,--quiet", *quiet, "No progress output");
   cmd->callback([o, quiet]() {
     const auto lock = LockWorkspace(o->workspace, "sfm", true);

@@ -126,9 +126,9 @@ class Runner {
 
   fs::path Sfm(StageReport* s) {
     const fs::path sparse = o_.workspace / "sparse" / "0";
-    if (!o_.force && (fs::exists(sparse / "cameras.bin") || fs::exists(sparse / "cameras.txt"))) {
-      s->skipped = true;
-      s->reason = "sparse/0 exists";
+    if (!o_.force && !fs::exists(sparse / "cameras.bin") && fs::exists(sparse / "cameras.txt")) {
+      s->skipped = true;  // a text model put there by hand (perf's runs write binary ones)
+      s->reason = "sparse/0 holds a text model";
       return sparse;
     }
     SfmOptions so;
@@ -139,8 +139,11 @@ class Runner {
       CheckStop();
       Say(line.rfind("sfm: ", 0) == 0 ? line : "sfm: " + line);  // RunSfm's own lines already say so
     };
+    // RunSfm keeps a model at sparse/0 made from these photos (and says so), or makes it again.
     const SfmResult r = RunSfm(so);
-    s->reason = StrCat(r.num_registered_images, " of ", r.num_input_images, " photos registered");
+    s->skipped = r.kept;
+    s->reason = r.kept ? "sparse/0 exists, made from these photos"
+                       : StrCat(r.num_registered_images, " of ", r.num_input_images, " photos registered");
     return r.sparse_dir;
   }
 

@@ -6,6 +6,8 @@
 #include <cstdint>
 #include <cstring>
 #include <fstream>
+#include <iterator>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <set>
 #include <system_error>
@@ -86,17 +88,56 @@ std::vector<std::string> WithSiftMatching(const SfmRun& run, std::vector<std::st
   return args;
 }
 
+// What the model at sparse/0 was made from: WORKSPACE/colmap/inputs.json, the images folder and
+// its photos as COLMAP named them, written when a run installs its model (a run that fails
+// before leaves the model and its record as they were).
+fs::path InputsRecordPath(const SfmOptions& options) { return options.workspace / "colmap" / "inputs.json"; }
+
+nlohmann::json InputsRecord(const SfmOptions& options, const std::vector<std::string>& inputs) {
+  return {{"images", fs::absolute(options.images).lexically_normal().string()}, {"photos", inputs}};
+}
+
+// Why the recorded inputs are not `inputs` ("3 photos added (c.jpg, ...)"); empty when they are,
+// or when nothing was recorded (a model of an older perf, or one put there by hand: kept).
+std::string InputsChanged(const SfmOptions& options, const std::vector<std::string>& inputs) {
+  std::error_code ec;
+  if (!fs::is_regular_file(InputsRecordPath(options), ec)) return {};
+  const nlohmann::json before = nlohmann::json::parse(ReadFileToString(InputsRecordPath(options)), nullptr, false);
+  if (!before.is_object() || !before.contains("photos") || !before["photos"].is_array()) return {};
+  const nlohmann::json now = InputsRecord(options, inputs);
+  if (before.value("images", "") != now["images"]) return "made from the photos in " + before.value("images", "");
+  std::set<std::string> old_names, new_names(inputs.begin(), inputs.end());
+  for (const auto& n : before["photos"]) {
+    if (n.is_string()) old_names.insert(n.get<std::string>());
+  }
+  std::vector<std::string> added, gone;
+  std::set_difference(new_names.begin(), new_names.end(), old_names.begin(), old_names.end(), std::back_inserter(added));
+  std::set_difference(old_names.begin(), old_names.end(), new_names.begin(), new_names.end(), std::back_inserter(gone));
+  std::string why;
+  if (!added.empty()) why = StrCat(added.size(), added.size() == 1 ? " photo" : " photos", " added since (", NameList(added), ")");
+  if (!gone.empty()) {
+    why += StrCat(why.empty() ? "" : ", ", gone.size(), gone.size() == 1 ? " photo" : " photos", " gone (", NameList(gone), ")");
+  }
+  return why;
+}
+
 // Without --force, a model already at WORKSPACE/sparse/0 is kept: says so and fills `result`'s
-// counts from it. False when there is none (or --force).
-bool KeepExistingModel(const SfmOptions& options, SfmResult* result) {
+// counts from it. False when there is none, when it was made from other photos than `inputs`
+// (said), or with --force.
+bool KeepExistingModel(const SfmOptions& options, const std::vector<std::string>& inputs, SfmResult* result) {
   if (options.force) return false;
   const auto counts = ReadModelCounts(result->sparse_dir);
   if (!counts) return false;
+  if (const std::string why = InputsChanged(options, inputs); !why.empty()) {
+    Report(options, StrCat("sfm: ", result->sparse_dir.string(), " was ", why, ": running COLMAP again"));
+    return false;
+  }
   Report(options, StrCat("sfm: skipped, ", result->sparse_dir.string(), " already exists (",
                          counts->num_images, " images, ", counts->num_points,
                          " points); use --force to run COLMAP again"));
   result->num_registered_images = counts->num_images;
   result->num_points = counts->num_points;
+  result->kept = true;
   return true;
 }
 
@@ -339,6 +380,7 @@ void RegisterLeftOut(SfmRun& run, bool exhaustive, Mapping* mapping) {
 // The chosen model becomes WORKSPACE/sparse/0; `result` gets its counts and the photos it left out.
 void InstallModel(const SfmRun& run, const Mapping& mapping, SfmResult* result) {
   ReplaceDirectory(*mapping.best_dir, result->sparse_dir);
+  WriteFileAtomically(InputsRecordPath(run.options), InputsRecord(run.options, run.inputs).dump(1) + "\n");
   result->num_registered_images = mapping.best.num_images;
   result->num_points = mapping.best.num_points;
   if (const auto missing = LeftOut(run.inputs, result->sparse_dir)) result->left_out = *missing;
@@ -378,7 +420,7 @@ SfmResult RunSfm(const SfmOptions& options) {
   const std::vector<std::string> inputs = ListInputImages(options.images);
   result.num_input_images = static_cast<int>(inputs.size());
   result.sparse_dir = options.workspace / "sparse" / "0";
-  if (KeepExistingModel(options, &result)) {
+  if (KeepExistingModel(options, inputs, &result)) {
     result.seconds = elapsed();
     return result;
   }

@@ -49,6 +49,7 @@ struct SfmResult {
   int num_points = 0;
   std::vector<std::string> left_out;  // input photos not in the model (empty when unknown)
   double seconds = 0;
+  bool kept = false;  // the model already at sparse/0 was kept (made from these photos; no --force)
 };
 
 // Throws IoError/InputError with a clear message when colmap is missing, a step fails (with the

@@ -682,6 +682,59 @@ TEST(ColmapRunner, FakeColmapPicksLargestModelAndReplacesOldOne) {
   EXPECT_NE(log2.find("arg=[--SequentialMatching.overlap]\narg=[4]"), std::string::npos);
 }
 
+// A model is kept while it was made from the photos given; other photos (added, gone, or
+// another folder) run COLMAP again and say why. A model no run recorded is kept as before.
+TEST(ColmapRunner, AModelOfOtherPhotosIsMadeAgain) {
+  TempDir dir("inputs");
+  SfmOptions options;
+  options.images = dir.path() / "photos";
+  WritePhoto(options.images / "a.jpg");
+  WritePhoto(options.images / "b.jpg");
+  options.workspace = dir.path() / "work";
+  options.colmap_binary = (dir.path() / "bin" / "colmap").string();
+  WriteExecutable(options.colmap_binary, kFakeColmap);
+  options.min_registered_images = 2;
+  std::vector<std::string> progress;
+  options.progress = [&](const std::string& line) { progress.push_back(line); };
+  const auto said = [&](const std::string& text) {
+    return std::any_of(progress.begin(), progress.end(), [&](const std::string& l) { return l.find(text) != std::string::npos; });
+  };
+  const auto runs = [&] { return static_cast<int>(ReadFile(options.workspace / "colmap" / "colmap.log").size()); };
+
+  RunSfm(options);
+  ASSERT_TRUE(fs::exists(options.workspace / "colmap" / "inputs.json"));
+  const int after_first = runs();
+  progress.clear();
+  RunSfm(options);
+  EXPECT_TRUE(said("sfm: skipped")) << progress.front();
+  EXPECT_EQ(runs(), after_first) << "colmap ran for the same photos";
+
+  WritePhoto(options.images / "c.jpg");
+  progress.clear();
+  RunSfm(options);
+  EXPECT_TRUE(said("was 1 photo added since (c.jpg): running COLMAP again")) << progress.front();
+  EXPECT_GT(runs(), after_first);
+
+  fs::remove(options.images / "a.jpg");
+  progress.clear();
+  RunSfm(options);
+  EXPECT_TRUE(said("was 1 photo gone (a.jpg): running COLMAP again")) << progress.front();
+
+  const fs::path other = dir.path() / "other";
+  fs::copy(options.images, other);
+  options.images = other;
+  progress.clear();
+  RunSfm(options);
+  EXPECT_TRUE(said("was made from the photos in " + (dir.path() / "photos").string())) << progress.front();
+
+  // Without a record (an older perf's model): kept, whatever the folder holds now.
+  fs::remove(options.workspace / "colmap" / "inputs.json");
+  WritePhoto(other / "d.jpg");
+  progress.clear();
+  RunSfm(options);
+  EXPECT_TRUE(said("sfm: skipped")) << progress.front();
+}
+
 // A model holding the named photos (one camera, no points), as COLMAP writes it.
 void WriteNamedModel(const fs::path& dir, const std::vector<std::string>& names) {
   colmap::Reconstruction rec;
