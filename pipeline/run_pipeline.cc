@@ -46,6 +46,17 @@ fs::file_time_type NewestInput(const fs::path& p) {
   return newest;
 }
 
+// The newest file under `dir` (the photos, which COLMAP names with their subfolders); the oldest
+// time when there is no folder.
+fs::file_time_type NewestUnder(const fs::path& dir) {
+  fs::file_time_type newest = fs::file_time_type::min();
+  std::error_code ec;
+  for (fs::recursive_directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    if (it->is_regular_file(ec)) newest = std::max(newest, ModTime(it->path()));
+  }
+  return newest;
+}
+
 bool NewerThan(const fs::path& output, fs::file_time_type input) {
   return fs::exists(output) && ModTime(output) >= input;
 }
@@ -150,11 +161,13 @@ class Runner {
   void Import(const fs::path& model, StageReport* s) {
     const fs::path input = o_.nerf.empty() ? model : o_.nerf;
     const fs::path scene = o_.workspace / "scene.json";
-    if (!o_.force && NewerThan(scene, NewestInput(input))) {
+    // A photo replaced or edited since the import counts as a newer input too.
+    const auto newest = o_.nerf.empty() ? std::max(NewestInput(input), NewestUnder(o_.images)) : NewestInput(input);
+    if (!o_.force && NewerThan(scene, newest)) {
       const std::string changed = ImportChanges(scene, input);
       if (changed.empty()) {
         s->skipped = true;
-        s->reason = "scene.json is newer than " + input.string();
+        s->reason = "scene.json is newer than " + input.string() + (o_.nerf.empty() ? " and the photos" : "");
         return;
       }
       Say("import: " + changed + ": importing again");

@@ -182,6 +182,27 @@ TEST_F(RunCli, ChangedSettingsRunTheStagesTheyShape) {
   EXPECT_FALSE(s["export"].first) << output;
 }
 
+// A COLMAP capture whose photo was replaced after the import is imported again (before, only the
+// model folder's files were compared with scene.json).
+TEST(RunCliColmap, APhotoChangedSinceTheImportImportsAgain) {
+  test::TempDir dir;
+  fs::copy(fs::path(PERF_SOURCE_DIR) / "examples" / "bonsai_mini", dir / "capture", fs::copy_options::recursive);
+  const std::string cmd = test::PerfBinary() + " run --colmap " + (dir / "capture" / "sparse" / "0").string() +
+                          " --images " + (dir / "capture" / "images").string() + " --workspace " +
+                          (dir / "ws").string() + " --preset preview --max-size 24 --levels 1 --iterations 1";
+  const auto import_skipped = [&] {
+    const auto r = RunCommand(cmd);
+    EXPECT_EQ(r.exit_code, 0) << r.output;
+    const nlohmann::json run = nlohmann::json::parse(ReadFileToString(dir / "ws" / "run.json"));
+    return run["stages"][0]["skipped"].get<bool>();
+  };
+  EXPECT_FALSE(import_skipped());
+  EXPECT_TRUE(import_skipped());
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  fs::last_write_time(dir / "capture" / "images" / "DSCF5614.JPG", fs::file_time_type::clock::now());
+  EXPECT_FALSE(import_skipped());
+}
+
 // Stops `perf run` with `sig` once level 0's checkpoint is written (the solve is then inside level 1).
 int StopDuringLevel1(const std::string& command, const fs::path& ws, int sig) {
   return test::StopWhenExists(command, recon::CheckpointPath(ws, 0), sig);
