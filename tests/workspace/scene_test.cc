@@ -58,6 +58,7 @@ TEST(Scene, JsonRoundTripIsExact) {
   EXPECT_EQ(back.version, kSceneVersion);
   EXPECT_EQ(back.source.type, "colmap");
   EXPECT_EQ(back.source.downscale, 2);
+  EXPECT_EQ(back.source.max_size, 0);
   EXPECT_EQ(back.background, s.background);
   EXPECT_EQ(back.box.center, s.box.center);
   EXPECT_EQ(back.box.size, s.box.size);
@@ -80,6 +81,17 @@ TEST(Scene, JsonRoundTripIsExact) {
     EXPECT_EQ(back.images[i].refined_focal_scale, s.images[i].refined_focal_scale);
   }
   EXPECT_TRUE(back.images[1].refined_focal_scale.has_value());
+}
+
+// The import's size limit: written, read back, and -1 (not recorded) in a scene.json of an
+// older perf, which perf run then imports again rather than guess.
+TEST(Scene, MaxSizeIsRecordedAndUnknownInOlderScenes) {
+  Scene s = MakeScene();
+  s.source.max_size = 400;
+  EXPECT_EQ(SceneFromJson(SceneToJson(s), "scene.json").source.max_size, 400);
+  nlohmann::json old = nlohmann::json::parse(SceneToJson(s));
+  old["source"].erase("max_size");
+  EXPECT_EQ(SceneFromJson(old.dump(), "scene.json").source.max_size, -1);
 }
 
 TEST(Scene, FileRoundTripAndMissingFile) {
