@@ -682,17 +682,23 @@ TEST(ColmapRunner, FakeColmapPicksLargestModelAndReplacesOldOne) {
   EXPECT_NE(log2.find("arg=[--SequentialMatching.overlap]\narg=[4]"), std::string::npos);
 }
 
+// Options for one photo in `dir` and a fake colmap there that runs `script`.
+SfmOptions WithFakeColmap(const TempDir& dir, const std::string& script) {
+  SfmOptions options;
+  options.images = dir.path() / "photos";
+  WritePhoto(options.images / "a.jpg");
+  options.workspace = dir.path() / "work";
+  options.colmap_binary = (dir.path() / "colmap").string();
+  WriteExecutable(options.colmap_binary, script);
+  return options;
+}
+
 // A model is kept while it was made from the photos given; other photos (added, gone, or
 // another folder) run COLMAP again and say why. A model no run recorded is kept as before.
 TEST(ColmapRunner, AModelOfOtherPhotosIsMadeAgain) {
   TempDir dir("inputs");
-  SfmOptions options;
-  options.images = dir.path() / "photos";
-  WritePhoto(options.images / "a.jpg");
+  SfmOptions options = WithFakeColmap(dir, kFakeColmap);
   WritePhoto(options.images / "b.jpg");
-  options.workspace = dir.path() / "work";
-  options.colmap_binary = (dir.path() / "bin" / "colmap").string();
-  WriteExecutable(options.colmap_binary, kFakeColmap);
   options.min_registered_images = 2;
   std::vector<std::string> progress;
   options.progress = [&](const std::string& line) { progress.push_back(line); };
@@ -976,17 +982,6 @@ TEST(ColmapRunner, CaptureTimesAgainstTheNamesMeanEveryPair) {
   log = ReadFile(options.workspace / "colmap" / "colmap.log");
   EXPECT_NE(log.find("arg=[sequential_matcher]"), std::string::npos) << log;
   EXPECT_TRUE(said("sfm: the EXIF capture times follow the file names (0 of 3"));
-}
-
-// Options for one photo in `dir` and a fake colmap there that runs `script`.
-SfmOptions WithFakeColmap(const TempDir& dir, const std::string& script) {
-  SfmOptions options;
-  options.images = dir.path() / "photos";
-  WritePhoto(options.images / "a.jpg");
-  options.workspace = dir.path() / "work";
-  options.colmap_binary = (dir.path() / "colmap").string();
-  WriteExecutable(options.colmap_binary, script);
-  return options;
 }
 
 TEST(ColmapRunner, FailingStepReportsExitCodeAndLogTail) {
