@@ -153,8 +153,7 @@ class Runner {
     // RunSfm keeps a model at sparse/0 made from these photos (and says so), or makes it again.
     const SfmResult r = RunSfm(so);
     s->skipped = r.kept;
-    s->reason = r.kept ? "sparse/0 exists, made from these photos"
-                       : StrCat(r.num_registered_images, " of ", r.num_input_images, " photos registered");
+    s->reason = r.kept ? "sparse/0 exists" : StrCat(r.num_registered_images, " of ", r.num_input_images, " photos registered");
     return r.sparse_dir;
   }
 
@@ -205,7 +204,8 @@ class Runner {
     }
     const SceneSource& src = scene.source;
     const auto same_path = [](const std::string& recorded, const fs::path& p) {
-      return recorded == fs::absolute(p).lexically_normal().string();
+      std::error_code ec;  // the same folder or file by another spelling (a trailing slash, a link) too
+      return recorded == fs::absolute(p).lexically_normal().string() || fs::equivalent(recorded, p, ec);
     };
     if (src.type != (o_.nerf.empty() ? "colmap" : "nerf") || !same_path(src.path, input)) {
       return "scene.json was imported from " + src.path;
@@ -245,7 +245,7 @@ class Runner {
       s->skipped = true;
       s->reason = "every level is checkpointed";
     } else if (!r.settings_changed.empty()) {
-      s->reason = "from the start: the settings changed (" + r.settings_changed + ")";
+      s->reason = "from the start: " + r.settings_changed;
     } else {
       s->reason = ro.resume ? "resumed after the last checkpoint" : "from the start";
     }

@@ -189,22 +189,23 @@ class Reconstruction {
   // not, perf run (restart_if_settings_changed) starts over and perf reconstruct --resume
   // continues; either says what changed. Rank 0 reads the record; every rank takes its answer.
   bool ResumesTheSameFit() {
-    std::string changes;
+    std::string why;
     if (run_.root) {
       const std::optional<nlohmann::json> before = ReadRunSettings(o_.workspace);
-      if (!before) {
-        changes = "not recorded by the run that made them";
-      } else {
+      std::string changes;
+      if (before) {
         for (const std::string& c : SettingsChanges(*before, RunSettings(o_))) changes += (changes.empty() ? "" : ", ") + c;
       }
+      if (!before) why = "the checkpoints' settings are not recorded (an older perf made them)";
+      if (!changes.empty()) why = "the checkpoints' settings differ from this run's (" + changes + ")";
     }
-    if (!run_.comm.Any(!changes.empty())) return true;
-    run_.result.settings_changed = changes;
+    if (!run_.comm.Any(!why.empty())) return true;
+    run_.result.settings_changed = why;
     if (o_.restart_if_settings_changed) {
-      run_.Say(StrCat("the checkpoints' settings differ from this run's (", changes, "): fitting from the start"));
+      run_.Say("fitting from the start: " + why);
       return false;
     }
-    run_.Say(StrCat("resuming checkpoints made with other settings (", changes, "); the levels done keep theirs"));
+    run_.Say("resuming although " + why + "; the levels done keep theirs");
     return true;
   }
 

@@ -46,8 +46,9 @@ struct ReconstructResult {
   double test_psnr = 0;             // held-out PSNR of the final level (0: no held-out views)
   std::filesystem::path final_checkpoint;
   bool already_complete = false;    // --resume found every level done
-  // Resume asked for, but the last run's settings differ from this one's (run_settings.h): what
-  // changed, and (restart_if_settings_changed) this run started over; empty: the same or no resume.
+  // Resume asked for, but the checkpoints' settings differ from this run's or are not recorded
+  // (run_settings.h): why, and (restart_if_settings_changed) this run started over; empty: the
+  // same, or no resume.
   std::string settings_changed;
   LevelChoice levels_choice;        // how many levels and why
   int ranks = 1;                    // processes that fitted the photos (ReconstructOptions::comm)

@@ -142,7 +142,8 @@ TEST_F(ReconstructCli, ResumeContinuesAfterTheLastLevel) {
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("resuming after level 0"), std::string::npos) << r.output;
   // An explicit --resume goes on with other settings (here a level more), and names them.
-  EXPECT_NE(r.output.find("resuming checkpoints made with other settings (levels 1 -> 2); the levels done keep theirs"),
+  EXPECT_NE(r.output.find("resuming although the checkpoints' settings differ from this run's (levels 1 -> 2); the "
+                          "levels done keep theirs"),
             std::string::npos) << r.output;
   EXPECT_TRUE(fs::exists(ws_ / "recon" / "level_1.perfvol"));
   const std::vector<nlohmann::json> log = ReadLog(ws_ / "recon" / "log.jsonl");

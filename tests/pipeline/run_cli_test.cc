@@ -155,7 +155,7 @@ TEST_F(RunCli, ChangedSettingsRunTheStagesTheyShape) {
   EXPECT_TRUE(s["import"].first) << output;
   EXPECT_FALSE(s["reconstruct"].first) << output;
   EXPECT_NE(s["reconstruct"].second.find("sh_degree 1 -> 0"), std::string::npos) << s["reconstruct"].second;
-  EXPECT_NE(output.find("settings differ from this run's (sh_degree 1 -> 0): fitting from the start"),
+  EXPECT_NE(output.find("fitting from the start: the checkpoints' settings differ from this run's (sh_degree 1 -> 0)"),
             std::string::npos) << output;
   EXPECT_EQ(nlohmann::json::parse(ReadFileToString(ws_ / "recon" / "recon.json"))["sh_degree"], 0);
   EXPECT_FALSE(s["export"].first) << "a new fit is exported";
@@ -180,6 +180,13 @@ TEST_F(RunCli, ChangedSettingsRunTheStagesTheyShape) {
   std::tie(output, s) = stages("--max-size 16 --sh-degree 0");
   EXPECT_TRUE(s["reconstruct"].first) << output;
   EXPECT_FALSE(s["export"].first) << output;
+
+  // Checkpoints whose settings were not recorded (an older perf's) are fitted again.
+  fs::remove(ws_ / "recon" / "settings.json");
+  std::tie(output, s) = stages("--max-size 16 --sh-degree 0");
+  EXPECT_FALSE(s["reconstruct"].first) << output;
+  EXPECT_NE(output.find("fitting from the start: the checkpoints' settings are not recorded"), std::string::npos) << output;
+  EXPECT_TRUE(fs::exists(ws_ / "recon" / "settings.json"));
 }
 
 // A COLMAP capture whose photo was replaced after the import is imported again (before, only the
