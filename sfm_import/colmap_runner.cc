@@ -97,15 +97,18 @@ nlohmann::json InputsRecord(const SfmOptions& options, const std::vector<std::st
   return {{"images", fs::absolute(options.images).lexically_normal().string()}, {"photos", inputs}};
 }
 
-// Why the recorded inputs are not `inputs` ("3 photos added (c.jpg, ...)"); empty when they are,
-// or when nothing was recorded (a model of an older perf, or one put there by hand: kept).
+// How the recorded inputs differ from `inputs` ("made from other photos (1 added since: c.jpg)");
+// empty when they do not, or when nothing was recorded (a model of an older perf, or one put there
+// by hand: kept).
 std::string InputsChanged(const SfmOptions& options, const std::vector<std::string>& inputs) {
   std::error_code ec;
   if (!fs::is_regular_file(InputsRecordPath(options), ec)) return {};
   const nlohmann::json before = nlohmann::json::parse(ReadFileToString(InputsRecordPath(options)), nullptr, false);
   if (!before.is_object() || !before.contains("photos") || !before["photos"].is_array()) return {};
   const nlohmann::json now = InputsRecord(options, inputs);
-  if (before.value("images", "") != now["images"]) return "made from the photos in " + before.value("images", "");
+  const std::string folder = before.value("images", "");
+  std::error_code same;  // the folder by another spelling (a link) is the same
+  if (folder != now["images"] && !fs::equivalent(folder, options.images, same)) return "made from the photos in " + folder;
   std::set<std::string> old_names, new_names(inputs.begin(), inputs.end());
   for (const auto& n : before["photos"]) {
     if (n.is_string()) old_names.insert(n.get<std::string>());
@@ -114,11 +117,9 @@ std::string InputsChanged(const SfmOptions& options, const std::vector<std::stri
   std::set_difference(new_names.begin(), new_names.end(), old_names.begin(), old_names.end(), std::back_inserter(added));
   std::set_difference(old_names.begin(), old_names.end(), new_names.begin(), new_names.end(), std::back_inserter(gone));
   std::string why;
-  if (!added.empty()) why = StrCat(added.size(), added.size() == 1 ? " photo" : " photos", " added since (", NameList(added), ")");
-  if (!gone.empty()) {
-    why += StrCat(why.empty() ? "" : ", ", gone.size(), gone.size() == 1 ? " photo" : " photos", " gone (", NameList(gone), ")");
-  }
-  return why;
+  if (!added.empty()) why = StrCat(added.size(), " added since: ", NameList(added));
+  if (!gone.empty()) why += StrCat(why.empty() ? "" : "; ", gone.size(), " gone: ", NameList(gone));
+  return why.empty() ? why : "made from other photos (" + why + ")";
 }
 
 // Without --force, a model already at WORKSPACE/sparse/0 is kept: says so and fills `result`'s

@@ -718,13 +718,13 @@ TEST(ColmapRunner, AModelOfOtherPhotosIsMadeAgain) {
   WritePhoto(options.images / "c.jpg");
   progress.clear();
   RunSfm(options);
-  EXPECT_TRUE(said("was 1 photo added since (c.jpg): running COLMAP again")) << progress.front();
+  EXPECT_TRUE(said("was made from other photos (1 added since: c.jpg): running COLMAP again")) << progress.front();
   EXPECT_GT(runs(), after_first);
 
   fs::remove(options.images / "a.jpg");
   progress.clear();
   RunSfm(options);
-  EXPECT_TRUE(said("was 1 photo gone (a.jpg): running COLMAP again")) << progress.front();
+  EXPECT_TRUE(said("was made from other photos (1 gone: a.jpg): running COLMAP again")) << progress.front();
 
   const fs::path other = dir.path() / "other";
   fs::copy(options.images, other);
