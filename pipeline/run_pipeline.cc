@@ -14,6 +14,7 @@
 #include "common/stopwatch.h"
 #include "export/evaluate.h"
 #include "export/export.h"
+#include "pipeline/stage_freshness.h"
 #include "pipeline/stage_progress.h"
 #include "recon_cuda/data/checkpoint.h"
 #include "recon_cuda/run/level_choice.h"
@@ -29,37 +30,6 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr const char* kCommandLine = "command line";
-
-fs::file_time_type ModTime(const fs::path& p) {
-  std::error_code ec;
-  const auto t = fs::last_write_time(p, ec);
-  return ec ? fs::file_time_type::min() : t;
-}
-
-// The newest file directly in `dir` (a COLMAP model folder), or the file itself.
-fs::file_time_type NewestInput(const fs::path& p) {
-  if (!fs::is_directory(p)) return ModTime(p);
-  fs::file_time_type newest = fs::file_time_type::min();
-  for (const auto& e : fs::directory_iterator(p)) {
-    if (e.is_regular_file()) newest = std::max(newest, ModTime(e.path()));
-  }
-  return newest;
-}
-
-// The newest file under `dir` (the photos, which COLMAP names with their subfolders); the oldest
-// time when there is no folder.
-fs::file_time_type NewestUnder(const fs::path& dir) {
-  fs::file_time_type newest = fs::file_time_type::min();
-  std::error_code ec;
-  for (fs::recursive_directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
-    if (it->is_regular_file(ec)) newest = std::max(newest, ModTime(it->path()));
-  }
-  return newest;
-}
-
-bool NewerThan(const fs::path& output, fs::file_time_type input) {
-  return fs::exists(output) && ModTime(output) >= input;
-}
 
 // --log-json: one JSON line per stage event (and reconstruct iteration), stamped with the time;
 // nothing without a path.
@@ -163,7 +133,8 @@ class Runner {
     // A photo replaced or edited since the import counts as a newer input too.
     const auto newest = o_.nerf.empty() ? std::max(NewestInput(input), NewestUnder(o_.images)) : NewestInput(input);
     if (!o_.force && NewerThan(scene, newest)) {
-      const std::string changed = ImportChanges(scene, input);
+      const std::string changed = ImportChanges(scene, {o_.nerf.empty(), input, o_.images, preset_.max_size,
+                                                        o_.keep_bad_poses});
       if (changed.empty()) {
         s->skipped = true;
         s->reason = "scene.json is newer than " + input.string() + (o_.nerf.empty() ? " and the photos" : "");
@@ -191,39 +162,6 @@ class Runner {
     progress.Finish();
     for (const std::string& w : r.warnings) Say("import: warning: " + w);
     s->reason = StrCat(r.scene.images.size(), " images");
-  }
-
-  // Why the workspace's scene.json is not what this command would import from `input`: another
-  // source, photo size or bad-pose rule (empty: it is). An unreadable one is imported again.
-  std::string ImportChanges(const fs::path& scene_path, const fs::path& input) const {
-    Scene scene;
-    try {
-      scene = ReadScene(scene_path);
-    } catch (const Error& e) {
-      return "scene.json cannot be read (" + std::string(e.what()) + ")";
-    }
-    const SceneSource& src = scene.source;
-    const auto same_path = [](const std::string& recorded, const fs::path& p) {
-      std::error_code ec;  // the same folder or file by another spelling (a trailing slash, a link) too
-      return recorded == fs::absolute(p).lexically_normal().string() || fs::equivalent(recorded, p, ec);
-    };
-    if (src.type != (o_.nerf.empty() ? "colmap" : "nerf") || !same_path(src.path, input)) {
-      return "scene.json was imported from " + src.path;
-    }
-    if (o_.nerf.empty() && !o_.images.empty() && !same_path(src.images, o_.images)) {
-      return "scene.json's photos are from " + src.images;
-    }
-    if (src.max_size != preset_.max_size) {
-      const auto size = [](int max_size, int downscale) {
-        if (max_size < 0) return std::string("a size it does not record (an older perf)");
-        return max_size > 0 ? StrCat("at most ", max_size, " px") : downscale > 1 ? StrCat("1/", downscale, " size")
-                                                                                  : std::string("full size");
-      };
-      return "scene.json holds photos of " + size(src.max_size, src.downscale) + ", this run asks for " +
-             size(preset_.max_size, 1);
-    }
-    if (o_.keep_bad_poses && AnyExcluded(scene)) return "scene.json leaves out photos that --keep-bad-poses keeps";
-    return {};
   }
 
   void Reconstruct(StageReport* s) {
