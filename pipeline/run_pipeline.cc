@@ -2,6 +2,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <fstream>
 #include <iomanip>
@@ -142,6 +143,7 @@ class Runner {
       }
       Say("import: " + changed + ": importing again");
     }
+    const std::vector<std::string> by_hand = ExcludedByHand(scene);
     ImportOptions io;
     if (o_.nerf.empty()) {
       io.colmap_dir = model;
@@ -161,6 +163,16 @@ class Runner {
     const ImportResult r = RunImport(io);
     progress.Finish();
     for (const std::string& w : r.warnings) Say("import: warning: " + w);
+    std::string dropped;  // left out by hand in the scene.json this import replaced
+    for (const SceneImage& im : r.scene.images) {
+      if (im.split != Split::kExcluded && std::find(by_hand.begin(), by_hand.end(), im.name) != by_hand.end()) {
+        dropped += (dropped.empty() ? "" : ", ") + im.name;
+      }
+    }
+    if (!dropped.empty()) {
+      Say("import: warning: the new scene.json trains or scores " + dropped + ", which the old one left out by hand; "
+          "set their \"split\" to \"excluded\" again to leave them out");
+    }
     s->reason = StrCat(r.scene.images.size(), " images");
   }
 

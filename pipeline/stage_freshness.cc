@@ -68,4 +68,18 @@ std::string ImportChanges(const fs::path& scene_path, const ImportRequest& reque
   return {};
 }
 
+std::vector<std::string> ExcludedByHand(const fs::path& scene_path) {
+  std::vector<std::string> names;
+  std::error_code ec;
+  if (!fs::is_regular_file(scene_path, ec)) return names;
+  try {
+    for (const SceneImage& im : ReadScene(scene_path).images) {
+      if (im.split == Split::kExcluded && im.excluded_because.empty()) names.push_back(im.name);
+    }
+  } catch (const Error&) {
+    // unreadable: nothing to carry
+  }
+  return names;
+}
+
 }  // namespace perf

@@ -6,6 +6,7 @@
 
 #include <filesystem>
 #include <string>
+#include <vector>
 
 namespace perf {
 
@@ -31,5 +32,9 @@ struct ImportRequest {
 // Why the workspace's scene.json is not what `request` would import: another source, photo folder,
 // photo size or bad-pose rule; empty when it is. An unreadable scene.json is imported again.
 std::string ImportChanges(const std::filesystem::path& scene_path, const ImportRequest& request);
+
+// The photos scene.json leaves out by hand ("split": "excluded" with no reason recorded, as the
+// photo-fit warning suggests); a new import does not keep them. Empty without a readable scene.json.
+std::vector<std::string> ExcludedByHand(const std::filesystem::path& scene_path);
 
 }  // namespace perf

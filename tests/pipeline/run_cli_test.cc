@@ -163,8 +163,15 @@ TEST_F(RunCli, ChangedSettingsRunTheStagesTheyShape) {
   std::tie(output, s) = stages("--max-size 24 --sh-degree 0");  // the same again: nothing to do
   for (const auto& [name, st] : s) EXPECT_TRUE(st.first) << name << ": " << st.second;
 
-  // Another photo size: imported again (the old scene.json said nothing, and the fit went on at 24 px).
+  // Another photo size: imported again (the old scene.json said nothing, and the fit went on at 24 px),
+  // and a photo left out by hand in the old scene.json is named: the new one trains on it.
+  nlohmann::json edited = nlohmann::json::parse(ReadFileToString(ws_ / "scene.json"));
+  const std::string by_hand = edited["images"][0]["name"];
+  edited["images"][0]["split"] = "excluded";
+  WriteFileAtomically(ws_ / "scene.json", edited.dump());
   std::tie(output, s) = stages("--max-size 16 --sh-degree 0");
+  EXPECT_NE(output.find("trains or scores " + by_hand + ", which the old one left out by hand"), std::string::npos)
+      << output;
   EXPECT_FALSE(s["import"].first) << output;
   EXPECT_NE(output.find("photos of at most 24 px, this run asks for at most 16 px: importing again"), std::string::npos)
       << output;
