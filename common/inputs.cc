@@ -118,4 +118,13 @@ int ProtectRecordedInputs(const fs::path& workspace) {
   return count;
 }
 
+std::string RecordedPath(const std::filesystem::path& given) {
+  return std::filesystem::absolute(given).lexically_normal().string();
+}
+
+bool RecordedAs(const std::string& recorded, const std::filesystem::path& given) {
+  std::error_code ec;
+  return recorded == RecordedPath(given) || std::filesystem::equivalent(recorded, given, ec);
+}
+
 }  // namespace perf

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <filesystem>
+#include <string>
 #include <string_view>
 #include <vector>
 
@@ -27,6 +28,12 @@ void CheckNotInput(const std::filesystem::path& target, std::string_view what = 
 
 // The registered inputs' paths (absolute), in no particular order.
 std::vector<std::filesystem::path> ProtectedInputPaths();
+
+// How the workspace's records name an input (scene.json's source, colmap/inputs.json): absolute and
+// lexically normal. RecordedAs: whether `given` is the input `recorded` names, by that spelling or
+// as the same file or folder by another (a trailing slash, a link).
+std::string RecordedPath(const std::filesystem::path& given);
+bool RecordedAs(const std::string& recorded, const std::filesystem::path& given);
 
 // WORKSPACE/inputs.json: every registered input, written atomically.
 std::filesystem::path InputRecordPath(const std::filesystem::path& workspace);

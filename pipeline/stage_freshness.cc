@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "common/errors.h"
+#include "common/inputs.h"
 #include "workspace/scene.h"
 
 namespace perf {
@@ -45,14 +46,10 @@ std::string ImportChanges(const fs::path& scene_path, const ImportRequest& reque
     return "scene.json cannot be read (" + std::string(e.what()) + ")";
   }
   const SceneSource& src = scene.source;
-  const auto same_path = [](const std::string& recorded, const fs::path& p) {
-    std::error_code ec;  // the same folder or file by another spelling (a trailing slash, a link) too
-    return recorded == fs::absolute(p).lexically_normal().string() || fs::equivalent(recorded, p, ec);
-  };
-  if (src.type != (request.colmap ? "colmap" : "nerf") || !same_path(src.path, request.input)) {
+  if (src.type != (request.colmap ? "colmap" : "nerf") || !RecordedAs(src.path, request.input)) {
     return "scene.json was imported from " + src.path;
   }
-  if (request.colmap && !request.images.empty() && !same_path(src.images, request.images)) {
+  if (request.colmap && !request.images.empty() && !RecordedAs(src.images, request.images)) {
     return "scene.json's photos are from " + src.images;
   }
   if (src.max_size != request.max_size) {

@@ -15,6 +15,7 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
+#include "common/inputs.h"
 #include "sfm_import/camera_groups.h"
 #include "sfm_import/capture_order.h"
 #include "sfm_import/colmap_process.h"
@@ -94,7 +95,7 @@ std::vector<std::string> WithSiftMatching(const SfmRun& run, std::vector<std::st
 fs::path InputsRecordPath(const SfmOptions& options) { return options.workspace / "colmap" / "inputs.json"; }
 
 nlohmann::json InputsRecord(const SfmOptions& options, const std::vector<std::string>& inputs) {
-  return {{"images", fs::absolute(options.images).lexically_normal().string()}, {"photos", inputs}};
+  return {{"images", RecordedPath(options.images)}, {"photos", inputs}};
 }
 
 // How the recorded inputs differ from `inputs` ("made from other photos (1 added since: c.jpg)");
@@ -105,10 +106,8 @@ std::string InputsChanged(const SfmOptions& options, const std::vector<std::stri
   if (!fs::is_regular_file(InputsRecordPath(options), ec)) return {};
   const nlohmann::json before = nlohmann::json::parse(ReadFileToString(InputsRecordPath(options)), nullptr, false);
   if (!before.is_object() || !before.contains("photos") || !before["photos"].is_array()) return {};
-  const nlohmann::json now = InputsRecord(options, inputs);
   const std::string folder = before.value("images", "");
-  std::error_code same;  // the folder by another spelling (a link) is the same
-  if (folder != now["images"] && !fs::equivalent(folder, options.images, same)) return "made from the photos in " + folder;
+  if (!RecordedAs(folder, options.images)) return "made from the photos in " + folder;
   std::set<std::string> old_names, new_names(inputs.begin(), inputs.end());
   for (const auto& n : before["photos"]) {
     if (n.is_string()) old_names.insert(n.get<std::string>());

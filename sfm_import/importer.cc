@@ -12,6 +12,7 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
+#include "common/inputs.h"
 #include "sfm_import/bad_poses.h"
 #include "sfm_import/camera_models.h"
 #include "sfm_import/colmap_model.h"
@@ -315,8 +316,7 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
 
   std::sort(r->scene.images.begin(), r->scene.images.end(),
             [](const SceneImage& a, const SceneImage& b) { return a.name < b.name; });
-  r->scene.source = {"colmap", fs::absolute(model_dir).lexically_normal().string(),
-                     fs::absolute(photos.dir).lexically_normal().string(),
+  r->scene.source = {"colmap", RecordedPath(model_dir), RecordedPath(photos.dir),
                      format == colmap::ModelFormat::kBinary ? "binary" : "text", o.downscale, o.max_size};
   std::vector<BoundsPoint> points;
   points.reserve(rec.points3D.size());
@@ -384,8 +384,7 @@ void ImportNerf(const ImportOptions& o, ImportResult* r) {
     jobs.push_back({f.image_path, si.path, si.alpha_path, nullptr, sc.width, sc.height});
     r->scene.images.push_back(std::move(si));
   }
-  r->scene.source = {"nerf", fs::absolute(o.nerf_json).lexically_normal().string(),
-                     fs::absolute(base).lexically_normal().string(), "json", o.downscale, o.max_size};
+  r->scene.source = {"nerf", RecordedPath(o.nerf_json), RecordedPath(base), "json", o.downscale, o.max_size};
   ImportOptions no = o;
   no.bounds.align_to_up = false;  // the json's world frame is meaningful: keep its axes
   PlaceBoundsAndShells(no, {}, source, r);
