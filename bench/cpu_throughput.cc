@@ -44,6 +44,9 @@ int main(int argc, char** argv) {
   bool exact_record = false;
   app.add_flag("--exact-record", exact_record,
                "Record the Jacobian exactly (floats, absolute positions) instead of compactly (the default)");
+  bool sample_record = false;
+  app.add_flag("--sample-record", sample_record,
+               "Record the compact Jacobian sample by sample instead of each ray's cells merged (the default)");
   bench::CpuHierarchySettings hs;
   std::string modes = "both";
   app.add_option("--levels", hs.levels,
@@ -89,6 +92,7 @@ int main(int argc, char** argv) {
     CpuBackendOptions o;
     o.threads = threads;
     o.compact_jacobian = !exact_record;
+    o.merged_jacobian = !exact_record && !sample_record;
     auto backend = MakeCpuBackend(o);
     backend->SetLevel(LevelProblem{shape, geometry, &rays, {}}, 5);
     backend->Upload(0, x);

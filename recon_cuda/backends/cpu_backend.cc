@@ -11,6 +11,7 @@
 #include "common/stopwatch.h"
 #include "common/system_memory.h"
 #include "recon_cuda/backends/cpu_jacobian_record.h"
+#include "recon_cuda/backends/cpu_ray_visitors.h"
 #include "recon_cuda/backends/cpu_vectors.h"
 #include "recon_cuda/core/jacobian.h"
 #include "recon_cuda/core/training_ray.h"
@@ -32,14 +33,7 @@ class CpuBackend final : public Backend {
   std::string Describe() const override { return StrCat("cpu (", threads_, " thread", threads_ == 1 ? "" : "s", ")"); }
 
   MemoryEstimate EstimateMemory(const LevelProblem& p, int num_vectors) const override {
-    MemoryEstimate e;
-    const int64_t params = p.shape.ParamCount();
-    e.vectors = num_vectors * params * 4;
-    e.scratch = int64_t{threads_} * 2 * params * 4;
-    e.rays = p.rays ? p.rays->Bytes() : 0;
-    if (options_.cache_jacobian && p.rays) e.jacobian_cache = CacheBytes(p);
-    e.available = options_.max_memory > 0 ? options_.max_memory : AvailableMemory() * 9 / 10;
-    return e;
+    return PlanLevel(p, num_vectors, threads_, options_, kBlockRays, vectors_).memory;
   }
 
   MemoryEstimate SetLevel(const LevelProblem& problem, int num_vectors) override {
@@ -56,13 +50,15 @@ class CpuBackend final : public Backend {
              PhotoSlots(p, p.shape.exposures), PhotoSlots(p, p.shape.poses)};
     weight_ = OpacityResidualWeight(p);
     robust_ = p.residuals.robust_scale;
-    const MemoryEstimate e = EstimateMemory(p, num_vectors);
+    const LevelPlan plan = PlanLevel(p, num_vectors, threads_, options_, kBlockRays, vectors_);
+    const MemoryEstimate& e = plan.memory;
     if (!e.Fits()) {
       throw ResourceError(StrCat("level ", DescribeShape(p.shape), " needs ", e.Needed() >> 20, " MiB for the solver's ",
                                  num_vectors, " vectors, per-thread sums and rays, but only ", e.available >> 20,
                                  " MiB are available; use fewer --levels, fewer --threads, or a larger --downscale"));
     }
     cache_ = options_.cache_jacobian && (e.available == 0 || e.Needed() + e.jacobian_cache <= e.available);
+    record_ = plan.record;
     vectors_.Assign(num_vectors, p.shape.ParamCount());
     const int64_t nblocks = (p.rays->size() + kBlockRays - 1) / kBlockRays;
     if (cache_) blocks_.resize(nblocks);
@@ -118,7 +114,8 @@ class CpuBackend final : public Backend {
         const auto ray_of = [&](size_t r) {
           return TrainingRayOf(vol, ray0 + static_cast<int64_t>(r) * jtj_.stride, lin_seed_);
         };
-        DropSkippableSamples(vol, pf, ray_of, &blocks_[b]);
+        if (blocks_[b].merged) DropSkippableCells(pf, &blocks_[b]);
+        else DropSkippableSamples(vol, pf, ray_of, &blocks_[b]);
       });
     });
   }
@@ -143,7 +140,10 @@ class CpuBackend final : public Backend {
     const uint64_t pass = BeginPass();
     PassStats stats = ForBlocks(want_diag ? 2 : 1, pass, [&](int64_t block, int64_t begin, int64_t end, Scratch& s) {
       BlockJ* out = record ? &blocks_[block] : nullptr;
-      if (out) out->Clear(jtj.CountIn(begin, end), level_.shape, options_.compact_jacobian);
+      if (out) {
+        out->Clear(jtj.CountIn(begin, end), level_.shape, record_ != RecordKind::kExact,
+                   record_ == RecordKind::kMerged);
+      }
       return want_diag ? LinearizeBlock<true>(vol, seed, subset, jtj, begin, end, s, out)
                        : LinearizeBlock<false>(vol, seed, subset, jtj, begin, end, s, out);
     });
@@ -212,12 +212,16 @@ class CpuBackend final : public Backend {
         for (int k = 0; k < k_shells; ++k) {
           if (shells.hit[k]) AddJpShell(pp, shells.ts[k], shells.sp[k], u);
         }
+        // A merged record (degree 0) holds the ray's cells; else its samples, read here.
+        const MergedCells merged{row->merged ? &row->cells[first] : nullptr, row->merged ? count : 0};
+        PERF_CHECK(!row->merged || sh.degree == 0);
+        merged.AddJp(pp, s.acc.data(), u);
         RecordedSamples read(*row, m, tr.jit, r_row, first);
         GridSample<float>* w = s.weights.data();
         SamplePartials<float>* sp = s.partials.data();
         CellMerger<float, RayCells::K> merger;  // with SH: the ray's cells, merged (RayCells)
         if (sh.degree > 0) s.cells.Begin(pp, s.acc.data(), sh);
-        for (int j = 0; j < count; ++j) {
+        for (int j = 0; j < (row->merged ? 0 : count); ++j) {
           const GridSample<float> gs = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(read.Next(&sp[j])));
           if (sh.degree > 0) {
             merger.Sample(gs, {sp[j].dc, sp[j].ds[0], sp[j].ds[1], sp[j].ds[2], sp[j].dl}, s.cells);
@@ -237,7 +241,9 @@ class CpuBackend final : public Backend {
         for (int k = 0; k < k_shells; ++k) {
           if (shells.hit[k]) ScatterJtuShell(shells.ts[k], shells.sp[k], uv, sink);
         }
-        if (sh.degree > 0) {
+        if (row->merged) {
+          merged.ScatterJtu(uv, s.acc.data());
+        } else if (sh.degree > 0) {
           s.cells.ScatterJtu(uv);
         } else {
           // Direct scatter: at degree 0 measured faster than merging cells (RayCells) first.
@@ -361,7 +367,7 @@ class CpuBackend final : public Backend {
         out->end[r_out] = out->SampleCount();
         for (int c = 0; c < 3; ++c) out->h[3 * r_out + c] = fwd.h[c];
         out->scale[r_out] = scale;
-        if (out->compact) out->dl_per_delta[r_out] = DlPerDelta(fwd);  // as Backward makes it
+        if (out->compact && !out->merged) out->dl_per_delta[r_out] = DlPerDelta(fwd);  // as Backward makes it
         if (out->compact) out->t_box[r_out] = fwd.t_box;  // the shells' partials (RecordedShells)
         ++r_out;
       }
@@ -404,10 +410,6 @@ class CpuBackend final : public Backend {
     }
     for (int c = 0; c < 3; ++c) s.row.h[c] = fwd.h[c];
     s.row.scale[0] = RobustRowScale(fwd.residual, robust_);
-  }
-
-  int64_t CacheBytes(const LevelProblem& p) const {
-    return RecordedJacobianBytes(p, kBlockRays, options_.compact_jacobian, vectors_);
   }
 
   uint64_t BeginPass() { return ++pass_; }
@@ -475,6 +477,7 @@ class CpuBackend final : public Backend {
   std::vector<double> pose_blocks_;  // the last Linearize's pose blocks (pose_blocks.h), with a diagonal
   tbb::enumerable_thread_specific<Scratch> scratch_;
   bool cache_ = false, linearized_ = false, recorded_ = false;
+  RecordKind record_ = RecordKind::kCompact;  // the level's record (PlanLevel)
   int max_samples_ = 0;
   TrainingRays<float> rays_{};     // the level's rays (alphas: nullptr unless UsesAlpha)
   float weight_ = 0;               // OpacityResidualWeight

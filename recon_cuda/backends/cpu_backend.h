@@ -22,8 +22,13 @@ struct CpuBackendOptions {
   // Keep the Jacobian partials between passes when they fit (see above).
   bool cache_jacobian = true;
   // Keep it compact: each sample's partials in bfloat16 and its position as its march index,
-  // 10 bytes instead of 24; J^T J p then within ~3e-3 of the exact product (docs/tuning.md).
+  // 9 bytes instead of 24; J^T J p then within ~3e-3 of the exact product (docs/tuning.md).
   bool compact_jacobian = true;
+  // With compact_jacobian, keep each ray's cells instead of its samples where the level has no
+  // spherical harmonics and fits in half the memory with them: the samples' partials summed per
+  // cell with their trilinear weights, in float (cpu_jacobian_record.h MergedCellJ), about 11x
+  // the bytes; J^T J p then reads and writes each of a ray's cells once (docs/tuning.md).
+  bool merged_jacobian = true;
   // Memory the backend may use; 0: what /proc/meminfo calls available, less 10 %.
   int64_t max_memory = 0;
 };

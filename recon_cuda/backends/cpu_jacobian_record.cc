@@ -5,28 +5,25 @@
 #include <algorithm>
 
 #include "common/errors.h"
+#include "common/system_memory.h"
 #include "recon_cuda/backends/cpu_vectors.h"
 
 namespace perf::recon::cpu {
 
-// Bytes of the recorded Jacobian: every ray's march length (no jitter needed for the count;
-// early termination only shortens it; a sparse grid's march counted sample by sample, plus an
-// eighth for the jittered samples that land differently, on every 4th ray of a block and scaled
-// to the block: an estimate, and a quarter of a march) times the per-sample record, plus the
-// shell records and, when poses are refined, the pose rows; of the recorded rays (every
-// p.jtj_ray_stride-th) only.
-void BlockJ::Clear(int64_t rays, const VolumeShape& shape, bool compact_samples) {
+void BlockJ::Clear(int64_t rays, const VolumeShape& shape, bool compact_samples, bool merged_cells) {
   compact = compact_samples;
+  merged = compact_samples && merged_cells;
   samples.clear();
+  cells.clear();
   packed.clear();
   steps.clear();
-  first_k.assign(compact ? rays : 0, 0);
+  first_k.assign(compact && !merged ? rays : 0, 0);
   end.assign(rays, 0);
   shells.assign(compact ? 0 : rays * shape.num_shells, ShellJ{{-1, 0.f, 0.f}, {}});
   t_box.assign(compact ? rays : 0, 0.f);
   h.assign(3 * rays, 0.f);
   scale.assign(rays, 1.f);
-  dl_per_delta.assign(compact ? rays : 0, 0.f);
+  dl_per_delta.assign(compact && !merged ? rays : 0, 0.f);
   pose.assign(shape.poses > 0 && !compact ? kPoseRowValues * rays : 0, 0.f);
   packed_pose.assign(shape.poses > 0 && compact ? kPoseRowValues * rays : 0, 0);
 }
@@ -91,49 +88,103 @@ const int32_t* PhotoSlots(const LevelProblem& p, int count) {
   return p.rays->exposure_slot.data();
 }
 
-int64_t RecordedJacobianBytes(const LevelProblem& p, int64_t block_rays, bool compact, const CpuVectors& vectors) {
-  constexpr int64_t kSparseStride = 4;
+namespace {
+// How many of a sample's cells its predecessor on the ray (prev) did not reach: the cells a
+// ray's merged record gains with it (CellMerger emits a cell once it leaves the samples' window).
+int NewCells(const GridSample<float>& gs, const GridSample<float>& prev, bool first) {
+  int count = 0;
+  for (int q = 0; q < 8; ++q) {
+    if (gs.cell[q] < 0) continue;
+    bool seen = false;
+    for (int j = 0; j < 8 && !first && !seen; ++j) seen = prev.cell[j] == gs.cell[q];
+    if (!seen) ++count;
+  }
+  return count;
+}
+}  // namespace
+
+RecordEstimate EstimateRecord(const LevelProblem& p, int64_t block_rays, const CpuVectors& vectors) {
+  constexpr int64_t kStride = 4;
   const VolumeView<float> vol = MakeView(p.shape, p.geometry, nullptr);
   const int64_t n = p.rays->size();
-  std::vector<int64_t> per_block((n + block_rays - 1) / block_rays, 0);
+  struct Counts {
+    int64_t samples = 0, cells = 0;
+  };
+  std::vector<Counts> per_block((n + block_rays - 1) / block_rays);
   vectors.arena().execute([&] {
     tbb::parallel_for(int64_t{0}, static_cast<int64_t>(per_block.size()), [&](int64_t b) {
-      int64_t count = 0, sparse_count = 0, sparse_rays = 0;
+      int64_t samples = 0, cells = 0, rays = 0;
       const int64_t begin = b * block_rays, end = std::min(n, (b + 1) * block_rays);
-      for (int64_t i = begin; i < end; i += vol.brick_slot ? kSparseStride : 1) {
+      for (int64_t i = begin; i < end; i += kStride, ++rays) {
         const RayPixel& px = p.rays->pixels[i];
-        const BoxRay<float> ray = PixelBoxRay(p.rays->cameras[px.camera], p.geometry.box, p.shape.n, px.x, px.y,
-                                              Jitter{0, 0, false, false});
-        const March<float> march = MakeMarch(vol, ray);
-        if (!vol.brick_slot) {
-          count += march.count;
-          continue;
-        }
         const Jitter none{0, 0, false, false};
+        const BoxRay<float> ray = PixelBoxRay(p.rays->cameras[px.camera], p.geometry.box, p.shape.n, px.x, px.y, none);
+        const March<float> march = MakeMarch(vol, ray);
         MarchStep<float> st;
-        int taken = 0;
+        int taken = 0, new_cells = 0;
+        GridSample<float> prev{};
         for (int k = TakeSample(vol, ray, march, 0, 1, none, &st); k < march.count;
              k = TakeSample(vol, ray, march, k + 1, 1, none, &st)) {
+          const GridSample<float> gs = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(st.t));
+          new_cells += NewCells(gs, prev, taken == 0);
+          prev = gs;
           ++taken;
         }
-        sparse_count += std::min(march.count, taken + taken / 8 + 2);
-        ++sparse_rays;
+        // An eighth more for the jittered samples that land differently.
+        samples += vol.brick_slot ? std::min(march.count, taken + taken / 8 + 2) : march.count;
+        cells += new_cells + new_cells / 8;
       }
-      if (sparse_rays > 0) count += (sparse_count * (end - begin) + sparse_rays - 1) / sparse_rays;
-      per_block[b] = count;
+      const auto scaled = [&](int64_t count) { return (count * (end - begin) + rays - 1) / rays; };
+      if (rays > 0) per_block[b] = {scaled(samples), scaled(cells)};
     });
   });
-  int64_t samples = 0;
-  for (int64_t c : per_block) samples += c;
   // Only every jtj_ray_stride-th ray is recorded.
-  const int64_t stride = std::max(1, p.jtj_ray_stride), recorded = (n + stride - 1) / stride;
-  // What BlockJ keeps for a sample and for a recorded ray (the vectors of Clear).
-  const size_t per_sample = compact ? sizeof(CompactSampleJ) + sizeof(uint8_t) : sizeof(SampleJ);  // packed, steps
-  size_t per_ray = sizeof(uint32_t) + 4 * sizeof(float);                     // end, h, scale
-  if (compact) per_ray += 2 * sizeof(float) + sizeof(uint16_t);  // dl_per_delta, t_box, first_k
-  if (!compact) per_ray += p.shape.num_shells * sizeof(ShellJ);    // shells
-  if (p.shape.poses > 0) per_ray += kPoseRowValues * (compact ? sizeof(uint16_t) : sizeof(float));  // the pose rows
-  return samples / stride * static_cast<int64_t>(per_sample) + recorded * static_cast<int64_t>(per_ray);
+  const int64_t stride = std::max(1, p.jtj_ray_stride);
+  RecordEstimate e;
+  for (const Counts& c : per_block) {
+    e.samples += c.samples / stride;
+    e.cells += c.cells / stride;
+  }
+  e.rays = (n + stride - 1) / stride;
+  return e;
+}
+
+int64_t RecordBytes(const RecordEstimate& e, RecordKind kind, const VolumeShape& shape) {
+  const bool merged = kind == RecordKind::kMerged, compact = kind != RecordKind::kExact;
+  // What BlockJ keeps for a sample (merged: for a cell of a ray) and for a recorded ray (the
+  // vectors of Clear).
+  const int64_t entries = merged ? e.cells : e.samples;
+  const size_t per_entry = merged    ? sizeof(MergedCellJ)
+                           : compact ? sizeof(CompactSampleJ) + sizeof(uint8_t)  // packed, steps
+                                     : sizeof(SampleJ);
+  size_t per_ray = sizeof(uint32_t) + 4 * sizeof(float);                // end, h, scale
+  if (compact) per_ray += sizeof(float);                                // t_box
+  if (compact && !merged) per_ray += sizeof(float) + sizeof(uint16_t);  // dl_per_delta, first_k
+  if (!compact) per_ray += shape.num_shells * sizeof(ShellJ);           // shells
+  if (shape.poses > 0) per_ray += kPoseRowValues * (compact ? sizeof(uint16_t) : sizeof(float));  // the pose rows
+  return entries * static_cast<int64_t>(per_entry) + e.rays * static_cast<int64_t>(per_ray);
+}
+
+LevelPlan PlanLevel(const LevelProblem& p, int num_vectors, int threads, const CpuBackendOptions& options,
+                    int64_t block_rays, const CpuVectors& vectors) {
+  MemoryEstimate e;
+  const int64_t params = p.shape.ParamCount();
+  e.vectors = num_vectors * params * 4;
+  e.scratch = int64_t{threads} * 2 * params * 4;
+  e.rays = p.rays ? p.rays->Bytes() : 0;
+  e.available = options.max_memory > 0 ? options.max_memory : AvailableMemory() * 9 / 10;
+  RecordKind kind = !options.compact_jacobian                               ? RecordKind::kExact
+                    : options.merged_jacobian && p.shape.sh_degree == 0 ? RecordKind::kMerged
+                                                                        : RecordKind::kCompact;
+  if (options.cache_jacobian && p.rays) {
+    const RecordEstimate r = EstimateRecord(p, block_rays, vectors);
+    const int64_t merged = RecordBytes(r, RecordKind::kMerged, p.shape);
+    if (kind == RecordKind::kMerged && e.available > 0 && 2 * (e.Needed() + merged) > e.available) {
+      kind = RecordKind::kCompact;
+    }
+    e.jacobian_cache = RecordBytes(r, kind, p.shape);
+  }
+  return {e, kind};
 }
 
 }  // namespace perf::recon::cpu

@@ -27,14 +27,23 @@ void ExpectClose(const std::vector<float>& got, const std::vector<double>& want,
   test::ExpectAllClose(got, want, 2e-4, 1e-4, what);
 }
 
-// The tests against the dense Jacobian check the exact record; the compact one has its own test.
-std::unique_ptr<Backend> Cpu(int threads, bool cache = true, bool compact = false) {
+// The tests against the dense Jacobian check the exact record; the compact ones have their own
+// tests.
+using cpu::RecordKind;
+std::unique_ptr<Backend> Cpu(int threads, bool cache = true, RecordKind record = RecordKind::kExact,
+                             int64_t max_memory = 0) {
   CpuBackendOptions o;
   o.threads = threads;
   o.cache_jacobian = cache;
-  o.compact_jacobian = compact;
+  o.compact_jacobian = record != RecordKind::kExact;
+  o.merged_jacobian = record == RecordKind::kMerged;
+  o.max_memory = max_memory;
   return MakeCpuBackend(o);
 }
+const char* Name(RecordKind k) {
+  return k == RecordKind::kExact ? "exact" : k == RecordKind::kCompact ? "compact samples" : "merged cells";
+}
+constexpr RecordKind kRecords[] = {RecordKind::kExact, RecordKind::kCompact, RecordKind::kMerged};
 
 enum : VecId { kX, kG, kD, kP, kOut, kVectors };
 
@@ -145,12 +154,13 @@ TEST(CpuBackendTest, JtJpMatchesTheDenseJacobianCachedAndRecomputed) {
 
 // ReleaseJacobian (the hierarchy's, after a level's solve) frees the record: MultiplyJtJ is then
 // refused until a Linearize, which records it again, and the product is the one before, bit for
-// bit on one thread (exact and compact records).
+// bit on one thread (every kind of record).
 TEST(CpuBackendTest, AReleasedJacobianIsRecordedAgain) {
   const TinyProblem p(3);
   const std::vector<float> pv = test::RandomDirection(p.shape, 4);
-  for (bool compact : {false, true}) {
-    auto b = Cpu(1, true, compact);
+  for (const RecordKind record : kRecords) {
+    SCOPED_TRACE(Name(record));
+    auto b = Cpu(1, true, record);
     b->SetLevel(p.Level(), kVectors);
     b->Upload(kX, p.x);
     b->Upload(kP, pv);
@@ -159,16 +169,105 @@ TEST(CpuBackendTest, AReleasedJacobianIsRecordedAgain) {
     b->MultiplyJtJ(kP, kOut);
     b->Download(kOut, before);
     b->ReleaseJacobian();
-    EXPECT_THROW(b->MultiplyJtJ(kP, kOut), InternalError) << "compact " << compact;
+    EXPECT_THROW(b->MultiplyJtJ(kP, kOut), InternalError);
     b->Linearize(kX, 11, kG, kD);
     b->MultiplyJtJ(kP, kOut);
     b->Download(kOut, after);
-    EXPECT_EQ(after, before) << "compact " << compact;
+    EXPECT_EQ(after, before);
     EXPECT_GT(*std::max_element(after.begin(), after.end()), 0.f);
   }
 }
 
-// The compact record (CpuBackendOptions::compact_jacobian, the default): the same samples (their
+// J^T J p of a backend keeping `record` on p (the fourth residual weighted lambda) for pv, then
+// after RestrictJacobian to `free` for held_p (with its output masked by `free`, as the solver's).
+struct RecordedProducts {
+  std::vector<float> out[2];  // [restricted]
+  PassStats stats[2];
+  RecordedProducts(const TinyProblem& p, float lambda, RecordKind record, const std::vector<float>& pv,
+                   const std::vector<float>& free, const std::vector<float>& held_p, bool mask) {
+    auto b = Cpu(2, true, record);
+    b->SetLevel(p.Level(lambda), kVectors);
+    b->Upload(kX, p.x);
+    b->Upload(kP, pv);
+    b->Linearize(kX, 11, kG, kD);
+    for (const bool restricted : {false, true}) {
+      if (restricted) {
+        b->Upload(kG, free);
+        b->Upload(kP, held_p);
+        b->RestrictJacobian(kG);
+      }
+      stats[restricted] = b->MultiplyJtJ(kP, kOut);
+      out[restricted].resize(p.shape.ParamCount());
+      b->Download(kOut, out[restricted]);
+      if (restricted && mask) {
+        for (size_t i = 0; i < free.size(); ++i) out[restricted][i] *= free[i];
+      }
+    }
+  }
+};
+
+// The records' tests hold every density (RestrictJacobian then drops what reaches only empty,
+// held cells): the first half of p's cells is made empty; `free` holds the densities, held_p is
+// pv with 0 on them.
+void HoldDensities(TinyProblem* p, const std::vector<float>& pv, std::vector<float>* free,
+                   std::vector<float>* held_p) {
+  free->assign(p->shape.ParamCount(), 1.f);
+  *held_p = pv;
+  for (int64_t c = 0; c < p->shape.StoredCells(); ++c) {
+    (*free)[GridParam(c, 3)] = 0.f;
+    (*held_p)[GridParam(c, 3)] = 0.f;
+    if (2 * c < p->shape.StoredCells()) p->x[GridParam(c, 3)] = 0.f;
+  }
+}
+
+// A compact record's J^T J p against the exact record's, on the volume alone and with exposures
+// and poses, the fourth residual weighted 0.1 and 100, on every parameter and restricted.
+void ExpectCloseToTheExactRecord(RecordKind record) {
+  const bool merged = record == RecordKind::kMerged;
+  TinyProblem posed(3);
+  posed.AddExposures(5);
+  posed.AddPoses(6);
+  for (TinyProblem p : {TinyProblem(3), posed}) {
+    SCOPED_TRACE(p.shape.poses > 0 ? "poses refined" : "volume only");
+    const std::vector<float> pv = test::RandomDirection(p.shape, 4);
+    std::vector<float> free, held_p;
+    HoldDensities(&p, pv, &free, &held_p);
+    // Merged, on the volume's entries: the exact record but for the order of float sums, unless
+    // the rays' bfloat16 pose rows reach them (through J p).
+    const double volume_tol = merged && p.shape.poses == 0 ? 1e-5 : 3e-3;
+    for (const float lambda : {0.1f, 100.f}) {
+      SCOPED_TRACE(lambda);
+      const RecordedProducts exact_run(p, lambda, RecordKind::kExact, pv, free, held_p, merged);
+      const RecordedProducts run(p, lambda, record, pv, free, held_p, merged);
+      for (const bool restricted : {false, true}) {
+        SCOPED_TRACE(restricted ? "restricted" : "every parameter");
+        const std::vector<float>& exact = exact_run.out[restricted];
+        const std::vector<float>& got = run.out[restricted];
+        // PassStats::samples counts a merged record's cells: several a sample.
+        if (merged) EXPECT_GT(run.stats[restricted].samples, 2 * exact_run.stats[restricted].samples);
+        else EXPECT_EQ(run.stats[restricted].samples, exact_run.stats[restricted].samples);
+        EXPECT_GT(run.stats[restricted].samples, 100);
+        // The volume's entries, and the photos' (exposures and poses, on their own scale).
+        const auto photos = static_cast<std::ptrdiff_t>(p.shape.ExposureStart());
+        test::ExpectAllClose(std::vector<float>(got.begin(), got.begin() + photos),
+                             std::vector<double>(exact.begin(), exact.begin() + photos), volume_tol, volume_tol,
+                             "compact J^T J p, the volume");
+        if (!merged) EXPECT_NE(got, exact);  // rounded: not the exact record
+        if (p.shape.poses > 0) {
+          test::ExpectAllClose(std::vector<float>(got.begin() + photos, got.end()),
+                               std::vector<double>(exact.begin() + photos, exact.end()), 3e-3, 3e-3,
+                               "compact J^T J p, exposures and poses");
+          const auto at = static_cast<std::ptrdiff_t>(p.shape.PoseStart());
+          EXPECT_FALSE(std::equal(got.begin() + at, got.end(), exact.begin() + at));  // rounded too
+        }
+      }
+      EXPECT_LT(run.stats[1].samples, run.stats[0].samples);  // the restriction dropped some
+    }
+  }
+}
+
+// The compact record (CpuBackendOptions::compact_jacobian, the default; sample by sample, as
+// levels with spherical harmonics keep it): the same samples (their
 // positions recomputed from their march indices; a wrong one would miss by far more than the
 // tolerance) with the colour partials rounded to bfloat16 (2^-9 relative each) and dl made from
 // the ray's dL/dT_box as Backward makes it, the shells' partials recomputed from the ray's T_box
@@ -177,67 +276,51 @@ TEST(CpuBackendTest, AReleasedJacobianIsRecordedAgain) {
 // the pose rows in bfloat16 (a row read three rays off fails it; the next pixel's is
 // within the tolerance), so J^T J p within a few tenths of a percent of the exact record's. With
 // the fourth residual weighted 100 its dl^2 terms dominate the densities' entries: a dl off by 1 %
-// fails there.
-TEST(CpuBackendTest, CompactRecordIsTheExactOneRoundedToBfloat16) {
-  TinyProblem posed(3);
-  posed.AddExposures(5);
-  posed.AddPoses(6);
-  for (TinyProblem p : {TinyProblem(3), posed}) {
-    SCOPED_TRACE(p.shape.poses > 0 ? "poses refined" : "volume only");
-    const std::vector<float> pv = test::RandomDirection(p.shape, 4);
-    // Then with every density held (RestrictJacobian drops the samples whose cells are all empty
-    // and held, and the compact record re-encodes its march steps in place): the first half of
-    // the cells is empty.
-    std::vector<float> free(p.shape.ParamCount(), 1.f), held_p = pv;
-    for (int64_t c = 0; c < p.shape.StoredCells(); ++c) {
-      free[GridParam(c, 3)] = 0.f;
-      held_p[GridParam(c, 3)] = 0.f;
-      if (2 * c < p.shape.StoredCells()) p.x[GridParam(c, 3)] = 0.f;
-    }
-    for (const float lambda : {0.1f, 100.f}) {
-      SCOPED_TRACE(lambda);
-      std::vector<float> out[2][2];  // [restricted][compact]
-      PassStats stats[2][2];
-      for (const bool compact : {false, true}) {
-        auto b = Cpu(2, true, compact);
-        b->SetLevel(p.Level(lambda), kVectors);
-        b->Upload(kX, p.x);
-        b->Upload(kP, pv);
-        b->Linearize(kX, 11, kG, kD);
-        for (const bool restricted : {false, true}) {
-          if (restricted) {
-            b->Upload(kG, free);
-            b->Upload(kP, held_p);
-            b->RestrictJacobian(kG);
-          }
-          stats[restricted][compact] = b->MultiplyJtJ(kP, kOut);
-          out[restricted][compact].resize(p.shape.ParamCount());
-          b->Download(kOut, out[restricted][compact]);
-        }
-      }
-      for (const bool restricted : {false, true}) {
-        SCOPED_TRACE(restricted ? "restricted" : "every parameter");
-        const std::vector<float>& exact = out[restricted][0];
-        const std::vector<float>& compact = out[restricted][1];
-        EXPECT_EQ(stats[restricted][1].samples, stats[restricted][0].samples);
-        EXPECT_GT(stats[restricted][1].samples, 100);
-        // The volume's entries, and the photos' (exposures and poses, on their own scale).
-        const auto photos = static_cast<std::ptrdiff_t>(p.shape.ExposureStart());
-        test::ExpectAllClose(std::vector<float>(compact.begin(), compact.begin() + photos),
-                             std::vector<double>(exact.begin(), exact.begin() + photos), 3e-3, 3e-3,
-                             "compact J^T J p, the volume");
-        EXPECT_NE(compact, exact);  // rounded: not the exact record
-        if (p.shape.poses > 0) {
-          test::ExpectAllClose(std::vector<float>(compact.begin() + photos, compact.end()),
-                               std::vector<double>(exact.begin() + photos, exact.end()), 3e-3, 3e-3,
-                               "compact J^T J p, exposures and poses");
-          const auto at = static_cast<std::ptrdiff_t>(p.shape.PoseStart());
-          EXPECT_FALSE(std::equal(compact.begin() + at, compact.end(), exact.begin() + at));  // rounded too
-        }
-      }
-      EXPECT_LT(stats[1][1].samples, stats[0][1].samples);  // the restriction dropped some
-    }
-  }
+// fails there. With every density held, the compact record re-encodes its march steps in place.
+TEST(CpuBackendTest, CompactRecordIsTheExactOneRoundedToBfloat16) { ExpectCloseToTheExactRecord(RecordKind::kCompact); }
+
+// The merged record (CpuBackendOptions::merged_jacobian, the default at degree 0): each ray's cells
+// with the sums of its samples' partials times their trilinear weights, in float, beside the
+// compact record's shells and bfloat16 pose rows. Without poses J^T J p is the exact record's but
+// for the order of float sums (to 1e-5; a cell's sums from the wrong ray, or one sample's weight
+// left out, fail it by far); with every density held the dropped cells (merged dc 0 and
+// the density held) change nothing on the free entries, the only ones the solver keeps
+// (Multiply by the free mask, as RecordedProducts does here).
+TEST(CpuBackendTest, MergedRecordIsTheExactOneSummedByCell) { ExpectCloseToTheExactRecord(RecordKind::kMerged); }
+
+// Which record a level keeps (CpuBackendOptions::merged_jacobian): merged cells at degree 0 when
+// the level fits in half the memory with them; samples with spherical harmonics (the bands'
+// traffic dominates there) or when memory is short. PassStats::samples tells them apart: a merged
+// record counts its rays' cells, several a sample.
+TEST(CpuBackendTest, MergedCellsOnlyWithoutBandsAndWhereTheyFit) {
+  TinyProblem plain(3), banded(3);
+  banded.AddSh(1, 8);
+  const auto recorded = [](const TinyProblem& p, int64_t max_memory, int64_t* cache_bytes) {
+    auto b = Cpu(2, true, RecordKind::kMerged, max_memory);
+    *cache_bytes = b->EstimateMemory(p.Level(), kVectors).jacobian_cache;
+    b->SetLevel(p.Level(), kVectors);
+    b->Upload(kX, p.x);
+    b->Upload(kP, test::RandomDirection(p.shape, 4));
+    const PassStats lin = b->Linearize(kX, 11, kG, kD);
+    EXPECT_TRUE(b->CachesJacobian());
+    return std::pair{b->MultiplyJtJ(kP, kOut).samples, lin.samples};
+  };
+  const int64_t plenty = int64_t{1} << 40;
+  int64_t merged_bytes = 0, sample_bytes = 0;
+  const auto [cells, samples] = recorded(plain, plenty, &merged_bytes);
+  EXPECT_GT(cells, 2 * samples) << "merged cells at degree 0";
+  const MemoryEstimate e = Cpu(2)->EstimateMemory(plain.Level(), kVectors);
+  // Just too little for half the memory: the level keeps its samples, and says so in its estimate.
+  const int64_t tight = 2 * (e.Needed() + merged_bytes) - 1;
+  const auto [short_count, short_samples] = recorded(plain, tight, &sample_bytes);
+  EXPECT_EQ(short_count, short_samples) << "samples where memory is short";
+  EXPECT_LT(sample_bytes, merged_bytes);
+  // The estimate is of what is kept: near the recorded cells' 16 bytes each (and the rays' own).
+  EXPECT_GT(merged_bytes, cells * 16 / 2);
+  EXPECT_LT(merged_bytes, cells * 16 * 3);
+  int64_t banded_bytes = 0;
+  const auto [banded_count, banded_samples] = recorded(banded, plenty, &banded_bytes);
+  EXPECT_EQ(banded_count, banded_samples) << "samples with spherical harmonics";
 }
 
 // The compact record's march indices, one byte a sample (the steps back from the ray's entry
