@@ -140,10 +140,7 @@ class CpuBackend final : public Backend {
     const uint64_t pass = BeginPass();
     PassStats stats = ForBlocks(want_diag ? 2 : 1, pass, [&](int64_t block, int64_t begin, int64_t end, Scratch& s) {
       BlockJ* out = record ? &blocks_[block] : nullptr;
-      if (out) {
-        out->Clear(jtj.CountIn(begin, end), level_.shape, record_ != RecordKind::kExact,
-                   record_ == RecordKind::kMerged);
-      }
+      if (out) out->Clear(jtj.CountIn(begin, end), level_.shape, record_);
       return want_diag ? LinearizeBlock<true>(vol, seed, subset, jtj, begin, end, s, out)
                        : LinearizeBlock<false>(vol, seed, subset, jtj, begin, end, s, out);
     });

@@ -10,9 +10,9 @@
 
 namespace perf::recon::cpu {
 
-void BlockJ::Clear(int64_t rays, const VolumeShape& shape, bool compact_samples, bool merged_cells) {
-  compact = compact_samples;
-  merged = compact_samples && merged_cells;
+void BlockJ::Clear(int64_t rays, const VolumeShape& shape, RecordKind kind) {
+  compact = kind != RecordKind::kExact;
+  merged = kind == RecordKind::kMerged;
   samples.clear();
   cells.clear();
   packed.clear();

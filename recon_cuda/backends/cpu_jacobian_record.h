@@ -47,6 +47,10 @@ inline float FromBfloat16(uint16_t h) { return std::bit_cast<float>(static_cast<
 // A ray's pose row (pose.h PoseRow) without its padding column: 4 residuals x 7 values.
 inline constexpr int kPoseRowValues = 4 * kPoseSolved;
 
+// How Linearize records the Jacobian: exactly (SampleJ), compactly sample by sample
+// (CompactSampleJ), or compactly with each ray's cells merged (MergedCellJ).
+enum class RecordKind { kExact, kCompact, kMerged };
+
 // One sample of a ray's Jacobian, as recorded by Linearize: exact, or compact (CpuBackendOptions::
 // compact_jacobian): its colour partials in bfloat16 (8 bits of mantissa) and, apart (BlockJ::
 // steps), one byte: how many march steps it lies before the ray's entry before (Backward records a
@@ -114,8 +118,8 @@ struct BlockJ {
   std::vector<float> pose;
   std::vector<uint16_t> packed_pose;
 
-  // Empty, for `rays` rays of a level of `shape`, exact or compact.
-  void Clear(int64_t rays, const VolumeShape& shape, bool compact_samples = false, bool merged_cells = false);
+  // Empty, for `rays` rays of a level of `shape`, kept as `kind`.
+  void Clear(int64_t rays, const VolumeShape& shape, RecordKind kind = RecordKind::kExact);
   // One past the last sample (merged: cell) recorded.
   uint32_t SampleCount() const {
     return static_cast<uint32_t>(merged ? cells.size() : compact ? packed.size() : samples.size());
@@ -260,10 +264,6 @@ inline void DropSkippableCells(const float* free, BlockJ* block) {
 // The photo slots the level's rays read (RaySet::exposure_slot: the exposures' and the poses'),
 // checked against `count` photos, or nullptr when the level solves none (count 0).
 const int32_t* PhotoSlots(const LevelProblem& p, int count);
-
-// How Linearize records the Jacobian: exactly (SampleJ), compactly sample by sample
-// (CompactSampleJ), or compactly with each ray's cells merged (MergedCellJ).
-enum class RecordKind { kExact, kCompact, kMerged };
 
 // What a level's Jacobian record holds (every p.jtj_ray_stride-th ray): its samples, its rays'
 // cells as a merged record keeps them, and its rays. An estimate made by marching every 4th ray

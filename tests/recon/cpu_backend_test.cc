@@ -335,7 +335,7 @@ TEST(CpuBackendTest, CompactRecordStepsBridgeLongGaps) {
   const Jitter none{0, 0, false, false};
   const auto partials = [](int k) { return SamplePartials<float>{0.01f * k, {1.f, -2.f, 0.5f * k}, 0.f}; };
   BlockJ b;
-  b.Clear(static_cast<int64_t>(ks.size()), VolumeShape(4, 2, 2), true);
+  b.Clear(static_cast<int64_t>(ks.size()), VolumeShape(4, 2, 2), RecordKind::kCompact);
   for (size_t r = 0; r < ks.size(); ++r) {
     int last = -1;
     for (int k : ks[r]) b.AppendCompact(static_cast<int64_t>(r), k, partials(k), &last);
