@@ -50,15 +50,14 @@ class CpuBackend final : public Backend {
              PhotoSlots(p, p.shape.exposures), PhotoSlots(p, p.shape.poses)};
     weight_ = OpacityResidualWeight(p);
     robust_ = p.residuals.robust_scale;
-    const LevelPlan plan = PlanLevel(p, num_vectors, threads_, options_, kBlockRays, vectors_);
-    const MemoryEstimate& e = plan.memory;
+    plan_ = PlanLevel(p, num_vectors, threads_, options_, kBlockRays, vectors_);
+    const MemoryEstimate& e = plan_.memory;
     if (!e.Fits()) {
       throw ResourceError(StrCat("level ", DescribeShape(p.shape), " needs ", e.Needed() >> 20, " MiB for the solver's ",
                                  num_vectors, " vectors, per-thread sums and rays, but only ", e.available >> 20,
                                  " MiB are available; use fewer --levels, fewer --threads, or a larger --downscale"));
     }
     cache_ = options_.cache_jacobian && (e.available == 0 || e.Needed() + e.jacobian_cache <= e.available);
-    record_ = plan.record;
     vectors_.Assign(num_vectors, p.shape.ParamCount());
     const int64_t nblocks = (p.rays->size() + kBlockRays - 1) / kBlockRays;
     if (cache_) blocks_.resize(nblocks);
@@ -140,7 +139,8 @@ class CpuBackend final : public Backend {
     const uint64_t pass = BeginPass();
     PassStats stats = ForBlocks(want_diag ? 2 : 1, pass, [&](int64_t block, int64_t begin, int64_t end, Scratch& s) {
       BlockJ* out = record ? &blocks_[block] : nullptr;
-      if (out) out->Clear(jtj.CountIn(begin, end), level_.shape, record_);
+      const int64_t room = static_cast<size_t>(block) < plan_.entries.size() ? plan_.entries[block] : 0;
+      if (out) out->Clear(jtj.CountIn(begin, end), level_.shape, plan_.record, room);
       return want_diag ? LinearizeBlock<true>(vol, seed, subset, jtj, begin, end, s, out)
                        : LinearizeBlock<false>(vol, seed, subset, jtj, begin, end, s, out);
     });
@@ -474,7 +474,7 @@ class CpuBackend final : public Backend {
   std::vector<double> pose_blocks_;  // the last Linearize's pose blocks (pose_blocks.h), with a diagonal
   tbb::enumerable_thread_specific<Scratch> scratch_;
   bool cache_ = false, linearized_ = false, recorded_ = false;
-  RecordKind record_ = RecordKind::kCompact;  // the level's record (PlanLevel)
+  LevelPlan plan_;  // the level's record and its estimated entries
   int max_samples_ = 0;
   TrainingRays<float> rays_{};     // the level's rays (alphas: nullptr unless UsesAlpha)
   float weight_ = 0;               // OpacityResidualWeight

@@ -10,13 +10,22 @@
 
 namespace perf::recon::cpu {
 
-void BlockJ::Clear(int64_t rays, const VolumeShape& shape, RecordKind kind) {
+void BlockJ::Clear(int64_t rays, const VolumeShape& shape, RecordKind kind, int64_t entries) {
   compact = kind != RecordKind::kExact;
   merged = kind == RecordKind::kMerged;
   samples.clear();
   cells.clear();
   packed.clear();
   steps.clear();
+  const auto reserve = static_cast<size_t>(std::max<int64_t>(entries, 0));
+  if (merged) {
+    cells.reserve(reserve);
+  } else if (compact) {
+    packed.reserve(reserve);
+    steps.reserve(reserve);
+  } else {
+    samples.reserve(reserve);
+  }
   first_k.assign(compact && !merged ? rays : 0, 0);
   end.assign(rays, 0);
   shells.assign(compact ? 0 : rays * shape.num_shells, ShellJ{{-1, 0.f, 0.f}, {}});
@@ -142,6 +151,8 @@ RecordEstimate EstimateRecord(const LevelProblem& p, int64_t block_rays, const C
   const int64_t stride = std::max(1, p.jtj_ray_stride);
   RecordEstimate e;
   for (const Counts& c : per_block) {
+    e.block_samples.push_back(c.samples / stride);
+    e.block_cells.push_back(c.cells / stride);
     e.samples += c.samples / stride;
     e.cells += c.cells / stride;
   }
@@ -183,8 +194,9 @@ LevelPlan PlanLevel(const LevelProblem& p, int num_vectors, int threads, const C
       kind = RecordKind::kCompact;
     }
     e.jacobian_cache = RecordBytes(r, kind, p.shape);
+    return {e, kind, kind == RecordKind::kMerged ? r.block_cells : r.block_samples};
   }
-  return {e, kind};
+  return {e, kind, {}};
 }
 
 }  // namespace perf::recon::cpu

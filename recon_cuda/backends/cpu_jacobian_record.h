@@ -118,8 +118,9 @@ struct BlockJ {
   std::vector<float> pose;
   std::vector<uint16_t> packed_pose;
 
-  // Empty, for `rays` rays of a level of `shape`, kept as `kind`.
-  void Clear(int64_t rays, const VolumeShape& shape, RecordKind kind = RecordKind::kExact);
+  // Empty, for `rays` rays of a level of `shape`, kept as `kind`, with room for `entries` samples
+  // (merged: cells), so that the first Linearize of a level does not copy them as they grow.
+  void Clear(int64_t rays, const VolumeShape& shape, RecordKind kind = RecordKind::kExact, int64_t entries = 0);
   // One past the last sample (merged: cell) recorded.
   uint32_t SampleCount() const {
     return static_cast<uint32_t>(merged ? cells.size() : compact ? packed.size() : samples.size());
@@ -271,6 +272,7 @@ const int32_t* PhotoSlots(const LevelProblem& p, int count);
 // land differently), on the arena of `vectors`.
 struct RecordEstimate {
   int64_t samples = 0, cells = 0, rays = 0;
+  std::vector<int64_t> block_samples, block_cells;  // [blocks]
 };
 RecordEstimate EstimateRecord(const LevelProblem& p, int64_t block_rays, const CpuVectors& vectors);
 // Bytes of that record, kept as `kind`.
@@ -283,6 +285,7 @@ int64_t RecordBytes(const RecordEstimate& e, RecordKind kind, const VolumeShape&
 struct LevelPlan {
   MemoryEstimate memory;
   RecordKind record = RecordKind::kCompact;
+  std::vector<int64_t> entries;  // [blocks] the record's estimated entries (BlockJ::Clear); empty: none
 };
 LevelPlan PlanLevel(const LevelProblem& p, int num_vectors, int threads, const CpuBackendOptions& options,
                     int64_t block_rays, const CpuVectors& vectors);
