@@ -1,7 +1,9 @@
 // Throughput of the solver's passes on the CPU backend: rays/s and samples/s of Linearize (cost,
 // J^T r, diag, recorded Jacobian), MultiplyJtJ, the cost-only pass, Linearize as Adam runs it
 // (no diagonal, nothing recorded), and MultiplyJtJ as Gauss-Newton's CG runs it: restricted to
-// the free parameters (HoldParameters, RestrictJacobian), where it visits fewer samples.
+// the free parameters (HoldParameters, RestrictJacobian), where it visits fewer samples. With the
+// merged record (the default at degree 0; --sample-record for the samples) J^T J p's "samples"
+// are the rays' cells, about 4 a sample.
 //
 //   perf_bench_cpu --workspace WS [--checkpoint FILE] [--n 64] [--threads 2] [--repeat 3]
 //   perf_bench_cpu --workspace WS --levels 2 [--start-resolution 32] [--iterations 10] [--modes both]

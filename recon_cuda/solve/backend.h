@@ -110,7 +110,7 @@ struct PassStats {
   double cost = 0;        // 0.5 sum of squared residuals (colour and auxiliary)
   double colour_sse = 0;  // sum of squared colour residuals (for PSNR: MSE = colour_sse / (3 rays))
   int64_t rays = 0;       // rays evaluated
-  int64_t samples = 0;    // march samples composited
+  int64_t samples = 0;    // march samples composited (MultiplyJtJ on the CPU's merged record: the rays' cells)
   double seconds = 0;
   // Linearize only: the cost of the rays of its `subset` alone, summed as Cost(x, seed, subset)
   // sums it (the line search's starting cost without a pass of its own).
