@@ -112,8 +112,7 @@ int NewCells(const GridSample<float>& gs, const GridSample<float>& prev, bool fi
 }
 }  // namespace
 
-RecordEstimate EstimateRecord(const LevelProblem& p, int64_t block_rays, const CpuVectors& vectors) {
-  constexpr int64_t kStride = 4;
+RecordEstimate EstimateRecord(const LevelProblem& p, int64_t block_rays, const CpuVectors& vectors, bool count_cells) {
   const VolumeView<float> vol = MakeView(p.shape, p.geometry, nullptr);
   const int64_t n = p.rays->size();
   struct Counts {
@@ -124,19 +123,28 @@ RecordEstimate EstimateRecord(const LevelProblem& p, int64_t block_rays, const C
     tbb::parallel_for(int64_t{0}, static_cast<int64_t>(per_block.size()), [&](int64_t b) {
       int64_t samples = 0, cells = 0, rays = 0;
       const int64_t begin = b * block_rays, end = std::min(n, (b + 1) * block_rays);
-      for (int64_t i = begin; i < end; i += kStride, ++rays) {
+      // A dense grid's samples are its march's length, counted on every ray; a sparse march and
+      // the cells are walked sample by sample on every 4th ray.
+      const int64_t step = vol.brick_slot || count_cells ? 4 : 1;
+      for (int64_t i = begin; i < end; i += step, ++rays) {
         const RayPixel& px = p.rays->pixels[i];
         const Jitter none{0, 0, false, false};
         const BoxRay<float> ray = PixelBoxRay(p.rays->cameras[px.camera], p.geometry.box, p.shape.n, px.x, px.y, none);
         const March<float> march = MakeMarch(vol, ray);
+        if (!vol.brick_slot && !count_cells) {
+          samples += march.count;
+          continue;
+        }
         MarchStep<float> st;
         int taken = 0, new_cells = 0;
         GridSample<float> prev{};
         for (int k = TakeSample(vol, ray, march, 0, 1, none, &st); k < march.count;
              k = TakeSample(vol, ray, march, k + 1, 1, none, &st)) {
-          const GridSample<float> gs = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(st.t));
-          new_cells += NewCells(gs, prev, taken == 0);
-          prev = gs;
+          if (count_cells) {
+            const GridSample<float> gs = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(st.t));
+            new_cells += NewCells(gs, prev, taken == 0);
+            prev = gs;
+          }
           ++taken;
         }
         // An eighth more for the jittered samples that land differently.
@@ -188,9 +196,9 @@ LevelPlan PlanLevel(const LevelProblem& p, int num_vectors, int threads, const C
                     : options.merged_jacobian && p.shape.sh_degree == 0 ? RecordKind::kMerged
                                                                         : RecordKind::kCompact;
   if (options.cache_jacobian && p.rays) {
-    const RecordEstimate r = EstimateRecord(p, block_rays, vectors);
-    const int64_t merged = RecordBytes(r, RecordKind::kMerged, p.shape);
-    if (kind == RecordKind::kMerged && e.available > 0 && 2 * (e.Needed() + merged) > e.available) {
+    const bool merged = kind == RecordKind::kMerged;
+    const RecordEstimate r = EstimateRecord(p, block_rays, vectors, merged);
+    if (merged && e.available > 0 && 2 * (e.Needed() + RecordBytes(r, RecordKind::kMerged, p.shape)) > e.available) {
       kind = RecordKind::kCompact;
     }
     e.jacobian_cache = RecordBytes(r, kind, p.shape);

@@ -267,14 +267,15 @@ inline void DropSkippableCells(const float* free, BlockJ* block) {
 const int32_t* PhotoSlots(const LevelProblem& p, int count);
 
 // What a level's Jacobian record holds (every p.jtj_ray_stride-th ray): its samples, its rays'
-// cells as a merged record keeps them, and its rays. An estimate made by marching every 4th ray
-// of each block of `block_rays` without jitter (an eighth added for the jittered samples that
-// land differently), on the arena of `vectors`.
+// cells as a merged record keeps them (counted only with count_cells), and its rays. An estimate
+// made by marching the rays of each block of `block_rays` without jitter (a sparse grid's or the
+// cells on every 4th ray, an eighth added for the jittered samples that land differently), on the
+// arena of `vectors`.
 struct RecordEstimate {
   int64_t samples = 0, cells = 0, rays = 0;
   std::vector<int64_t> block_samples, block_cells;  // [blocks]
 };
-RecordEstimate EstimateRecord(const LevelProblem& p, int64_t block_rays, const CpuVectors& vectors);
+RecordEstimate EstimateRecord(const LevelProblem& p, int64_t block_rays, const CpuVectors& vectors, bool count_cells);
 // Bytes of that record, kept as `kind`.
 int64_t RecordBytes(const RecordEstimate& e, RecordKind kind, const VolumeShape& shape);
 
