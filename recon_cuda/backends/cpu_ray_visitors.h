@@ -97,9 +97,6 @@ struct MergedCells {
   const MergedCellJ* c;
   int count;
 
-  static void Values(const MergedCellJ& m, float k[5]) {
-    for (int i = 0; i < 5; ++i) k[i] = m.k[i];
-  }
   static constexpr int kAhead = 8;  // cells whose line of p is asked for ahead of AddJp's
   // u += J p (RayCells::AddJp). The sums' lines are asked for on the way, for ScatterJtu.
   void AddJp(const float* p, float* sums, float u[4]) const {
@@ -107,8 +104,7 @@ struct MergedCells {
     for (int j = 0; j < count; ++j) {
       if (j + kAhead < count) __builtin_prefetch(p + GridParam(c[j + kAhead].cell, 0));
       __builtin_prefetch(sums + GridParam(c[j].cell, 0), 1);
-      float k[5];
-      Values(c[j], k);
+      const float* k = c[j].k;
       const float* g = p + GridParam(c[j].cell, 0);
       for (int ch = 0; ch < 3; ++ch) u[ch] += k[0] * g[ch] + k[1 + ch] * g[3];
       u[3] += k[4] * g[3];
@@ -117,8 +113,7 @@ struct MergedCells {
   // sums += J^T uv (RayCells::ScatterJtu).
   void ScatterJtu(const float uv[4], float* sums) const {
     for (int j = 0; j < count; ++j) {
-      float k[5];
-      Values(c[j], k);
+      const float* k = c[j].k;
       float* g = sums + GridParam(c[j].cell, 0);
       for (int ch = 0; ch < 3; ++ch) g[ch] += k[0] * uv[ch];
       g[3] += k[1] * uv[0] + k[2] * uv[1] + k[3] * uv[2] + k[4] * uv[3];
