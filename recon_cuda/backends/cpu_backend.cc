@@ -33,7 +33,7 @@ class CpuBackend final : public Backend {
   std::string Describe() const override { return StrCat("cpu (", threads_, " thread", threads_ == 1 ? "" : "s", ")"); }
 
   MemoryEstimate EstimateMemory(const LevelProblem& p, int num_vectors) const override {
-    return PlanLevel(p, num_vectors, threads_, options_, kBlockRays, vectors_).memory;
+    return PlanLevel(p, num_vectors, threads_, options_, kBlockRays, vectors_, Kept()).memory;
   }
 
   MemoryEstimate SetLevel(const LevelProblem& problem, int num_vectors) override {
@@ -50,7 +50,8 @@ class CpuBackend final : public Backend {
              PhotoSlots(p, p.shape.exposures), PhotoSlots(p, p.shape.poses)};
     weight_ = OpacityResidualWeight(p);
     robust_ = p.residuals.robust_scale;
-    plan_ = PlanLevel(p, num_vectors, threads_, options_, kBlockRays, vectors_);
+    plan_ = PlanLevel(p, num_vectors, threads_, options_, kBlockRays, vectors_, Kept());
+    level_.start = {};  // the caller's, read by the plan alone
     const MemoryEstimate& e = plan_.memory;
     if (!e.Fits()) {
       throw ResourceError(StrCat("level ", DescribeShape(p.shape), " needs ", e.Needed() >> 20, " MiB for the solver's ",
@@ -61,6 +62,11 @@ class CpuBackend final : public Backend {
     vectors_.Assign(num_vectors, p.shape.ParamCount());
     const int64_t nblocks = (p.rays->size() + kBlockRays - 1) / kBlockRays;
     if (cache_) blocks_.resize(nblocks);
+    size_t cell_room = 0;  // merged cells: one region for all blocks' (record_arena.h)
+    for (int64_t cells : cache_ && plan_.record == RecordKind::kMerged ? plan_.entries : std::vector<int64_t>{}) {
+      cell_room += (cells * sizeof(MergedCellJ) + 63) / 64 * 64;
+    }
+    arena_.Reset(cell_room);
     const float* size = &p.geometry.box.size.x;
     const float longest = std::max({size[0], size[1], size[2]}), shortest = std::min({size[0], size[1], size[2]});
     // The march of any ray: its chord is at most the box diagonal.
@@ -71,8 +77,9 @@ class CpuBackend final : public Backend {
 
   const LevelProblem& level() const override { return level_; }
   bool CachesJacobian() const override { return cache_; }
-  void ReleaseJacobian() override {
+  void ReleaseJacobian(bool keep_room) override {
     for (BlockJ& b : blocks_) b = BlockJ{};
+    if (!keep_room) arena_.Release();
     scratch_.clear();
     linearized_ = false;
   }
@@ -140,7 +147,7 @@ class CpuBackend final : public Backend {
     PassStats stats = ForBlocks(want_diag ? 2 : 1, pass, [&](int64_t block, int64_t begin, int64_t end, Scratch& s) {
       BlockJ* out = record ? &blocks_[block] : nullptr;
       const int64_t room = static_cast<size_t>(block) < plan_.entries.size() ? plan_.entries[block] : 0;
-      if (out) out->Clear(jtj.CountIn(begin, end), level_.shape, plan_.record, room);
+      if (out) out->Clear(jtj.CountIn(begin, end), level_.shape, plan_.record, room, &arena_);
       return want_diag ? LinearizeBlock<true>(vol, seed, subset, jtj, begin, end, s, out)
                        : LinearizeBlock<false>(vol, seed, subset, jtj, begin, end, s, out);
     });
@@ -314,6 +321,8 @@ class CpuBackend final : public Backend {
     }
   };
 
+  // The record's room kept from the level before (ReleaseJacobian's keep_room).
+  int64_t Kept() const { return static_cast<int64_t>(arena_.size()); }
   std::vector<float>& vec(VecId v) { return vectors_[v]; }
   const std::vector<float>& vec(VecId v) const { return vectors_[v]; }
 
@@ -470,6 +479,7 @@ class CpuBackend final : public Backend {
   int threads_;
   CpuVectors vectors_;  // and the arena every pass runs in
   LevelProblem level_;
+  RecordArena arena_;  // the merged cells of blocks_ (declared first: it outlives them)
   std::vector<BlockJ> blocks_;
   std::vector<double> pose_blocks_;  // the last Linearize's pose blocks (pose_blocks.h), with a diagonal
   tbb::enumerable_thread_specific<Scratch> scratch_;

@@ -10,10 +10,11 @@
 
 namespace perf::recon::cpu {
 
-void BlockJ::Clear(int64_t rays, const VolumeShape& shape, RecordKind kind, int64_t entries) {
+void BlockJ::Clear(int64_t rays, const VolumeShape& shape, RecordKind kind, int64_t entries, RecordArena* arena) {
   compact = kind != RecordKind::kExact;
   merged = kind == RecordKind::kMerged;
   samples.clear();
+  if (cells.get_allocator().arena != arena) cells = ArenaVector<MergedCellJ>(ArenaAllocator<MergedCellJ>(arena));
   cells.clear();
   packed.clear();
   steps.clear();
@@ -113,7 +114,13 @@ int NewCells(const GridSample<float>& gs, const GridSample<float>& prev, bool fi
 }  // namespace
 
 RecordEstimate EstimateRecord(const LevelProblem& p, int64_t block_rays, const CpuVectors& vectors, bool count_cells) {
-  const VolumeView<float> vol = MakeView(p.shape, p.geometry, nullptr);
+  // With the level's start, the cells are counted up to where a ray turns opaque (as Linearize
+  // records them); the samples are a march's whole length either way (what the compact record
+  // may grow to).
+  const bool opaque_ends = count_cells && !p.start.empty() && p.residuals.stop_transmittance > 0;
+  PERF_CHECK(p.start.empty() || static_cast<int64_t>(p.start.size()) == p.shape.ParamCount());
+  const VolumeView<float> vol = MakeView(p.shape, p.geometry, opaque_ends ? p.start.data() : nullptr);
+  const float stop = p.residuals.stop_transmittance;
   const int64_t n = p.rays->size();
   struct Counts {
     int64_t samples = 0, cells = 0;
@@ -137,13 +144,19 @@ RecordEstimate EstimateRecord(const LevelProblem& p, int64_t block_rays, const C
         }
         MarchStep<float> st;
         int taken = 0, new_cells = 0;
+        float trans = 1;
         GridSample<float> prev{};
         for (int k = TakeSample(vol, ray, march, 0, 1, none, &st); k < march.count;
              k = TakeSample(vol, ray, march, k + 1, 1, none, &st)) {
-          if (count_cells) {
+          if (count_cells && trans >= stop) {
             const GridSample<float> gs = TrilinearWeights(vol.n, vol.brick_slot, ray.GridPoint(st.t));
             new_cells += NewCells(gs, prev, taken == 0);
             prev = gs;
+            if (opaque_ends) {
+              float v[4];
+              GatherGrid(vol.params, gs, v);
+              trans *= Exp(-v[3] * st.delta);
+            }
           }
           ++taken;
         }
@@ -185,13 +198,13 @@ int64_t RecordBytes(const RecordEstimate& e, RecordKind kind, const VolumeShape&
 }
 
 LevelPlan PlanLevel(const LevelProblem& p, int num_vectors, int threads, const CpuBackendOptions& options,
-                    int64_t block_rays, const CpuVectors& vectors) {
+                    int64_t block_rays, const CpuVectors& vectors, int64_t kept) {
   MemoryEstimate e;
   const int64_t params = p.shape.ParamCount();
   e.vectors = num_vectors * params * 4;
   e.scratch = int64_t{threads} * 2 * params * 4;
   e.rays = p.rays ? p.rays->Bytes() : 0;
-  e.available = options.max_memory > 0 ? options.max_memory : AvailableMemory() * 9 / 10;
+  e.available = options.max_memory > 0 ? options.max_memory : (AvailableMemory() + kept) * 9 / 10;
   RecordKind kind = !options.compact_jacobian                               ? RecordKind::kExact
                     : options.merged_jacobian && p.shape.sh_degree == 0 ? RecordKind::kMerged
                                                                         : RecordKind::kCompact;

@@ -9,6 +9,7 @@
 
 #include "common/errors.h"
 #include "recon_cuda/backends/cpu_backend.h"
+#include "recon_cuda/backends/record_arena.h"
 #include "recon_cuda/core/jacobian.h"
 #include "recon_cuda/core/pose.h"
 #include "recon_cuda/core/ray_math.h"
@@ -100,7 +101,7 @@ struct BlockJ {
   bool compact = false;                 // its samples are in `packed` and `steps`, else in `samples`
   bool merged = false;                  // compact, and its rays' cells in `cells` (no samples)
   std::vector<SampleJ> samples;
-  std::vector<MergedCellJ> cells;
+  ArenaVector<MergedCellJ> cells;  // its room from the level's arena (record_arena.h), where Clear is given one
   std::vector<CompactSampleJ> packed;
   std::vector<uint8_t> steps;     // [entries of packed]: march steps back from the ray's entry before (first: 0)
   std::vector<uint16_t> first_k;  // [rays] when compact: the march index of the ray's first entry (its last sample)
@@ -119,8 +120,10 @@ struct BlockJ {
   std::vector<uint16_t> packed_pose;
 
   // Empty, for `rays` rays of a level of `shape`, kept as `kind`, with room for `entries` samples
-  // (merged: cells), so that the first Linearize of a level does not copy them as they grow.
-  void Clear(int64_t rays, const VolumeShape& shape, RecordKind kind = RecordKind::kExact, int64_t entries = 0);
+  // (merged: cells), so that the first Linearize of a level does not copy them as they grow; the
+  // merged cells' room from `arena` where one is given.
+  void Clear(int64_t rays, const VolumeShape& shape, RecordKind kind = RecordKind::kExact, int64_t entries = 0,
+             RecordArena* arena = nullptr);
   // One past the last sample (merged: cell) recorded.
   uint32_t SampleCount() const {
     return static_cast<uint32_t>(merged ? cells.size() : compact ? packed.size() : samples.size());
@@ -267,10 +270,10 @@ inline void DropSkippableCells(const float* free, BlockJ* block) {
 const int32_t* PhotoSlots(const LevelProblem& p, int count);
 
 // What a level's Jacobian record holds (every p.jtj_ray_stride-th ray): its samples, its rays'
-// cells as a merged record keeps them (counted only with count_cells), and its rays. An estimate
-// made by marching the rays of each block of `block_rays` without jitter (a sparse grid's or the
-// cells on every 4th ray, an eighth added for the jittered samples that land differently), on the
-// arena of `vectors`.
+// cells as a merged record keeps them (counted only with count_cells; up to where a ray turns
+// opaque in p.start when the level has one), and its rays. An estimate made by marching the rays
+// of each block of `block_rays` without jitter (a sparse grid's or the cells on every 4th ray, an
+// eighth added for the jittered samples that land differently), on the arena of `vectors`.
 struct RecordEstimate {
   int64_t samples = 0, cells = 0, rays = 0;
   std::vector<int64_t> block_samples, block_cells;  // [blocks]
@@ -282,13 +285,14 @@ int64_t RecordBytes(const RecordEstimate& e, RecordKind kind, const VolumeShape&
 // A level's memory on a backend of `threads` threads and `options`, and the record Linearize keeps
 // for it: the options' kind, except that merged cells (4 to 5 a sample, 24 bytes each, against 9
 // bytes a sample) are kept only without spherical harmonics and when the level fits in half the
-// memory with them; else its samples (docs/tuning.md "Merged cells").
+// memory with them; else its samples (docs/tuning.md "Merged cells"). kept: bytes the backend holds
+// for the record from the level before (RecordArena), counted as available.
 struct LevelPlan {
   MemoryEstimate memory;
   RecordKind record = RecordKind::kCompact;
   std::vector<int64_t> entries;  // [blocks] the record's estimated entries (BlockJ::Clear); empty: none
 };
 LevelPlan PlanLevel(const LevelProblem& p, int num_vectors, int threads, const CpuBackendOptions& options,
-                    int64_t block_rays, const CpuVectors& vectors);
+                    int64_t block_rays, const CpuVectors& vectors, int64_t kept);
 
 }  // namespace perf::recon::cpu

@@ -39,7 +39,7 @@ class DistributedBackend final : public Backend {
   MemoryEstimate SetLevel(const LevelProblem& problem, int num_vectors) override;
   const LevelProblem& level() const override { return inner_->level(); }
   bool CachesJacobian() const override { return inner_->CachesJacobian(); }
-  void ReleaseJacobian() override { inner_->ReleaseJacobian(); }
+  void ReleaseJacobian(bool keep_room) override { inner_->ReleaseJacobian(keep_room); }
 
   void Upload(VecId v, std::span<const float> host) override { inner_->Upload(v, host); }
   void Download(VecId v, std::span<float> host) const override { inner_->Download(v, host); }

@@ -74,6 +74,10 @@ struct LevelProblem {
   // MultiplyJtJ will run on every k-th ray (SolverOptions::jtj_ray_stride): what the CPU
   // backend's Jacobian record is sized for.
   int jtj_ray_stride = 1;
+  // The parameters the level starts from ([shape.ParamCount()]), or empty. Only a prediction for
+  // the level's plan (the CPU backend's record estimate ends rays where they turn opaque), never
+  // solved from: the solver uploads its own start.
+  std::span<const float> start = {};
   HeldKinds Held() const { return {fixed_shells, fixed_poses, fixed_volume, fixed_focal}; }
 };
 
@@ -181,7 +185,9 @@ class Backend {
   // Frees what MultiplyJtJ reuses of the last Linearize (the recorded Jacobian, a level's largest
   // buffer, and the per-thread sums); MultiplyJtJ then needs a Linearize first. The hierarchy calls
   // it when a level's solve is done, so that the level's checkpoint and scores run without it.
-  virtual void ReleaseJacobian() {}
+  // keep_room: a level follows; the backend may keep the record's memory for it (the CPU backend's
+  // merged cells: its pages need no first touch again), given back by the next SetLevel if unused.
+  virtual void ReleaseJacobian(bool keep_room) { (void)keep_room; }
 
   // Vector operations; every vector has level().shape.ParamCount() floats.
   virtual void Upload(VecId v, std::span<const float> host) = 0;

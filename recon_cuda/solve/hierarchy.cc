@@ -59,6 +59,7 @@ std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geomet
     problem.fixed_poses = level < o.refine_poses_from;
     problem.fixed_focal = !o.refine_focal;
     problem.jtj_ray_stride = o.solver.jtj_ray_stride;
+    problem.start = x;
     if (o.stop_when_out_of_memory && level > 0) {
       h.memory = backend->EstimateMemory(problem, RequiredVectors(o.solver.type));
       if (!h.memory.Fits()) {
@@ -86,7 +87,9 @@ std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geomet
       throw Error(StrCat("level ", level, ": the solver failed: ", summary.message,
                          "; check the workspace images, or try --damping 0.1"));
     }
-    backend->ReleaseJacobian();  // not needed for what follows: the level's checkpoint, scores, next level
+    // Not needed for what follows (the level's checkpoint, scores, next level); its room may stay
+    // for the next level's record.
+    backend->ReleaseJacobian(/*keep_room=*/!stopped && level + 1 < o.levels);
     if (cb.level_done) cb.level_done(h, summary, x);
     if (stopped) break;
     if (level + 1 < o.levels) {

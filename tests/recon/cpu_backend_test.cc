@@ -8,6 +8,8 @@
 #include <algorithm>
 #include <cmath>
 #include <numeric>
+#include <cstdio>
+#include <span>
 
 #include "common/errors.h"
 
@@ -154,27 +156,35 @@ TEST(CpuBackendTest, JtJpMatchesTheDenseJacobianCachedAndRecomputed) {
 
 // ReleaseJacobian (the hierarchy's, after a level's solve) frees the record: MultiplyJtJ is then
 // refused until a Linearize, which records it again, and the product is the one before, bit for
-// bit on one thread (every kind of record).
+// bit on one thread (every kind of record). With keep_room the merged cells' room stays for the
+// next level, which records into it the same (SetLevel again, as the hierarchy does).
 TEST(CpuBackendTest, AReleasedJacobianIsRecordedAgain) {
   const TinyProblem p(3);
   const std::vector<float> pv = test::RandomDirection(p.shape, 4);
   for (const RecordKind record : kRecords) {
-    SCOPED_TRACE(Name(record));
-    auto b = Cpu(1, true, record);
-    b->SetLevel(p.Level(), kVectors);
-    b->Upload(kX, p.x);
-    b->Upload(kP, pv);
-    std::vector<float> before(p.shape.ParamCount()), after(p.shape.ParamCount());
-    b->Linearize(kX, 11, kG, kD);
-    b->MultiplyJtJ(kP, kOut);
-    b->Download(kOut, before);
-    b->ReleaseJacobian();
-    EXPECT_THROW(b->MultiplyJtJ(kP, kOut), InternalError);
-    b->Linearize(kX, 11, kG, kD);
-    b->MultiplyJtJ(kP, kOut);
-    b->Download(kOut, after);
-    EXPECT_EQ(after, before);
-    EXPECT_GT(*std::max_element(after.begin(), after.end()), 0.f);
+    for (const bool keep_room : {false, true}) {
+      SCOPED_TRACE(testing::Message() << Name(record) << (keep_room ? ", room kept" : ""));
+      auto b = Cpu(1, true, record);
+      b->SetLevel(p.Level(), kVectors);
+      b->Upload(kX, p.x);
+      b->Upload(kP, pv);
+      std::vector<float> before(p.shape.ParamCount()), after(p.shape.ParamCount());
+      b->Linearize(kX, 11, kG, kD);
+      b->MultiplyJtJ(kP, kOut);
+      b->Download(kOut, before);
+      b->ReleaseJacobian(keep_room);
+      EXPECT_THROW(b->MultiplyJtJ(kP, kOut), InternalError);
+      if (keep_room) {
+        b->SetLevel(p.Level(), kVectors);
+        b->Upload(kX, p.x);
+        b->Upload(kP, pv);
+      }
+      b->Linearize(kX, 11, kG, kD);
+      b->MultiplyJtJ(kP, kOut);
+      b->Download(kOut, after);
+      EXPECT_EQ(after, before);
+      EXPECT_GT(*std::max_element(after.begin(), after.end()), 0.f);
+    }
   }
 }
 
@@ -252,7 +262,9 @@ void ExpectCloseToTheExactRecord(RecordKind record) {
         test::ExpectAllClose(std::vector<float>(got.begin(), got.begin() + photos),
                              std::vector<double>(exact.begin(), exact.begin() + photos), volume_tol, volume_tol,
                              "compact J^T J p, the volume");
-        if (!merged) EXPECT_NE(got, exact);  // rounded: not the exact record
+        if (!merged) {
+          EXPECT_NE(got, exact);  // rounded: not the exact record
+        }
         if (p.shape.poses > 0) {
           test::ExpectAllClose(std::vector<float>(got.begin() + photos, got.end()),
                                std::vector<double>(exact.begin() + photos, exact.end()), 3e-3, 3e-3,
@@ -315,12 +327,43 @@ TEST(CpuBackendTest, MergedCellsOnlyWithoutBandsAndWhereTheyFit) {
   const auto [short_count, short_samples] = recorded(plain, tight, &sample_bytes);
   EXPECT_EQ(short_count, short_samples) << "samples where memory is short";
   EXPECT_LT(sample_bytes, merged_bytes);
-  // The estimate is of what is kept: near the recorded cells' 16 bytes each (and the rays' own).
+  // The estimate is of what is kept: near the recorded cells' 24 bytes each (and the rays' own).
   EXPECT_GT(merged_bytes, cells * 16 / 2);
   EXPECT_LT(merged_bytes, cells * 16 * 3);
   int64_t banded_bytes = 0;
   const auto [banded_count, banded_samples] = recorded(banded, plenty, &banded_bytes);
   EXPECT_EQ(banded_count, banded_samples) << "samples with spherical harmonics";
+}
+
+// Given the level's start, the merged record's estimate ends each ray where it turns opaque, as
+// Linearize does: far below the estimate without one in a dense volume, and still about what is
+// recorded.
+TEST(CpuBackendTest, MergedEstimateEndsRaysWhereTheyTurnOpaque) {
+  TinyProblem dense(5, 8, 2, 3, 12, 10);
+  for (int64_t i = 0; i < dense.shape.ParamCount(); ++i) {
+    if (KindOf(dense.shape, i) == ParamKind::kGridDensity) dense.x[i] *= 20.f;
+  }
+  LevelProblem level = dense.Level();
+  level.residuals.stop_transmittance = 1e-3f;
+  const auto estimate = [&](std::span<const float> start) {
+    LevelProblem l = level;
+    l.start = start;
+    return Cpu(2, true, RecordKind::kMerged)->EstimateMemory(l, kVectors).jacobian_cache;
+  };
+  const int64_t blind = estimate({}), seeing = estimate(dense.x);
+  auto b = Cpu(2, true, RecordKind::kMerged);
+  b->SetLevel(level, kVectors);
+  b->Upload(kX, dense.x);
+  b->Upload(kP, test::RandomDirection(dense.shape, 4));
+  b->Linearize(kX, 11, kG, kD);
+  const int64_t cells = b->MultiplyJtJ(kP, kOut).samples, rays = dense.rays.size();
+  const int64_t recorded = cells * static_cast<int64_t>(sizeof(cpu::MergedCellJ));
+  std::printf("merged record: %lld cells on %lld rays (%lld bytes); estimated %lld bytes with the start, %lld without\n",
+              static_cast<long long>(cells), static_cast<long long>(rays), static_cast<long long>(recorded),
+              static_cast<long long>(seeing), static_cast<long long>(blind));
+  EXPECT_LT(2 * seeing, blind) << "the opaque volume ends its rays early";
+  EXPECT_GT(seeing, recorded * 3 / 4);
+  EXPECT_LT(seeing, recorded * 2 + rays * 64) << "the cells and the rays' own bytes";
 }
 
 // The compact record's march indices, one byte a sample (the steps back from the ray's entry
