@@ -33,7 +33,7 @@ class CpuBackend final : public Backend {
   std::string Describe() const override { return StrCat("cpu (", threads_, " thread", threads_ == 1 ? "" : "s", ")"); }
 
   MemoryEstimate EstimateMemory(const LevelProblem& p, int num_vectors) const override {
-    return PlanLevel(p, num_vectors, threads_, options_, kBlockRays, vectors_, Kept()).memory;
+    return PlanLevel(p, num_vectors, threads_, options_, kBlockRays, vectors_, arena_.size()).memory;
   }
 
   MemoryEstimate SetLevel(const LevelProblem& problem, int num_vectors) override {
@@ -50,7 +50,7 @@ class CpuBackend final : public Backend {
              PhotoSlots(p, p.shape.exposures), PhotoSlots(p, p.shape.poses)};
     weight_ = OpacityResidualWeight(p);
     robust_ = p.residuals.robust_scale;
-    plan_ = PlanLevel(p, num_vectors, threads_, options_, kBlockRays, vectors_, Kept());
+    plan_ = PlanLevel(p, num_vectors, threads_, options_, kBlockRays, vectors_, arena_.size());
     level_.start = {};  // the caller's, read by the plan alone
     const MemoryEstimate& e = plan_.memory;
     if (!e.Fits()) {
@@ -62,11 +62,7 @@ class CpuBackend final : public Backend {
     vectors_.Assign(num_vectors, p.shape.ParamCount());
     const int64_t nblocks = (p.rays->size() + kBlockRays - 1) / kBlockRays;
     if (cache_) blocks_.resize(nblocks);
-    size_t cell_room = 0;  // merged cells: one region for all blocks' (record_arena.h)
-    for (int64_t cells : cache_ && plan_.record == RecordKind::kMerged ? plan_.entries : std::vector<int64_t>{}) {
-      cell_room += (cells * sizeof(MergedCellJ) + 63) / 64 * 64;
-    }
-    arena_.Reset(cell_room);
+    arena_.Reset(cache_ ? plan_.ArenaBytes() : 0);  // merged cells: one region for all blocks'
     const float* size = &p.geometry.box.size.x;
     const float longest = std::max({size[0], size[1], size[2]}), shortest = std::min({size[0], size[1], size[2]});
     // The march of any ray: its chord is at most the box diagonal.
@@ -308,21 +304,6 @@ class CpuBackend final : public Backend {
   }
 
  private:
-  struct BlockStats {
-    double cost = 0, colour_sse = 0, subset_cost = 0;
-    int64_t rays = 0, samples = 0;
-    void Add(const RayOutput<float>& o, float robust_scale, bool in_subset = false) {
-      const RayCost c = CostOf(o, robust_scale);
-      colour_sse += c.colour_sse;
-      cost += c.cost;
-      if (in_subset) subset_cost += c.cost;
-      rays += 1;
-      samples += o.count;
-    }
-  };
-
-  // The record's room kept from the level before (ReleaseJacobian's keep_room).
-  int64_t Kept() const { return static_cast<int64_t>(arena_.size()); }
   std::vector<float>& vec(VecId v) { return vectors_[v]; }
   const std::vector<float>& vec(VecId v) const { return vectors_[v]; }
 

@@ -197,14 +197,22 @@ int64_t RecordBytes(const RecordEstimate& e, RecordKind kind, const VolumeShape&
   return entries * static_cast<int64_t>(per_entry) + e.rays * static_cast<int64_t>(per_ray);
 }
 
+size_t LevelPlan::ArenaBytes() const {
+  if (record != RecordKind::kMerged) return 0;
+  size_t bytes = 0;
+  for (int64_t cells : entries) bytes += RecordArena::Rounded(cells * sizeof(MergedCellJ));
+  return bytes;
+}
+
 LevelPlan PlanLevel(const LevelProblem& p, int num_vectors, int threads, const CpuBackendOptions& options,
-                    int64_t block_rays, const CpuVectors& vectors, int64_t kept) {
+                    int64_t block_rays, const CpuVectors& vectors, size_t kept) {
   MemoryEstimate e;
   const int64_t params = p.shape.ParamCount();
   e.vectors = num_vectors * params * 4;
   e.scratch = int64_t{threads} * 2 * params * 4;
   e.rays = p.rays ? p.rays->Bytes() : 0;
-  e.available = options.max_memory > 0 ? options.max_memory : (AvailableMemory() + kept) * 9 / 10;
+  const auto available = AvailableMemory() + static_cast<int64_t>(kept);
+  e.available = options.max_memory > 0 ? options.max_memory : available * 9 / 10;
   RecordKind kind = !options.compact_jacobian                               ? RecordKind::kExact
                     : options.merged_jacobian && p.shape.sh_degree == 0 ? RecordKind::kMerged
                                                                         : RecordKind::kCompact;

@@ -291,8 +291,10 @@ struct LevelPlan {
   MemoryEstimate memory;
   RecordKind record = RecordKind::kCompact;
   std::vector<int64_t> entries;  // [blocks] the record's estimated entries (BlockJ::Clear); empty: none
+  // The room a merged record's blocks reserve together in the level's RecordArena (0: samples).
+  size_t ArenaBytes() const;
 };
 LevelPlan PlanLevel(const LevelProblem& p, int num_vectors, int threads, const CpuBackendOptions& options,
-                    int64_t block_rays, const CpuVectors& vectors, int64_t kept);
+                    int64_t block_rays, const CpuVectors& vectors, size_t kept);
 
 }  // namespace perf::recon::cpu

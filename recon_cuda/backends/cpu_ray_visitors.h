@@ -13,6 +13,20 @@
 
 namespace perf::recon::cpu {
 
+// What a pass over a block of rays adds up (cpu_backend.cc ForBlocks combines them in block order).
+struct BlockStats {
+  double cost = 0, colour_sse = 0, subset_cost = 0;
+  int64_t rays = 0, samples = 0;
+  void Add(const RayOutput<float>& o, float robust_scale, bool in_subset = false) {
+    const RayCost c = CostOf(o, robust_scale);
+    colour_sse += c.colour_sse;
+    cost += c.cost;
+    if (in_subset) subset_cost += c.cost;
+    rays += 1;
+    samples += o.count;
+  }
+};
+
 // One recorded ray's J^T J p on its volume cells, merged, with spherical harmonics (jacobian.h
 // AddJpSample, AddShColour, ScatterJtuSample, ScatterSh): a sample enters J p and J^T u through
 // its five partials (dc, ds[3], dl) times its cells' trilinear weights, so what a cell sees over

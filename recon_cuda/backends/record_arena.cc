@@ -5,7 +5,6 @@
 namespace perf::recon::cpu {
 namespace {
 constexpr size_t kHugePage = size_t{2} << 20;
-constexpr size_t kAlign = 64;  // a cache line: no two blocks' records share one
 }  // namespace
 
 void RecordArena::Reset(size_t bytes) {
@@ -38,7 +37,7 @@ void RecordArena::Release() {
 
 void* RecordArena::Take(size_t bytes) {
   if (base_ == nullptr || bytes == 0) return nullptr;
-  const size_t room = (bytes + kAlign - 1) / kAlign * kAlign;
+  const size_t room = Rounded(bytes);
   const size_t at = used_.fetch_add(room, std::memory_order_relaxed);
   if (at + room > size_) return nullptr;  // used up (used_ stays past the end: later takes fail too)
   return base_ + at;

@@ -30,6 +30,8 @@ class RecordArena {
   void Release();
   // `bytes` of the mapping (aligned to 64), or nullptr once it is used up. Thread-safe.
   void* Take(size_t bytes);
+  // What a Take of `bytes` uses of the arena.
+  static size_t Rounded(size_t bytes) { return (bytes + kAlign - 1) / kAlign * kAlign; }
   bool Owns(const void* p) const {
     const auto* b = static_cast<const std::byte*>(p);
     return base_ != nullptr && b >= base_ && b < base_ + size_;
@@ -38,6 +40,7 @@ class RecordArena {
   size_t used() const { return std::min(used_.load(std::memory_order_relaxed), size_); }
 
  private:
+  static constexpr size_t kAlign = 64;  // a cache line: no two blocks' records share one
   std::byte* base_ = nullptr;
   size_t size_ = 0;
   std::atomic<size_t> used_{0};
