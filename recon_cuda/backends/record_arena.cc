@@ -16,8 +16,9 @@ void RecordArena::Reset(size_t bytes) {
     size_ = size;
     return;
   }
+  constexpr int kFlags = MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE;
   void* p = base_ != nullptr ? mremap(base_, size_, size, MREMAP_MAYMOVE)
-                             : mmap(nullptr, size, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE, -1, 0);
+                             : mmap(nullptr, size, PROT_READ | PROT_WRITE, kFlags, -1, 0);
   if (p == MAP_FAILED) {  // the vectors take the heap instead
     Release();
     return;

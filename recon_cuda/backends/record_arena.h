@@ -1,8 +1,9 @@
 // One mapping for a level's Jacobian record, in transparent huge pages, from which each block's
 // record vector takes the room it reserves (cpu_jacobian_record.h BlockJ::cells). A first touch of
-// 4 KiB pages costs about 2.4 s a GiB on the 2-core VMs measured, 0.6 s with 2 MiB pages
-// (docs/tuning.md "The merged record's memory"); a block's own vector in huge pages would keep up
-// to 2 MiB resident past its end, one region for all of them does not. Internal to the CPU backend.
+// 4 KiB pages costs about 2.4 s a GiB on the 2-core VM measured, 0.6 s with 2 MiB pages (docs/
+// tuning.md "The merged record on lego 200's fine levels"). Per-block vectors in huge pages would
+// keep up to 2 MiB each resident past their ends; in one region only the blocks' reserved room is
+// resident (what the estimate gives beyond the cells, about 18 % on lego). Internal to the CPU backend.
 #pragma once
 
 #include <algorithm>
