@@ -99,6 +99,8 @@ std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geomet
       x = std::move(next);
     }
   }
+  // The room kept for a level that did not follow (before_level or the memory check ended the run).
+  backend->ReleaseJacobian(/*keep_room=*/false);
   return x;
 }
 
