@@ -80,6 +80,9 @@ TEST_F(ReconstructCli, ReconstructsLogsCheckpointsResumesAndRenders) {
   EXPECT_EQ(summary["smooth_grid"].get<double>(), 0.3);
   EXPECT_EQ(summary["smooth_shells"].get<double>(), 0.1);
   EXPECT_EQ(summary["cost_tolerance"].get<double>(), recon::kDefaultCostTolerance);
+  // View-dependent colour of degree 1 by default, at the last level alone.
+  EXPECT_EQ(recon::ReadCheckpoint(ws_ / "recon" / "level_0.perfvol").shape.sh_degree, 0);
+  EXPECT_EQ(recon::ReadCheckpoint(ws_ / "recon" / "level_1.perfvol").shape.sh_degree, 1);
 
   // Everything done: --resume says so and changes nothing.
   const auto before = fs::last_write_time(ws_ / "recon" / "level_1.perfvol");
@@ -161,11 +164,12 @@ TEST_F(ReconstructCli, ResumeContinuesAfterTheLastLevel) {
   EXPECT_NE(r.output.find("level_0.perfvol"), std::string::npos) << r.output;
 }
 
-// The shells of a checkpoint: (min, max) over every shell parameter.
+// The shells of a checkpoint: (min, max) over every shell parameter (not the bands, exposures or
+// poses that follow them).
 std::pair<float, float> ShellRange(const fs::path& checkpoint) {
   const recon::Checkpoint c = recon::ReadCheckpoint(checkpoint);
   float lo = 1e30f, hi = -1e30f;
-  for (int64_t i = c.shape.GridParamCount(); i < c.shape.ParamCount(); ++i) {
+  for (int64_t i = c.shape.GridParamCount(); i < c.shape.ShStart(); ++i) {
     lo = std::min(lo, c.params[i]);
     hi = std::max(hi, c.params[i]);
   }
