@@ -164,6 +164,19 @@ TEST_F(ReconstructCli, ResumeContinuesAfterTheLastLevel) {
   EXPECT_NE(r.output.find("level_0.perfvol"), std::string::npos) << r.output;
 }
 
+// A workspace whose levels were fitted without view dependence (an earlier build's default): a
+// resume at today's default names the change and solves the bands at the level it adds.
+TEST_F(ReconstructCli, ResumeAtTheDefaultAddsBandsToTheLevelsLeft) {
+  auto r = RunCommand(
+      Perf("reconstruct -q " + ws_.string() + " --levels 1 --start-resolution 8 --iterations 1 --sh-degree 0"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = RunCommand(Perf("reconstruct " + ws_.string() + " --levels 2 --start-resolution 8 --iterations 1 --resume"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("sh_degree 0 -> 1"), std::string::npos) << r.output;
+  EXPECT_EQ(recon::ReadCheckpoint(ws_ / "recon" / "level_0.perfvol").shape.sh_degree, 0);
+  EXPECT_EQ(recon::ReadCheckpoint(ws_ / "recon" / "level_1.perfvol").shape.sh_degree, 1);
+}
+
 // The shells of a checkpoint: (min, max) over every shell parameter (not the bands, exposures or
 // poses that follow them).
 std::pair<float, float> ShellRange(const fs::path& checkpoint) {
