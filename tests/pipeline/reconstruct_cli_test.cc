@@ -81,8 +81,8 @@ TEST_F(ReconstructCli, ReconstructsLogsCheckpointsResumesAndRenders) {
   EXPECT_EQ(summary["smooth_shells"].get<double>(), 0.1);
   EXPECT_EQ(summary["cost_tolerance"].get<double>(), recon::kDefaultCostTolerance);
   // View-dependent colour of degree 1 by default, at the last level alone.
-  EXPECT_EQ(recon::ReadCheckpoint(ws_ / "recon" / "level_0.perfvol").shape.sh_degree, 0);
-  EXPECT_EQ(recon::ReadCheckpoint(ws_ / "recon" / "level_1.perfvol").shape.sh_degree, 1);
+  EXPECT_EQ(recon::ReadCheckpoint(recon::CheckpointPath(ws_, 0)).shape.sh_degree, 0);
+  EXPECT_EQ(recon::ReadCheckpoint(recon::CheckpointPath(ws_, 1)).shape.sh_degree, 1);
 
   // Everything done: --resume says so and changes nothing.
   const auto before = fs::last_write_time(ws_ / "recon" / "level_1.perfvol");
@@ -173,8 +173,8 @@ TEST_F(ReconstructCli, ResumeAtTheDefaultAddsBandsToTheLevelsLeft) {
   r = RunCommand(Perf("reconstruct " + ws_.string() + " --levels 2 --start-resolution 8 --iterations 1 --resume"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("sh_degree 0 -> 1"), std::string::npos) << r.output;
-  EXPECT_EQ(recon::ReadCheckpoint(ws_ / "recon" / "level_0.perfvol").shape.sh_degree, 0);
-  EXPECT_EQ(recon::ReadCheckpoint(ws_ / "recon" / "level_1.perfvol").shape.sh_degree, 1);
+  EXPECT_EQ(recon::ReadCheckpoint(recon::CheckpointPath(ws_, 0)).shape.sh_degree, 0);
+  EXPECT_EQ(recon::ReadCheckpoint(recon::CheckpointPath(ws_, 1)).shape.sh_degree, 1);
 }
 
 // The shells of a checkpoint: (min, max) over every shell parameter (not the bands, exposures or
