@@ -17,6 +17,7 @@
 #include "sfm_import/camera_models.h"
 #include "sfm_import/colmap_model.h"
 #include "sfm_import/colmap_pose.h"
+#include "sfm_import/ghost_groups.h"
 #include "workspace/image_io.h"
 #include "sfm_import/import_images.h"
 #include "sfm_import/nerf_reader.h"
@@ -324,6 +325,7 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
     points.push_back({Eigen::Vector3d(p.xyz[0], p.xyz[1], p.xyz[2]), static_cast<int>(p.track.size()), p.error});
   }
   PlaceBoundsAndShells(o, points, model_dir.string(), r);
+  for (const GhostGroup& g : FindGhostGroups(rec, r->scene.box, bad_poses)) r->warnings.push_back(g.Warning());
   EnsureWritableDirectory(o.workspace / "images");
   RunJobs(jobs, o, photos.largest_decode);
 }
