@@ -162,6 +162,7 @@ nlohmann::json ReportJson(const EvalOptions& o, const EvalResult& r, const Loade
   for (const ViewReport& v : r.views) {
     nlohmann::json e = ScoresJson(v.scores);
     e["name"] = v.name;
+    if (!v.pose_doubt.empty()) e["pose_doubt"] = v.pose_doubt;
     if (r.pose_fit) {
       e["psnr_pose_fit"] = v.psnr_pose_fit;
       e["pose_fit_moved"] = {{"degrees", v.pose_fit_degrees}, {"centre_fraction", v.pose_fit_centre_fraction}};
@@ -235,6 +236,9 @@ EvalResult RunEval(const EvalOptions& o) {
     Image mask = Binarize(recon::OpacityImage(render), o.mask_threshold);
     const ImageScores s = ScoreImage(image, v.image, mask);
     r.views.push_back({v.name, s});
+    for (const SceneImage& im : scene.images) {
+      if (im.name == v.name) r.views.back().pose_doubt = im.pose_doubt;
+    }
     r.mean.psnr += s.psnr;
     r.mean.ssim += s.ssim;
     r.mean.mask_coverage += s.mask_coverage;

@@ -35,6 +35,7 @@ struct ViewReport {
   ImageScores scores;          // the headline: the camera from its neighbours' corrections
   double psnr_pose_fit = -1;   // after the test-time fit of its camera alone (-1: not run)
   double pose_fit_degrees = 0, pose_fit_centre_fraction = 0;  // how far that fit moved the camera
+  std::string pose_doubt;  // scene.json's: why its imported pose is in doubt (empty: none)
 };
 
 struct MaskReport {

@@ -224,10 +224,14 @@ std::string ReportHtml(const nlohmann::json& report, const std::vector<ReportStr
   bool any_mask = false;
   for (const nlohmann::json& v : report["test_views"]) any_mask = any_mask || v["mask_coverage"].get<double>() > 0;
   row("mean of " + std::to_string(report["test_views"].size()) + " views", mean, any_mask);
+  std::string doubts;  // the views whose imported pose is in doubt (scene.json pose_doubt), marked *
   for (const nlohmann::json& v : report["test_views"]) {
-    row(v["name"].get<std::string>(), v, v["mask_coverage"].get<double>() > 0);
+    const bool doubt = v.contains("pose_doubt");
+    row(v["name"].get<std::string>() + (doubt ? " *" : ""), v, v["mask_coverage"].get<double>() > 0);
+    if (doubt) doubts += "<li>" + Escape(v["name"].get<std::string>() + ": " + v["pose_doubt"].get<std::string>()) + "</li>";
   }
   h << "</table>\n";
+  if (!doubts.empty()) h << "<p>* Their imported poses are in doubt (perf import):</p><ul>" << doubts << "</ul>\n";
   if (report.contains("held_out_cameras")) {
     const nlohmann::json& cams = report["held_out_cameras"];
     h << "<p>Held-out cameras (the headline): " << Escape(cams["headline"].get<std::string>()) << ".";

@@ -57,6 +57,11 @@ std::string GhostGroup::Warning() const {
                 "(colmap image_deleter). The photos: ", list);
 }
 
+std::string GhostGroup::Doubt() const {
+  return StrCat("in a group that sees the object elsewhere: ", Describe(),
+                "; COLMAP placed the object elsewhere for them (a ghost), so their poses disagree with the others'");
+}
+
 std::vector<GhostGroup> FindGhostGroups(const colmap::Reconstruction& rec, const SceneBox& box,
                                         const std::map<std::string, std::string>& left_out,
                                         const GhostGroupOptions& o) {
@@ -129,6 +134,18 @@ std::vector<GhostGroup> FindGhostGroups(const colmap::Reconstruction& rec, const
     out.push_back(std::move(g));
   }
   return out;
+}
+
+std::vector<std::string> MarkGhostGroups(const colmap::Reconstruction& rec,
+                                         const std::map<std::string, std::string>& left_out, Scene* scene) {
+  std::vector<std::string> warnings;
+  for (const GhostGroup& g : FindGhostGroups(rec, scene->box, left_out)) {
+    warnings.push_back(g.Warning());
+    for (SceneImage& im : scene->images) {
+      if (std::binary_search(g.names.begin(), g.names.end(), im.name)) im.pose_doubt = g.Doubt();
+    }
+  }
+  return warnings;
 }
 
 }  // namespace perf

@@ -46,6 +46,8 @@ struct GhostGroup {
   std::string Describe() const;
   // Describe(), what it means and what to do, and every photo's name: perf import's warning.
   std::string Warning() const;
+  // What scene.json's "pose_doubt" of each of the group's photos says: Describe() and its meaning.
+  std::string Doubt() const;
 };
 
 // The groups of `rec` that see a second copy of the object in `box`, largest first. Photos named
@@ -54,5 +56,10 @@ struct GhostGroup {
 std::vector<GhostGroup> FindGhostGroups(const colmap::Reconstruction& rec, const SceneBox& box,
                                         const std::map<std::string, std::string>& left_out,
                                         const GhostGroupOptions& options = {});
+
+// FindGhostGroups in `scene`'s box; each group's photos get its Doubt() as their pose_doubt in
+// `scene`, and each group a warning (Warning()), returned for perf import to print.
+std::vector<std::string> MarkGhostGroups(const colmap::Reconstruction& rec,
+                                         const std::map<std::string, std::string>& left_out, Scene* scene);
 
 }  // namespace perf

@@ -325,7 +325,7 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
     points.push_back({Eigen::Vector3d(p.xyz[0], p.xyz[1], p.xyz[2]), static_cast<int>(p.track.size()), p.error});
   }
   PlaceBoundsAndShells(o, points, model_dir.string(), r);
-  for (const GhostGroup& g : FindGhostGroups(rec, r->scene.box, bad_poses)) r->warnings.push_back(g.Warning());
+  for (std::string& w : MarkGhostGroups(rec, bad_poses, &r->scene)) r->warnings.push_back(std::move(w));
   EnsureWritableDirectory(o.workspace / "images");
   RunJobs(jobs, o, photos.largest_decode);
 }

@@ -56,6 +56,9 @@ struct SceneImage {
   std::optional<double> refined_focal_scale;
   Split split = Split::kTrain;
   std::string excluded_because;  // why, when split is kExcluded (empty otherwise)
+  // Why its imported pose is in doubt although it is kept (perf import: a photo of a group that
+  // sees a second copy of the object, sfm_import/ghost_groups.h); empty otherwise.
+  std::string pose_doubt;
 };
 
 // Axis-aligned in the box's own frame: world point p is inside when

@@ -340,6 +340,14 @@ TEST(Report, AViewWithoutAMaskSaysSo) {
   EXPECT_EQ(row_a.find("no mask"), std::string::npos) << row_a;
   EXPECT_NE(row_b.find("no mask"), std::string::npos) << row_b;
   EXPECT_EQ(row_b.find("0.00"), std::string::npos) << row_b;
+  EXPECT_EQ(html.find("in doubt"), std::string::npos);
+  // A view whose imported pose is in doubt (scene.json pose_doubt) is marked, and the reason listed.
+  nlohmann::json doubted = report;
+  doubted["test_views"][1]["pose_doubt"] = "in a group that sees the object elsewhere";
+  const std::string marked = ReportHtml(doubted, {}, "");
+  EXPECT_NE(marked.find("<td>b.png *</td>"), std::string::npos) << marked;
+  EXPECT_NE(marked.find("<td>a.png</td>"), std::string::npos) << marked;
+  EXPECT_NE(marked.find("<li>b.png: in a group that sees the object elsewhere</li>"), std::string::npos) << marked;
 }
 
 }  // namespace

@@ -79,6 +79,23 @@ TEST(GhostGroups, AGroupSeeingItsOwnObjectFarAwayIsNamed) {
   EXPECT_TRUE(FindGhostGroups(rec, Box(60), {}).empty());
 }
 
+TEST(GhostGroups, MarkingPutsTheDoubtOnTheGroupsPhotosInTheScene) {
+  colmap::Reconstruction rec = Photos(20);
+  Cluster(&rec, 1, 300, Eigen::Vector3d::Zero(), 0.8, 1, 14);
+  Cluster(&rec, 1001, 60, Eigen::Vector3d(2.5, 0, 0), 0.4, 15, 20);
+  Scene scene;
+  scene.box = Box(8);
+  for (const auto& [id, im] : rec.images) scene.images.push_back({.name = im.name});
+  const std::vector<std::string> warnings = MarkGhostGroups(rec, {}, &scene);
+  ASSERT_EQ(warnings.size(), 1u);
+  EXPECT_NE(warnings[0].find("COLMAP reconstructed the object twice"), std::string::npos) << warnings[0];
+  for (const SceneImage& im : scene.images) {
+    const bool in_group = im.name >= "img15.jpg";
+    EXPECT_EQ(im.pose_doubt.empty(), !in_group) << im.name << ": " << im.pose_doubt;
+    if (in_group) EXPECT_EQ(im.pose_doubt.rfind("in a group that sees the object elsewhere: 6 photos", 0), 0u);
+  }
+}
+
 TEST(GhostGroups, TheFarSideOfOneObjectIsNotAGhost) {
   colmap::Reconstruction rec = Photos(20);
   Cluster(&rec, 1, 300, Eigen::Vector3d(-0.4, 0, 0), 0.6, 1, 10);  // the front half
