@@ -51,10 +51,10 @@ std::string GhostGroup::Warning() const {
   std::string list;
   for (const std::string& n : names) list += (list.empty() ? "" : ", ") + n;
   return StrCat(Describe(), ": COLMAP reconstructed the object twice, so these photos' poses disagree with the ",
-                "others' by more than camera refinement corrects, and the volume shows a second object from their ",
-                "side. They are kept for training (without them nothing sees that side). To fix it, run COLMAP again ",
-                "with more photos between the groups or with loop closure, or remove them from a copy of the model ",
-                "(colmap image_deleter). The photos: ", list);
+                "others', and the volume shows a blurred or second object from their side (camera refinement ",
+                "corrects only part of such an error). They are kept for training (without them nothing sees that ",
+                "side). To fix it, run COLMAP again with more photos between the groups or with loop closure, or ",
+                "remove them from a copy of the model (colmap image_deleter). The photos: ", list);
 }
 
 std::string GhostGroup::Doubt() const {

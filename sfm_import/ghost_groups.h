@@ -1,8 +1,8 @@
 // Groups of photos that COLMAP placed consistently among themselves but not with the rest: the
 // sparse points inside the box that such a group sees are seen by none of the other photos, and
 // their centre lies far from where the others see the object. COLMAP has reconstructed the object
-// twice (a ghost), so the group's poses disagree with the others' by more than camera refinement
-// corrects (a shared error of the whole group, not one photo's).
+// twice (a ghost), so the group's poses disagree with the others'; camera refinement, which moves
+// each photo a little, repairs only part of it (docs/tuning.md).
 //
 // shared/data/bonsai has two, the start of the capture: DSCF5605 to 5635 (11 photos) see 624
 // in-box points 2.6 units (2.9 times the object's RMS radius) from the 3577 that the 60 photos from
