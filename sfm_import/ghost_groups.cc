@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <map>
 #include <numeric>
+#include <unordered_map>
 
 #include "common/errors.h"
 
@@ -81,11 +82,18 @@ std::vector<GhostGroup> FindGhostGroups(const colmap::Reconstruction& rec, const
     }
   }
   Groups groups(static_cast<int>(photos.size()));
-  std::map<std::pair<int, int>, int> shared;
-  for (const auto& [id, v] : seen_by) {
-    for (size_t a = 0; a < v.size(); ++a) {
-      for (size_t b = a + 1; b < v.size(); ++b) {
-        if (++shared[{v[a], v[b]}] >= o.min_shared_points) groups.Join(v[a], v[b]);
+  if (o.min_shared_points <= 1) {  // one shared point links: a point joins all who see it
+    for (const auto& [id, v] : seen_by) {
+      for (size_t a = 1; a < v.size(); ++a) groups.Join(v[0], v[a]);
+    }
+  } else {  // count the points each pair shares (a track of T photos makes T (T - 1) / 2 pairs)
+    std::unordered_map<uint64_t, int> shared;
+    for (const auto& [id, v] : seen_by) {
+      for (size_t a = 0; a < v.size(); ++a) {
+        for (size_t b = a + 1; b < v.size(); ++b) {
+          const uint64_t key = static_cast<uint64_t>(std::min(v[a], v[b])) << 32 | std::max(v[a], v[b]);
+          if (++shared[key] >= o.min_shared_points) groups.Join(v[a], v[b]);
+        }
       }
     }
   }
