@@ -54,8 +54,9 @@ std::string GhostGroup::Warning() const {
   return StrCat(Describe(), ": COLMAP reconstructed the object twice, so these photos' poses disagree with the ",
                 "others', and the volume shows a blurred or second object from their side (camera refinement ",
                 "corrects only part of such an error). They are kept for training (without them nothing sees that ",
-                "side). To fix it, run COLMAP again with more photos between the groups or with loop closure, or ",
-                "remove them from a copy of the model (colmap image_deleter). The photos: ", list);
+                "side). To fix it, make the model again (perf sfm --images DIR matches the photos in capture order; ",
+                "on a capture with such a group it tied the group to the rest), or remove them from a copy of the ",
+                "model (colmap image_deleter). The photos: ", list);
 }
 
 std::string GhostGroup::Doubt() const {
