@@ -32,7 +32,8 @@ struct GhostGroupOptions {
   int min_points = 20;
   // ... nor one whose object centre is within this many times the main group's RMS radius of the
   // main group's centre: the far side of one object, seen by photos that share no point with the
-  // front, has its centre within about one radius. Bonsai's two ghost groups: 2.8 and 2.4.
+  // front, has its centre within about one radius. Bonsai's two ghost groups: 2.9 and 2.5;
+  // the two sides of a model of the same photos without a ghost (perf sfm): 0.8.
   double min_separation = 2.0;
 };
 
@@ -42,8 +43,8 @@ struct GhostGroup {
   double separation = 0;           // from the group's in-box centre to the main group's (world units)
   double main_radius = 0;          // RMS distance of the main group's in-box points from their centre
   int main_photos = 0, main_points = 0;
-  // e.g. "11 photos (DSCF5605.JPG ... DSCF5635.JPG) see 600 sparse points inside the box 2.6 units
-  // (2.8 times the object's radius) from the 3483 that the other 60 photos see, and share none".
+  // e.g. "11 photos (DSCF5605.JPG ... DSCF5635.JPG) see 624 sparse points inside the box 2.6 units
+  // (2.9 times the object's radius) from the 3577 that the other 60 photos see, and share none".
   std::string Describe() const;
   // Describe(), what it means and what to do, and every photo's name: perf import's warning.
   std::string Warning() const;
