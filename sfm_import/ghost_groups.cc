@@ -75,8 +75,9 @@ std::vector<GhostGroup> FindGhostGroups(const colmap::Reconstruction& rec, const
     const int k = static_cast<int>(photos.size());
     photos.push_back(&im);
     for (const colmap::Point2D& p : im.points2D) {
+      if (p.point3D_id == colmap::kInvalidPoint3DId) continue;  // most of a photo's 2-D points
       const auto it = rec.points3D.find(p.point3D_id);
-      if (p.point3D_id == colmap::kInvalidPoint3DId || it == rec.points3D.end()) continue;
+      if (it == rec.points3D.end()) continue;
       if (!InBox(box, Xyz(it->second))) continue;
       std::vector<int>& v = seen_by[p.point3D_id];
       if (v.empty() || v.back() != k) v.push_back(k);

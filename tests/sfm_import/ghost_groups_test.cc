@@ -14,7 +14,7 @@ namespace perf {
 namespace {
 
 // Only what FindGhostGroups reads: names, which points each photo sees, the points' positions.
-// `photos` photos img1 ... imgN; photo i sees no points until Sees() adds them.
+// `photos` photos img01 ... imgNN, seeing no points until Cluster() adds them.
 colmap::Reconstruction Photos(int photos) {
   colmap::Reconstruction rec;
   for (uint32_t i = 1; i <= static_cast<uint32_t>(photos); ++i) {
