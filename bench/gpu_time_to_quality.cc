@@ -17,6 +17,7 @@
 // budget and Adam the rest.
 #include <CLI/CLI.hpp>
 #include <atomic>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <ctime>
@@ -89,6 +90,13 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--line-search-stride", s.solver.line_search_ray_stride, "Line search on every k-th ray")
       ->capture_default_str();
+  app.add_option("--cg-exit-ratio", s.solver.cg_exit_ratio,
+                 "PCG leaves when |r|^2 falls by less than this factor (paper: 0.85; default inf: never)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--jtj-ray-stride", s.solver.jtj_ray_stride,
+                 "PCG's J^T J p on every k-th ray (subsampled Gauss-Newton; 1: every ray)")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
   app.add_option("--seed", s.seed, "Random start and jitter")->capture_default_str();
   app.add_option("--min-box-opacity", s.min_box_opacity,
                  "Held-out renders: the paper's floater rule (0.7; 0: off, the volume as fitted)")
@@ -103,8 +111,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--tag", tag, "File name stem (default: gpu_<data folder>_<date>)");
   app.add_option("--commit", commit, "Commit of the build, for the record")->capture_default_str();
-  bool dense = false;
+  bool dense = false, no_record = false;
   app.add_flag("--dense", dense, "Every level's grid dense (default: levels after the first keep the occupied bricks)");
+  app.add_flag("--no-record", no_record,
+               "J^T J p recomputes every ray (default: it reads the Jacobian record Linearize wrote, ray_record.h)");
   app.add_flag("--check-data", check_data, "Load the data, build every level's rays, print their sizes and exit (no GPU)");
   CLI11_PARSE(app, argc, argv);
   try {
@@ -119,7 +129,9 @@ int main(int argc, char** argv) {
     if (check_data) return CheckData(d, s);
     std::signal(SIGTERM, OnStopSignal);
     std::signal(SIGINT, OnStopSignal);
-    auto backend = MakeCudaBackend({});
+    CudaBackendOptions cuda_options;
+    cuda_options.record_jacobian = !no_record;
+    auto backend = MakeCudaBackend(cuda_options);
     const std::string device = backend->Describe();
     int train = 0;
     for (const View& v : d.views) train += v.train;
@@ -150,8 +162,11 @@ int main(int argc, char** argv) {
                         {"lr_density", s.solver.adam.lr_density},
                         {"max_cg_iterations", s.solver.max_cg_iterations},
                         {"line_search_ray_stride", s.solver.line_search_ray_stride},
+                        {"cg_exit_ratio", std::isfinite(s.solver.cg_exit_ratio) ? json(s.solver.cg_exit_ratio) : json()},
+                        {"jtj_ray_stride", s.solver.jtj_ray_stride},
                         {"min_box_opacity", s.min_box_opacity},
                         {"sparse", s.sparse},
+                        {"record_jacobian", !no_record},
                         {"time_budget_s", time_budget},
                         {"seed", s.seed}}}};
     std::map<std::string, SolverRun> runs;

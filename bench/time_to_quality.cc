@@ -258,6 +258,8 @@ void RunHierarchy(Backend* backend, const BenchData& d, SolverType type, const B
                {"seconds", level_seconds},
                {"solver", summary.ToJson()},
                {"memory_estimate_bytes", h.memory.Total()},
+               {"jacobian_record_bytes", h.memory.jacobian_cache},
+               {"jacobian_record_wanted_bytes", h.memory.jacobian_wanted},
                {"throughput", passes}};
     if (!stopped.empty()) entry["stopped"] = stopped;
     run->levels.push_back(entry);

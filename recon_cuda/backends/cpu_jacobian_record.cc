@@ -39,32 +39,23 @@ void BlockJ::Clear(int64_t rays, const VolumeShape& shape, RecordKind kind, int6
 }
 
 void BlockJ::StorePose(int64_t r, const PoseRow<float>& row) {
-  for (int i = 0; i < 4; ++i) {
-    for (int j = 0; j < kPoseSolved; ++j) {
-      const size_t at = kPoseRowValues * r + kPoseSolved * i + j;
-      if (compact) packed_pose[at] = ToBfloat16(row.j[i][j]);
-      else pose[at] = row.j[i][j];
-    }
+  if (compact) {
+    PackPoseRow(row, &packed_pose[kPoseRowValues * r]);
+    return;
   }
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < kPoseSolved; ++j) pose[kPoseRowValues * r + kPoseSolved * i + j] = row.j[i][j];
 }
 
 PoseRow<float> BlockJ::PoseAt(int64_t r) const {
+  if (compact) return UnpackPoseRow(&packed_pose[kPoseRowValues * r]);
   PoseRow<float> row;
   for (int i = 0; i < 4; ++i) {
-    for (int j = 0; j < kPoseSolved; ++j) {
-      const size_t at = kPoseRowValues * r + kPoseSolved * i + j;
-      row.j[i][j] = compact ? FromBfloat16(packed_pose[at]) : pose[at];
-    }
+    for (int j = 0; j < kPoseSolved; ++j) row.j[i][j] = pose[kPoseRowValues * r + kPoseSolved * i + j];
     for (int j = kPoseSolved; j < kPoseValues; ++j) row.j[i][j] = 0;
   }
   return row;
 }
-
-namespace {
-// The fillers between a ray's entry at last_k (-1: none) and its next sample k < last_k: one every
-// kMaxStep steps back, so that no step is longer.
-int FillersBetween(int last_k, int k) { return last_k < 0 ? 0 : (last_k - k - 1) / CompactSampleJ::kMaxStep; }
-}  // namespace
 
 void BlockJ::AppendCompact(int64_t r, int k, const SamplePartials<float>& p, int* last_k) {
   auto at = static_cast<uint32_t>(packed.size());
@@ -76,19 +67,7 @@ void BlockJ::AppendCompact(int64_t r, int k, const SamplePartials<float>& p, int
 
 void BlockJ::EncodeCompact(int64_t r, int k, CompactSampleJ e, uint32_t* at, int* last_k) {
   PERF_CHECK(k >= 0 && k <= 0xffff && (*last_k < 0 || k < *last_k));
-  for (int f = FillersBetween(*last_k, k); f > 0; --f, ++*at) {
-    packed[*at] = CompactSampleJ::Filler();
-    steps[*at] = CompactSampleJ::kMaxStep;
-    *last_k -= CompactSampleJ::kMaxStep;
-  }
-  if (*last_k < 0) {
-    first_k[r] = static_cast<uint16_t>(k);
-    *last_k = k;
-  }
-  packed[*at] = e;
-  steps[*at] = static_cast<uint8_t>(*last_k - k);
-  ++*at;
-  *last_k = k;
+  recon::EncodeCompact(packed.data(), steps.data(), k, e, at, last_k, &first_k[r]);
 }
 
 const int32_t* PhotoSlots(const LevelProblem& p, int count) {

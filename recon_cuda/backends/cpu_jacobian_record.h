@@ -3,13 +3,13 @@
 // to the CPU backend.
 #pragma once
 
-#include <bit>
 #include <cstdint>
 #include <vector>
 
 #include "common/errors.h"
 #include "recon_cuda/backends/cpu_backend.h"
 #include "recon_cuda/backends/record_arena.h"
+#include "recon_cuda/core/compact_record.h"
 #include "recon_cuda/core/jacobian.h"
 #include "recon_cuda/core/pose.h"
 #include "recon_cuda/core/ray_math.h"
@@ -37,48 +37,16 @@ struct AddSink {
   }
 };
 
-// A float rounded to bfloat16 (its top 16 bits, to nearest, ties to even), and back.
-inline uint16_t ToBfloat16(float x) {
-  uint32_t u = std::bit_cast<uint32_t>(x);
-  u += 0x7fffu + ((u >> 16) & 1u);
-  return static_cast<uint16_t>(u >> 16);
-}
-inline float FromBfloat16(uint16_t h) { return std::bit_cast<float>(static_cast<uint32_t>(h) << 16); }
-
-// A ray's pose row (pose.h PoseRow) without its padding column: 4 residuals x 7 values.
-inline constexpr int kPoseRowValues = 4 * kPoseSolved;
-
 // How Linearize records the Jacobian: exactly (SampleJ), compactly sample by sample
 // (CompactSampleJ), or compactly with each ray's cells merged (MergedCellJ).
 enum class RecordKind { kExact, kCompact, kMerged };
 
-// One sample of a ray's Jacobian, as recorded by Linearize: exact, or compact (CpuBackendOptions::
-// compact_jacobian): its colour partials in bfloat16 (8 bits of mantissa) and, apart (BlockJ::
-// steps), one byte: how many march steps it lies before the ray's entry before (Backward records a
-// ray back to front), so its march index, whose t and delta StepAt recomputes exactly (9 bytes a
-// sample). Its dl is the ray's DlPerDelta times delta, as Backward makes it, so it is not stored.
-// That dl is rounded to bfloat16 as the others are, so the product is the 12-byte record's to the
-// bit (left exact, the two-rank MPI test's cost bound failed; docs/tuning.md "dl not recorded").
-// A gap of more than kMaxStep steps between two samples of a ray is bridged by fillers: entries
-// whose partials are all 0, dl too, which add exact zeros to J^T J p.
+// One sample of a ray's Jacobian as the exact record keeps it; the compact record keeps
+// CompactSampleJ (compact_record.h) instead.
 struct SampleJ {
   float t;
   SamplePartials<float> sp;
 };
-struct CompactSampleJ {
-  static constexpr int kMaxStep = 255;
-  static constexpr uint16_t kFiller = 0xffff;  // sp[0] of a filler (a bfloat16 NaN)
-  uint16_t sp[4];  // dc, ds[3]
-  static CompactSampleJ Make(const SamplePartials<float>& p) {
-    return {{ToBfloat16(p.dc), ToBfloat16(p.ds[0]), ToBfloat16(p.ds[1]), ToBfloat16(p.ds[2])}};
-  }
-  static CompactSampleJ Filler() { return {{kFiller, 0, 0, 0}}; }
-  SamplePartials<float> Partials(float dl) const {
-    if (sp[0] == kFiller) return {0.f, {0.f, 0.f, 0.f}, 0.f};
-    return {FromBfloat16(sp[0]), {FromBfloat16(sp[1]), FromBfloat16(sp[2]), FromBfloat16(sp[3])}, dl};
-  }
-};
-static_assert(sizeof(CompactSampleJ) == 8, "8 bytes of partials a recorded sample, and its step");
 // One cell of a ray's merged record (BlockJ::merged): what the ray's samples put on that cell,
 // summed over them with their trilinear weights (RayCells' K = sum_j w_jq (dc, ds[3], dl)_j,
 // as Linearize's merge makes it for the diagonal), in float: J^T J p is then the exact record's
@@ -134,33 +102,17 @@ struct BlockJ {
   // Compact: appends sample k of ray r (its partials), which lies before the ray's sample last_k
   // (-1: the ray's first entry); last_k becomes k.
   void AppendCompact(int64_t r, int k, const SamplePartials<float>& p, int* last_k);
-  // Compact: writes entry e, sample k of ray r, at entry *at (and fillers before it where needed),
-  // after the ray's sample last_k (-1: none); *at moves past it. In place over the ray's own
-  // entries when some are dropped: it never writes past the entry it is given.
+  // Compact: compact_record.h EncodeCompact of sample k of ray r at entry *at of the block.
   void EncodeCompact(int64_t r, int k, CompactSampleJ e, uint32_t* at, int* last_k);
 };
 
-// A recorded ray's shells as J^T J p reads them: which the ray meets, their texel weights and
-// partials (the compact record recomputes where the ray meets them, from the ray and its march).
-struct RayShellsJ {
-  bool hit[kMaxShells];
-  TexelSample<float> ts[kMaxShells];
-  ShellPartials<float> sp[kMaxShells];
-};
 // vol: at the linearisation point (the compact record recomputes the shells' lookups and values
 // there, as Backward made them: the same partials to the bit).
 inline void RecordedShells(const BlockJ& b, int64_t r, const VolumeView<float>& vol, const BoxRay<float>& ray,
                            const March<float>& m, RayShellsJ* out) {
   const int n = vol.num_shells;
   if (b.compact) {
-    ShellStack<float> st;
-    EvalShells(vol, ray, m, &st, out->ts);
-    float behind[3] = {0.f, 0.f, 0.f};
-    for (int k = n - 1; k >= 0; --k) {
-      out->hit[k] = st.hit[k];
-      if (!st.hit[k]) continue;
-      out->sp[k] = ShellPartialsAt(st, k, n, b.t_box[r], behind);
-    }
+    CompactShells(vol, ray, m, b.t_box[r], out);
     return;
   }
   for (int k = 0; k < n; ++k) {
@@ -176,7 +128,13 @@ inline void RecordedShells(const BlockJ& b, int64_t r, const VolumeView<float>& 
 class RecordedSamples {
  public:
   RecordedSamples(const BlockJ& b, const March<float>& m, const Jitter& jit, int64_t r, uint32_t first)
-      : b_(b), m_(m), jit_(jit), r_(r), j_(first), k_(b.compact && !b.merged ? b.first_k[r] : 0) {}
+      : b_(b),
+        m_(m),
+        jit_(jit),
+        j_(first),
+        compact_(b.compact && !b.merged
+                     ? CompactReader{b.packed.data(), b.steps.data(), b.first_k[r], b.dl_per_delta[r]}
+                     : CompactReader{nullptr, nullptr, 0, 0.f}) {}
   // The next sample's t; its partials into *sp.
   float Next(SamplePartials<float>* sp) {
     const uint32_t j = j_++;
@@ -184,20 +142,16 @@ class RecordedSamples {
       *sp = b_.samples[j].sp;
       return b_.samples[j].t;
     }
-    k_ -= b_.steps[j];
-    const MarchStep<float> st = StepAt(m_, k_, jit_);
-    *sp = b_.packed[j].Partials(FromBfloat16(ToBfloat16(b_.dl_per_delta[r_] * st.delta)));
-    return st.t;
+    return compact_.Next(j, m_, jit_, sp);
   }
-  int k() const { return k_; }  // the march index of the last sample read (compact)
+  int k() const { return compact_.k; }  // the march index of the last sample read (compact)
 
  private:
   const BlockJ& b_;
   const March<float>& m_;
   const Jitter& jit_;
-  int64_t r_;
   uint32_t j_;
-  int k_;
+  CompactReader compact_;
 };
 
 // Keeps, in place, the samples of a block's record for which keep(ray, t, sp, k) holds (t: the

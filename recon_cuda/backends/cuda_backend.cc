@@ -10,107 +10,22 @@
 #include "common/stopwatch.h"
 #include "recon_cuda/backends/cuda_check.h"
 #include "recon_cuda/backends/cuda_kernels.h"
+#include "recon_cuda/backends/cuda_level_memory.h"
 #include "recon_cuda/backends/device_buffer.h"
+#include "recon_cuda/backends/device_record_plan.h"
 #include "recon_cuda/solve/pose_blocks.h"
 
 namespace perf::recon {
 namespace {
 
 using cuda::DeviceBuffer;
-
-static_assert(sizeof(RayPixel) == 8, "RayPixel is copied to the device as is");
+using cuda::DeviceRays;
+using cuda::DeviceRecord;
+using cuda::kRenderBandPixels;
+using cuda::RayBytes;
+using cuda::Scratch;
 
 std::string Mib(int64_t bytes) { return StrCat((bytes + (1 << 20) - 1) >> 20, " MiB"); }
-
-// Device bytes of the level's training rays: cameras, pixels, 8-bit colours and, when the level
-// fits the alpha (UsesAlpha), 8-bit alphas.
-int64_t RayBytes(const LevelProblem& p) {
-  return static_cast<int64_t>(p.rays->cameras.size() * (sizeof(PinholeCamera<float>) + sizeof(int32_t))) +
-         p.rays->size() * static_cast<int64_t>(sizeof(RayPixel) + 3 + (UsesAlpha(p) ? 1 : 0));
-}
-
-// Values in [0, 1] as the device stores them (cuda::ColourToByte).
-std::vector<uint8_t> ToBytes(const std::vector<float>& values) {
-  std::vector<uint8_t> bytes(values.size());
-  for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = cuda::ColourToByte(values[i]);
-  return bytes;
-}
-
-// The level's rays on the device (one owner: the backend, for one level).
-struct DeviceRays {
-  DeviceBuffer<PinholeCamera<float>> cameras;
-  DeviceBuffer<RayPixel> pixels;
-  DeviceBuffer<uint8_t> colours;
-  DeviceBuffer<uint8_t> alphas;  // empty when the level has no alpha residual
-  // Each camera's photo slot (RaySet::exposure_slot); empty when the level solves neither
-  // exposures nor poses.
-  DeviceBuffer<int32_t> exposure_slot;
-  int64_t first_index = 0;       // RaySet::first_index
-  bool exposures = false, poses = false;
-
-  DeviceRays(const RaySet& rays, bool use_alpha, int num_exposures, int num_poses)
-      : cameras(static_cast<int64_t>(rays.cameras.size())),
-        pixels(rays.size()),
-        colours(3 * rays.size()),
-        alphas(use_alpha ? rays.size() : 0),
-        exposure_slot(num_exposures > 0 || num_poses > 0 ? static_cast<int64_t>(rays.cameras.size()) : 0),
-        first_index(rays.first_index),
-        exposures(num_exposures > 0),
-        poses(num_poses > 0) {
-    PERF_CHECK(static_cast<int64_t>(rays.colours.size()) == 3 * rays.size());
-    cameras.CopyFromHost(rays.cameras);
-    pixels.CopyFromHost(rays.pixels);
-    colours.CopyFromHost(ToBytes(rays.colours));
-    if (use_alpha) alphas.CopyFromHost(ToBytes(rays.alphas));
-    if (exposures || poses) {
-      PERF_CHECK(rays.exposure_slot.size() == rays.cameras.size());
-      for (int32_t slot : rays.exposure_slot) {
-        PERF_CHECK(slot >= 0 && (!exposures || slot < num_exposures) && (!poses || slot < num_poses));
-      }
-      exposure_slot.CopyFromHost(rays.exposure_slot);
-    }
-  }
-  cuda::RaysView View() const {
-    return {cameras.data(),
-            pixels.data(),
-            colours.data(),
-            alphas.size() > 0 ? alphas.data() : nullptr,
-            pixels.size(),
-            first_index,
-            exposures ? exposure_slot.data() : nullptr,
-            poses ? exposure_slot.data() : nullptr};
-  }
-};
-
-// Render draws an image in bands of at most this many pixels through buffers allocated with the
-// level (16 MiB), so that its memory is part of the level's estimate whatever the image size.
-constexpr int64_t kRenderBandPixels = int64_t{1} << 20;
-
-// Pass statistics, reductions' working memory and Render's band.
-struct Scratch {
-  DeviceBuffer<cuda::RayStats> partials, total;
-  DeviceBuffer<double> result;
-  DeviceBuffer<uint8_t> temp;
-  DeviceBuffer<float> render_colour, render_opacity;  // [kRenderBandPixels, 3], [kRenderBandPixels]
-
-  static int64_t Bytes(int64_t rays, int64_t params) {
-    const int64_t blocks = cuda::PassBlocks(rays);
-    return (blocks + 1) * static_cast<int64_t>(sizeof(cuda::RayStats)) + static_cast<int64_t>(sizeof(double)) +
-           static_cast<int64_t>(std::max(cuda::StatsTempBytes(blocks), cuda::ReduceTempBytes(params))) +
-           4 * kRenderBandPixels * static_cast<int64_t>(sizeof(float));
-  }
-  Scratch(int64_t rays, int64_t params)
-      : partials(std::max<int64_t>(cuda::PassBlocks(rays), 1)),
-        total(1),
-        result(1),
-        temp(static_cast<int64_t>(std::max(cuda::StatsTempBytes(cuda::PassBlocks(rays)), cuda::ReduceTempBytes(params)))),
-        render_colour(3 * kRenderBandPixels),
-        render_opacity(kRenderBandPixels) {}
-  cuda::StatsScratch Stats() {
-    return {partials.data(), partials.size(), total.data(), temp.data(), static_cast<size_t>(temp.size())};
-  }
-  cuda::ReduceScratch Reduce() { return {result.data(), temp.data(), static_cast<size_t>(temp.size())}; }
-};
 
 class CudaBackend final : public Backend {
  public:
@@ -133,6 +48,12 @@ class CudaBackend final : public Backend {
   std::string Describe() const override { return StrCat("cuda (", name_, ")"); }
 
   MemoryEstimate EstimateMemory(const LevelProblem& p, int num_vectors) const override {
+    return EstimateAndPlan(p, num_vectors, nullptr);
+  }
+
+  // EstimateMemory, and the level's record (the room the rest leaves, less a margin of 2 % and
+  // at least 256 MiB for what the context and the reductions may still take).
+  MemoryEstimate EstimateAndPlan(const LevelProblem& p, int num_vectors, DeviceRecordPlan* plan_out) const {
     MemoryEstimate e;
     const int64_t params = p.shape.ParamCount();
     const int64_t rays = p.rays ? p.rays->size() : 0;
@@ -148,8 +69,15 @@ class CudaBackend final : public Backend {
       e.scratch += static_cast<int64_t>(b.slot.size() * sizeof(int32_t) + b.bricks.size() * sizeof(int64_t) +
                                         b.skip_blocks.size());
     }
-    e.jacobian_cache = 0;  // never cached: MultiplyJtJ recomputes (cuda_passes.cu)
     e.available = Available();
+    DeviceRecordPlan plan;
+    if (options_.record_jacobian && p.rays) {
+      const int64_t margin = std::max<int64_t>(int64_t{256} << 20, e.available / 50);
+      plan = PlanDeviceRecord(p, e.available - e.Needed() - margin);
+      e.jacobian_cache = plan.Bytes();
+      if (plan.Partial()) e.jacobian_wanted = plan.WantedBytes();
+    }
+    if (plan_out) *plan_out = plan;
     return e;
   }
 
@@ -161,7 +89,7 @@ class CudaBackend final : public Backend {
     Release();
     restrict_to_ = nullptr;
     level_ = p;
-    const MemoryEstimate e = EstimateMemory(p, num_vectors);
+    const MemoryEstimate e = EstimateAndPlan(p, num_vectors, &record_plan_);
     if (e.Total() > e.available) throw ResourceError(TooLarge(p, num_vectors, e));
     for (int v = 0; v < num_vectors; ++v) {
       vectors_.emplace_back(p.shape.ParamCount());
@@ -184,7 +112,13 @@ class CudaBackend final : public Backend {
   }
 
   const LevelProblem& level() const override { return level_; }
-  bool CachesJacobian() const override { return false; }
+  bool CachesJacobian() const override { return record_plan_.capacity > 0; }
+  // Frees the record; the next Linearize with a diagonal allocates it again.
+  void ReleaseJacobian(bool) override {
+    record_.reset();
+    recorded_ = false;
+    linearized_ = false;
+  }
 
   void Upload(VecId v, std::span<const float> host) override { vec(v).CopyFromHost(host); }
   void Download(VecId v, std::span<float> host) const override { vec(v).CopyToHost(host); }
@@ -242,7 +176,8 @@ class CudaBackend final : public Backend {
     SolvePoseBlocks(poses, wide, hr.data(), hd.data(), hf.data(), floor, hz.data());
     PERF_CUDA_CHECK(cudaMemcpy(ptr(z) + at, hz.data(), count * sizeof(float), cudaMemcpyHostToDevice));
   }
-  // Nothing is recorded: JtJpKernel skips the samples on the fly (jacobian.h SkippableSample).
+  // Nothing is dropped from the record: both J^T J p kernels skip the samples on the fly
+  // (jacobian.h SkippableSample).
   void RestrictJacobian(VecId free) override { restrict_to_ = ptr(free); }
   void AdamStep(VecId x, VecId g, VecId m, VecId v, const AdamSettings& s, int t) override {
     cuda::AdamStep(ptr(x), ptr(g), ptr(m), ptr(v), AdamCoefficientsAt(s, t), n(), level_.shape.Layout());
@@ -251,10 +186,13 @@ class CudaBackend final : public Backend {
   PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset, RaySubset jtj) override {
     PERF_CHECK(subset.Valid() && jtj.Valid());
     const auto t0 = WallClock::now();
+    const RecordView rec = diag != kNoVector && Record(jtj) ? record_->View(jtj) : RecordView{};
     const cuda::RayStats r =
         cuda::Linearize(Input(x, seed), ptr(g), diag == kNoVector ? nullptr : ptr(diag),
-                        pose_blocks_.size() > 0 ? pose_blocks_.data() : nullptr, n(), subset.stride, subset.offset,
-                        scratch_->Stats());
+                        pose_blocks_.size() > 0 ? pose_blocks_.data() : nullptr, rec, n(), subset.stride,
+                        subset.offset, scratch_->Stats());
+    recorded_ = rec.heads != nullptr;
+    every_ray_recorded_ = recorded_ && cuda::RecordedEntries(rec) <= rec.capacity;
     blocks_fresh_ = diag != kNoVector && pose_blocks_.size() > 0;
     lin_x_ = x;
     lin_seed_ = seed;
@@ -267,9 +205,10 @@ class CudaBackend final : public Backend {
   PassStats MultiplyJtJ(VecId p, VecId out) override {
     PERF_CHECK_MSG(linearized_, "MultiplyJtJ before Linearize");
     const auto t0 = WallClock::now();
+    const RecordView rec = recorded_ ? record_->View(jtj_) : RecordView{};
     const cuda::RayStats r =
         cuda::MultiplyJtJ(Input(lin_x_, lin_seed_), ptr(p), restrict_to_, ptr(out), n(), jtj_.stride, jtj_.offset,
-                          scratch_->Stats());
+                          scratch_->Stats(), rec, recorded_ && !every_ray_recorded_);
     return ToPassStats(r, t0);
   }
 
@@ -304,7 +243,29 @@ class CudaBackend final : public Backend {
   }
 
  private:
+  // Whether the record is kept for the rays of jtj: the level planned one with a slot for each of
+  // them; allocated here on the level's first Gauss-Newton Linearize (Adam's never asks). Should
+  // the device refuse the memory then (another process took it since SetLevel's estimate), the
+  // level recomputes instead.
+  bool Record(RaySubset jtj) {
+    if (record_plan_.capacity == 0) return false;
+    if (SubsetRays(level_.rays->size(), jtj) > record_plan_.slots) return false;
+    if (!record_) {
+      try {
+        record_ = std::make_unique<DeviceRecord>(record_plan_, level_.shape);
+      } catch (const ResourceError&) {
+        record_plan_.capacity = 0;
+        return false;
+      }
+    }
+    return true;
+  }
+  static int64_t SubsetRays(int64_t rays, RaySubset s) { return s.CountIn(0, rays); }
+
   void Release() {
+    record_.reset();
+    record_plan_ = {};
+    recorded_ = false;
     vectors_.clear();
     bricks_ = DeviceBuffer<int32_t>();
     skip_blocks_ = DeviceBuffer<uint8_t>();
@@ -420,70 +381,13 @@ class CudaBackend final : public Backend {
   uint32_t lin_seed_ = 0;
   RaySubset jtj_;  // the last Linearize's rays of MultiplyJtJ
   const float* restrict_to_ = nullptr;  // RestrictJacobian's free vector until the next Linearize
+  DeviceRecordPlan record_plan_;        // the level's record (capacity 0: none)
+  std::unique_ptr<DeviceRecord> record_;  // allocated by the level's first Gauss-Newton Linearize
+  bool recorded_ = false;               // the last Linearize recorded its jtj rays
+  bool every_ray_recorded_ = false;     // ... and every one of them found room
 };
 
 }  // namespace
-
-int64_t CudaMemoryInUse() {
-  size_t free = 0, total = 0;
-  PERF_CUDA_CHECK(cudaMemGetInfo(&free, &total));
-  return static_cast<int64_t>(total) - static_cast<int64_t>(free);
-}
-
-namespace {
-
-// Why cudaGetDeviceCount failed, in the three cases a user can act on: no driver (or one too old
-// for this runtime), no device visible, anything else with CUDA's own words.
-std::string NoDeviceReason(cudaError_t e) {
-  const std::string cuda = StrCat(cudaGetErrorString(e), " (", cudaGetErrorName(e), ")");
-  switch (e) {
-    case cudaErrorInsufficientDriver:
-      return StrCat("driver not found: no NVIDIA driver (libcuda.so.1) was loaded, or it is older than this CUDA "
-                    "runtime; ",
-                    cuda, "; check nvidia-smi, and that LD_LIBRARY_PATH still contains the driver's folder");
-    case cudaErrorNoDevice: {
-      const char* visible = std::getenv("CUDA_VISIBLE_DEVICES");
-      return StrCat("no device: the driver sees no CUDA device; ", cuda,
-                    visible ? StrCat("; CUDA_VISIBLE_DEVICES=\"", visible, "\"") : std::string());
-    }
-    default:
-      return StrCat("the CUDA runtime cannot use the driver: ", cuda);
-  }
-}
-
-}  // namespace
-
-bool ProbeCudaDevice(std::string* name, std::string* reason) {
-  int count = 0;
-  const cudaError_t e = cudaGetDeviceCount(&count);
-  if (e != cudaSuccess) {
-    cudaGetLastError();
-    if (reason) *reason = NoDeviceReason(e);
-    return false;
-  }
-  if (count == 0) {
-    if (reason) *reason = NoDeviceReason(cudaErrorNoDevice);
-    return false;
-  }
-  cudaDeviceProp prop;
-  const cudaError_t p = cudaGetDeviceProperties(&prop, 0);
-  if (p != cudaSuccess) {
-    cudaGetLastError();
-    if (reason) *reason = StrCat("cudaGetDeviceProperties: ", cudaGetErrorString(p));
-    return false;
-  }
-  // Device 0 is the current device unless this process chose another; the kernels' image must
-  // load on it (this build: sm_90 code + PTX, so not on GPUs before Hopper).
-  if (const char* k = cuda::KernelImageError()) {
-    if (reason) {
-      *reason = StrCat("wrong arch: ", prop.name, " (compute capability ", prop.major, ".", prop.minor,
-                       ") cannot run this build's kernels, built for sm_90 and newer (", k, ")");
-    }
-    return false;
-  }
-  if (name) *name = prop.name;
-  return true;
-}
 
 std::unique_ptr<Backend> MakeCudaBackend(const CudaBackendOptions& options) {
   std::string reason;

@@ -17,6 +17,10 @@ struct CudaBackendOptions {
   // Device memory the backend may use; 0: what cudaMemGetInfo reports free (plus what this
   // backend already holds) less 5 %.
   int64_t max_memory = 0;
+  // MultiplyJtJ reads the partials that Linearize recorded (ray_record.h, 9 bytes a sample) where
+  // they fit in the device memory the level leaves, and recomputes the rays that find no room;
+  // false: every product recomputes every ray (three marches of it). Default true.
+  bool record_jacobian = true;
 };
 
 // Throws ResourceError when no device is usable (CudaDeviceAvailable says why).

@@ -21,6 +21,7 @@
 
 #include "recon_cuda/core/param_ops.h"
 #include "recon_cuda/core/ray_math.h"
+#include "recon_cuda/core/ray_record.h"
 #include "recon_cuda/core/smoothness.h"
 #include "recon_cuda/core/training_ray.h"
 
@@ -65,13 +66,20 @@ size_t StatsTempBytes(int64_t blocks);
 // Passes (backend.h). Outputs are overwritten (zeroed first), not accumulated.
 // g, diag: [ParamCount]; diag may be nullptr (Adam). pose_blocks: [poses, kPoseBlock] the
 // photos' pose blocks (pose.h AddPoseBlock), needed with diag when the rays refine poses.
-RayStats Linearize(const PassInput& in, float* g, float* diag, float* pose_blocks, int64_t params, int stride,
-                   int offset, const StatsScratch& s);
+// rec: with diag, the Jacobian record (ray_record.h) the rays of its subset write (its counter
+// zeroed first); rec.heads nullptr: none.
+RayStats Linearize(const PassInput& in, float* g, float* diag, float* pose_blocks, const RecordView& rec,
+                   int64_t params, int stride, int offset, const StatsScratch& s);
+// The entries Linearize's rays asked rec for (more than rec.capacity: some rays found no room and
+// were not recorded). Synchronises.
+int64_t RecordedEntries(const RecordView& rec);
 // out = J_S^T J_S p at in.vol (the linearisation point) and in.seed, S the rays offset, offset +
 // stride, ...; p, out: [ParamCount]. free: nullptr, or the parameters the product is needed on
-// (backend.h RestrictJacobian).
+// (backend.h RestrictJacobian). rec: the last Linearize's record of S (rec.heads nullptr: none;
+// every ray is recomputed); recompute_rest: some of its rays were not recorded (RecordedEntries)
+// and are recomputed.
 RayStats MultiplyJtJ(const PassInput& in, const float* p, const float* free, float* out, int64_t params, int stride,
-                     int offset, const StatsScratch& s);
+                     int offset, const StatsScratch& s, const RecordView& rec = {}, bool recompute_rest = false);
 // Rays offset, offset + stride, ... only.
 RayStats Cost(const PassInput& in, int stride, int offset, const StatsScratch& s);
 // Rows y0 .. y0 + rows - 1 of an image `width` pixels wide; colour: [rows, width, 3], opacity:

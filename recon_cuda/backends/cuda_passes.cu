@@ -3,10 +3,13 @@
 // the per-ray math is written here; this file adds launches, the sink and the statistics.
 //
 // Differences from the CPU backend, by design:
-//   - no recorded Jacobian: MultiplyJtJ recomputes each ray's partials (Forward, then Backward
-//     twice: once gathering J p, once scattering J^T (J p)). A per-sample record at 256^3 on
-//     lego would need ~24 B x ~10^10 samples; memory traffic to re-read it would also cost about
-//     what the recompute's gathers do (L2-resident cells). Unmeasured;
+//   - the Jacobian record (ray_record.h) is the CPU's compact one (9 bytes a sample, no merged
+//     cells: at 24 bytes a cell and 4-5 cells a sample it would not fit a 256^3 level), each
+//     ray's entries contiguous at an offset handed out a warp at a time while Linearize runs
+//     (ReserveEntries); JtJpRecordKernel reads them. Rays that find no room (the record is sized
+//     to the memory the level leaves: device_record_plan.h) are recomputed by JtJpKernel
+//     (Forward, then Backward twice: once gathering J p, once scattering J^T (J p)), as every ray
+//     is with CudaBackendOptions::record_jacobian off;
 //   - J^T u scatters (Adam's gradient, J^T J p) go through the per-ray cell merge (CellMerger),
 //     so each cell gets one atomic per ray instead of one per sample (the CPU measured a direct
 //     scatter faster because its adds are plain; on the GPU atomics to the same few cells from a
@@ -14,43 +17,32 @@
 //   - the merged scatter adds 4 consecutive floats; on sm_90 that is one vector atomic (float4),
 //     elsewhere 4 scalar ones. Every Add4 index is a multiple of 4 (GridParam / ShellParam of
 //     channel 0) and cudaMalloc aligns to 256 bytes, so the float4 is aligned.
-// Resources (ptxas -v, CUDA 13.0.88, sm_90, no spills; re-measure after changing the per-ray
-// code): Linearize with diag 253 registers + 1056 B stack frame, Linearize for Adam and JtJp
-// 167 + 736 B, Cost 64 + 280 B, Render 56 + 360 B. The stack holds the cell merge buffers and
-// the per-shell arrays (indexed at run time); the driver backs it for every thread the device
-// can hold (KernelLocalMemoryBytes: ~285 MB on an H100, part of the memory estimate). At 253
-// registers only 2 blocks of 128 threads fit an SM's 64 K registers: 12.5 % occupancy for
-// Gauss-Newton's Linearize. That is the first thing to profile on a GPU (Nsight Compute: is the
-// kernel latency-bound, what do __launch_bounds__ min-blocks or smaller merge buffers cost in
-// local memory traffic?); do not tune it blind.
+// Resources (ptxas -v, CUDA 13.0.88, sm_90, 2026-12-07; re-measure after changing the per-ray
+// code): Linearize with diag (and the record's writer) 235 registers + 1296 B stack frame, with
+// poses 255 + 2120 B and 178 B of spill stores; for Adam 168 + 1040 B; JtJpRecordKernel 168 +
+// 1408 B (no spills; with __launch_bounds__ min 4 blocks: 128 + 1600 B, 252 B spilled), JtJpKernel
+// 168 + 1072 B (poses: 255 + 1896 B, 116 B spilled), Cost 96 + 328 B, Render 80 + 448 B. The stack
+// holds the cell merge buffers and the per-shell arrays (indexed at run time); the driver backs it
+// for every thread the device can hold (KernelLocalMemoryBytes: ~285 MB on an H100, part of the
+// memory estimate). At 235 registers 2 blocks of 128 threads fit an SM's 64 K registers: 12.5 %
+// occupancy for Gauss-Newton's Linearize. That is the first thing to profile on a GPU (Nsight
+// Compute: is the kernel latency-bound, what do __launch_bounds__ min-blocks or smaller merge
+// buffers cost in local memory traffic?); do not tune it blind.
 // Float atomics make the order of the additions, hence the last bits of g, diag and J^T J p,
 // vary from run to run; the cost and counts are summed per block with CUB in a fixed order.
-#include <cub/block/block_reduce.cuh>
 #include <cub/device/device_reduce.cuh>
 
 #include "common/errors.h"
 #include "recon_cuda/backends/cuda_check.h"
 #include "recon_cuda/backends/cuda_kernels.h"
+#include "recon_cuda/backends/cuda_pass_helpers.cuh"
 #include "recon_cuda/core/jacobian.h"
+#include "recon_cuda/core/ray_record.h"
 
 namespace perf::recon::cuda {
 namespace {
 
-constexpr int kRayThreads = 128;  // threads per block of the ray kernels (register-heavy)
-
-struct AtomicSink {
-  float* a;
-  __device__ __forceinline__ void Add4(int64_t i, float x, float y, float z, float w) {
-#if __CUDA_ARCH__ >= 900
-    atomicAdd(reinterpret_cast<float4*>(a + i), make_float4(x, y, z, w));
-#else
-    atomicAdd(a + i, x);
-    atomicAdd(a + i + 1, y);
-    atomicAdd(a + i + 2, z);
-    atomicAdd(a + i + 3, w);
-#endif
-  }
-};
+using namespace pass;  // the kernels' shared pieces (cuda_pass_helpers.cuh)
 
 // The ray's scatter of J^T u (u: the residuals for the gradient, J p for J^T J p) and, with
 // kDiag, its exact share of diag(J^T J), merged cell by cell along the ray (jacobian.h).
@@ -64,12 +56,14 @@ struct ScatterVisitor {
   const float* free = nullptr;
   float g2[3] = {1, 1, 1};  // the squared gains of the ray's photo (jacobian.h GainSquared)
   RaySh<float> sh{};        // the ray's spherical harmonics (degree 0: none)
+  RecordWriter record{};    // with kDiag: the ray's entries of the Jacobian record (ray_record.h)
 
   __device__ void Shell(int, const CubeCoord<float>&, const TexelSample<float>& ts, const ShellPartials<float>& sp) {
     ScatterJtuShell(ts, sp, u, g);
     if constexpr (kDiag) AddDiagShell(ts, sp, g2, d);
   }
-  __device__ void Sample(int, const MarchStep<float>&, const GridSample<float>& gs, const SamplePartials<float>& sp) {
+  __device__ void Sample(int k, const MarchStep<float>&, const GridSample<float>& gs, const SamplePartials<float>& sp) {
+    if constexpr (kDiag) record.Sample(k, sp);
     if (free && SkippableSample(gs, sp, free)) return;
     float v[K];
     JtuValues(sp, u, v);
@@ -105,77 +99,14 @@ struct JpVisitor {
   }
 };
 
-// A ray's exposure entries (jacobian.h ScatterJtuExposure, AddDiagExposure), or its pose entries
-// (pose.h ScatterJtuPose, AddDiagPose: as many), kept in registers until WarpAddExposure: base is
-// the photo's first exposure (pose) parameter (-1: none).
-// (A photo's pose block, pose.h AddPoseBlock, is a group of kPoseBlock values at base.)
-static_assert(kPoseValues == kExposureValues && kPoseBlock % 4 == 0);
-template <int N>
-struct GroupSums {
-  int64_t base = -1;
-  float v[N] = {};
-  __device__ __forceinline__ void Add4(int64_t i, float x, float y, float z, float w) {
-    float* p = v + (i - base);
-    p[0] += x;
-    p[1] += y;
-    p[2] += z;
-    p[3] += w;
-  }
-};
-using ExposureSums = GroupSums<kExposureValues>;
-
-// Adds every lane's group sums to dst. Every ray of a photo adds to the same values, and a warp's
-// rays are usually of one photo (the rays go photo by photo, tile by tile): then the warp sums
-// them with shuffles and one lane adds, instead of 32 atomics on one address. Call from every
-// lane of the warp (lanes without a ray pass base -1).
-template <int N>
-__device__ void WarpAddGroup(GroupSums<N>& e, float* dst) {
-  constexpr unsigned kAll = 0xffffffffu;
-  const long long first = __shfl_sync(kAll, static_cast<long long>(e.base), 0);
-  if (__all_sync(kAll, e.base == first)) {
-    if (first < 0) return;
-    for (int k = 0; k < N; ++k)
-      for (int offset = 16; offset > 0; offset >>= 1) e.v[k] += __shfl_down_sync(kAll, e.v[k], offset);
-    if ((threadIdx.x & 31) != 0) return;
-  } else if (e.base < 0) {
-    return;
-  }
-  AtomicSink sink{dst};
-  for (int k = 0; k < N; k += 4) sink.Add4(e.base + k, e.v[k], e.v[k + 1], e.v[k + 2], e.v[k + 3]);
-}
-__device__ void WarpAddExposure(ExposureSums& e, float* dst) { WarpAddGroup(e, dst); }
-
-struct SumStats {
-  __device__ __forceinline__ RayStats operator()(const RayStats& a, const RayStats& b) const {
-    return {a.cost + b.cost, a.colour_sse + b.colour_sse, a.rays + b.rays, a.samples + b.samples,
-            a.subset_cost + b.subset_cost};
-  }
-};
-
-// The cost of one ray (training_ray.h CostOf, as the CPU backend sums it).
-__device__ __forceinline__ RayStats StatsOf(const RayOutput<float>& o, float robust) {
-  const RayCost c = CostOf(o, robust);
-  return {c.cost, c.colour_sse, 1, o.count, 0.0};
-}
-
-__device__ __forceinline__ void WriteBlockStats(const RayStats& mine, RayStats* partials) {
-  using BlockReduce = cub::BlockReduce<RayStats, kRayThreads>;
-  __shared__ typename BlockReduce::TempStorage temp;
-  const RayStats sum = BlockReduce(temp).Reduce(mine, SumStats{});
-  if (threadIdx.x == 0) partials[blockIdx.x] = sum;
-}
-
-// Ray i as every pass of the iteration of in.seed sees it, its targets (training_ray.h).
-__device__ __forceinline__ TrainingRay MakeRay(const PassInput& in, int64_t i) {
-  return RayOf(in.rays, in.vol, in.box, i, in.seed, in.jitter, in.pixel_jitter);
-}
-
 // kPoses: the level refines the photos' poses (pose.h): the kernels also sweep the geometry
 // visitor and add the pose rows. A template argument, so that the kernels of a level without
-// poses keep their registers.
+// poses keep their registers. With kDiag (Gauss-Newton), the rays of rec's subset write their
+// entries of the Jacobian record as Backward visits their samples (rec.heads nullptr: none do).
 template <bool kDiag, bool kPoses>
 __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, float* g, float* diag, float* pose_blocks,
-                                                               int stride, int offset, RayStats* partials) {
+                                                               RecordView rec, int stride, int offset,
+                                                               RayStats* partials) {
   const int64_t i = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   RayStats mine;
   ExposureSums eg, ed, pg, pd;
@@ -196,12 +127,25 @@ __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, flo
     VolumeU(e, rs, v.u);
     GainSquared(e, v.g2);
     v.sh = ShOfRay(in.vol, r.ray);
+    bool records = false;
+    int64_t first = -1;
+    if constexpr (kDiag) {
+      records = rec.Records(i);
+      if (records) {
+        first = ReserveEntries(rec, EntriesToReserve(fwd));
+        v.record.Begin(rec, first);
+      }
+    }
     if constexpr (kPoses) {
       GeometryVisitor<float> geometry(in.vol, r.ray, r.jit);
       BothVisitors<ScatterVisitor<kDiag>, GeometryVisitor<float>> both{v, geometry};
       Backward(in.vol, r.ray, r.jit, fwd, both);
       if (r.pose >= 0) {
         const PoseRow<float> row = PoseRowOf(in.vol, in.vol.params + r.pose, r.forward, r.ray, geometry.grad);
+        if (records) {
+          FinishRecord(rec, i, first, v.record, fwd, e.scale, &row);
+          records = false;
+        }
         pg.base = pd.base = r.pose;
         ScatterJtuPose(row, r.pose, v.u, pg);
         if constexpr (kDiag) {
@@ -213,6 +157,7 @@ __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, flo
     } else {
       Backward(in.vol, r.ray, r.jit, fwd, v);
     }
+    if (records) FinishRecord(rec, i, first, v.record, fwd, e.scale, nullptr);
     v.Finish();
     eg.base = ed.base = e.param;
     ScatterJtuExposure(e, rs, eg);
@@ -233,14 +178,17 @@ __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, flo
 }
 
 // Thread j multiplies ray offset + j stride of `count` such rays.
+// recorded: the Jacobian record's heads of these rays (slot j), whose recorded rays are left to
+// JtJpRecordKernel; nullptr: none are.
 template <bool kPoses>
 __global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const float* p, const float* free,
                                                           float* out, int64_t stride, int64_t offset,
-                                                          int64_t count, RayStats* partials) {
+                                                          int64_t count, const RayRecordHead* recorded,
+                                                          RayStats* partials) {
   const int64_t j = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   RayStats mine;
   ExposureSums eo, po;
-  if (j < count) {
+  if (j < count && !(recorded && recorded[j].first >= 0)) {
     const int64_t i = offset + j * stride;
     const TrainingRay r = MakeRay(in, i);
     // The partials depend on the forward's transmittances and colours (and on whether the ray
@@ -286,6 +234,33 @@ __global__ void __launch_bounds__(kRayThreads) JtJpKernel(PassInput in, const fl
     // every sample). The march itself visits fwd.count, so after RestrictJacobian J^T J p's
     // samples/s is not a march rate.
     mine.samples = jp.used;
+  }
+  WarpAddExposure(eo, out);
+  if constexpr (kPoses) WarpAddExposure(po, out);
+  WriteBlockStats(mine, partials);
+}
+
+// J^T J p from the Jacobian record (ray_record.h RecordedJtJp): thread j multiplies ray
+// rec.offset + j rec.stride of `count` such rays when it is recorded (the rest: JtJpKernel).
+// Nothing is marched: the ray's entries give its samples' positions and partials, and its shells
+// are looked up once.
+template <bool kPoses>
+__global__ void __launch_bounds__(kRayThreads) JtJpRecordKernel(PassInput in, RecordView rec, const float* p,
+                                                                const float* free, float* out, int64_t count,
+                                                                RayStats* partials) {
+  const int64_t j = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+  RayStats mine;
+  ExposureSums eo, po;
+  if (j < count && rec.heads[j].first >= 0) {
+    const int64_t i = rec.offset + j * rec.stride;
+    const TrainingRay r = MakeRay(in, i);
+    const RayExposure<float> e = RecordedExposure(rec, i, in.vol.ExposureStart(), ExposureSlotOf(in.rays, i),
+                                                  TransformOfRay(in.rays, in.vol, i));
+    eo.base = e.param;
+    if constexpr (kPoses) po.base = r.pose;
+    AtomicSink sink{out};
+    mine.samples = RecordedJtJp(rec, i, in.vol, r, e, p, free, sink, eo, po);
+    mine.rays = 1;
   }
   WarpAddExposure(eo, out);
   if constexpr (kPoses) WarpAddExposure(po, out);
@@ -364,6 +339,8 @@ int64_t KernelLocalMemoryBytes() {
   at_least(reinterpret_cast<const void*>(LinearizeKernel<false, true>));
   at_least(reinterpret_cast<const void*>(JtJpKernel<false>));
   at_least(reinterpret_cast<const void*>(JtJpKernel<true>));
+  at_least(reinterpret_cast<const void*>(JtJpRecordKernel<false>));
+  at_least(reinterpret_cast<const void*>(JtJpRecordKernel<true>));
   at_least(reinterpret_cast<const void*>(CostKernel));
   at_least(reinterpret_cast<const void*>(RenderKernel));
   int device = 0, sms = 0, threads = 0;
@@ -388,46 +365,73 @@ size_t StatsTempBytes(int64_t blocks) {
   return bytes;
 }
 
-RayStats Linearize(const PassInput& in, float* g, float* diag, float* pose_blocks, int64_t params, int stride,
-                   int offset, const StatsScratch& s) {
+RayStats Linearize(const PassInput& in, float* g, float* diag, float* pose_blocks, const RecordView& rec,
+                   int64_t params, int stride, int offset, const StatsScratch& s) {
   PERF_CUDA_CHECK(cudaMemset(g, 0, params * sizeof(float)));
   if (diag) PERF_CUDA_CHECK(cudaMemset(diag, 0, params * sizeof(float)));
   const bool poses = in.rays.pose_slot != nullptr;
   PERF_CHECK(!(poses && diag) || pose_blocks != nullptr);
+  PERF_CHECK(rec.heads == nullptr || (diag != nullptr && rec.used != nullptr && rec.stride >= 1 &&
+                                      rec.offset >= 0 && rec.offset < rec.stride));
   if (poses && diag) {
     PERF_CUDA_CHECK(cudaMemset(pose_blocks, 0, static_cast<size_t>(in.vol.poses) * kPoseBlock * sizeof(float)));
   }
+  if (rec.heads) PERF_CUDA_CHECK(cudaMemset(rec.used, 0, sizeof(unsigned long long)));
   const int64_t blocks = PassBlocks(in.rays.count);
   if (blocks == 0) return {};
   PERF_CHECK(blocks <= s.capacity);
   if (diag && poses) {
-    LinearizeKernel<true, true><<<GridFor(blocks), kRayThreads>>>(in, g, diag, pose_blocks, stride, offset, s.partials);
+    LinearizeKernel<true, true>
+        <<<GridFor(blocks), kRayThreads>>>(in, g, diag, pose_blocks, rec, stride, offset, s.partials);
   } else if (diag) {
-    LinearizeKernel<true, false><<<GridFor(blocks), kRayThreads>>>(in, g, diag, nullptr, stride, offset, s.partials);
+    LinearizeKernel<true, false><<<GridFor(blocks), kRayThreads>>>(in, g, diag, nullptr, rec, stride, offset, s.partials);
   } else if (poses) {
-    LinearizeKernel<false, true><<<GridFor(blocks), kRayThreads>>>(in, g, nullptr, nullptr, stride, offset, s.partials);
+    LinearizeKernel<false, true>
+        <<<GridFor(blocks), kRayThreads>>>(in, g, nullptr, nullptr, RecordView{}, stride, offset, s.partials);
   } else {
-    LinearizeKernel<false, false><<<GridFor(blocks), kRayThreads>>>(in, g, nullptr, nullptr, stride, offset,
-                                                                    s.partials);
+    LinearizeKernel<false, false>
+        <<<GridFor(blocks), kRayThreads>>>(in, g, nullptr, nullptr, RecordView{}, stride, offset, s.partials);
   }
   PERF_CUDA_CHECK_LAUNCH("LinearizeKernel");
   return Total(s, blocks);
 }
 
+int64_t RecordedEntries(const RecordView& rec) {
+  if (!rec.heads) return 0;
+  unsigned long long used = 0;
+  PERF_CUDA_CHECK(cudaMemcpy(&used, rec.used, sizeof(used), cudaMemcpyDeviceToHost));
+  return static_cast<int64_t>(used);
+}
+
 RayStats MultiplyJtJ(const PassInput& in, const float* p, const float* free, float* out, int64_t params, int stride,
-                     int offset, const StatsScratch& s) {
+                     int offset, const StatsScratch& s, const RecordView& rec, bool recompute_rest) {
   const int64_t count = SubsetRays(in.rays.count, stride, offset);
   PERF_CUDA_CHECK(cudaMemset(out, 0, params * sizeof(float)));
   const int64_t blocks = PassBlocks(count);
   if (blocks == 0) return {};
   PERF_CHECK(blocks <= s.capacity);
-  if (in.rays.pose_slot) {
-    JtJpKernel<true><<<GridFor(blocks), kRayThreads>>>(in, p, free, out, stride, offset, count, s.partials);
+  const bool poses = in.rays.pose_slot != nullptr;
+  RayStats total;
+  if (rec.heads) {
+    PERF_CHECK(rec.stride == stride && rec.offset == offset);
+    if (poses) {
+      JtJpRecordKernel<true><<<GridFor(blocks), kRayThreads>>>(in, rec, p, free, out, count, s.partials);
+    } else {
+      JtJpRecordKernel<false><<<GridFor(blocks), kRayThreads>>>(in, rec, p, free, out, count, s.partials);
+    }
+    PERF_CUDA_CHECK_LAUNCH("JtJpRecordKernel");
+    total = Total(s, blocks);
+    if (!recompute_rest) return total;
+  }
+  const RayRecordHead* recorded = rec.heads;
+  if (poses) {
+    JtJpKernel<true><<<GridFor(blocks), kRayThreads>>>(in, p, free, out, stride, offset, count, recorded, s.partials);
   } else {
-    JtJpKernel<false><<<GridFor(blocks), kRayThreads>>>(in, p, free, out, stride, offset, count, s.partials);
+    JtJpKernel<false><<<GridFor(blocks), kRayThreads>>>(in, p, free, out, stride, offset, count, recorded, s.partials);
   }
   PERF_CUDA_CHECK_LAUNCH("JtJpKernel");
-  return Total(s, blocks);
+  const RayStats rest = Total(s, blocks);
+  return SumStats{}(total, rest);
 }
 
 RayStats Cost(const PassInput& in, int stride, int offset, const StatsScratch& s) {

@@ -20,14 +20,16 @@ MemoryEstimate DistributedBackend::EstimateMemory(const LevelProblem& problem, i
   MemoryEstimate e = inner_->EstimateMemory(problem, num_vectors);
   if (comm_->size() == 1) return e;
   // available: the smallest, as the maximum of its negative (0, unknown, counts as no limit).
-  double v[5] = {static_cast<double>(e.vectors), static_cast<double>(e.scratch), static_cast<double>(e.jacobian_cache),
-                 static_cast<double>(e.rays), e.available > 0 ? -static_cast<double>(e.available) : -1e300};
+  double v[6] = {static_cast<double>(e.vectors), static_cast<double>(e.scratch), static_cast<double>(e.jacobian_cache),
+                 static_cast<double>(e.rays), e.available > 0 ? -static_cast<double>(e.available) : -1e300,
+                 static_cast<double>(e.jacobian_wanted)};
   comm_->MaxInPlace(v);
   e.vectors = static_cast<int64_t>(v[0]);
   e.scratch = static_cast<int64_t>(v[1]);
   e.jacobian_cache = static_cast<int64_t>(v[2]);
   e.rays = static_cast<int64_t>(v[3]);
   e.available = v[4] > -1e299 ? static_cast<int64_t>(-v[4]) : 0;
+  e.jacobian_wanted = static_cast<int64_t>(v[5]);
   return e;
 }
 

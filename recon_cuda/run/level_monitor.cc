@@ -65,7 +65,11 @@ void LevelMonitor::LevelStarted(const HierarchyLevel& h) {
                   lr_.image_downscale > 1 ? StrCat(" (images / ", lr_.image_downscale, ")") : std::string(),
                   comm.size() > 1 ? "; memory per rank: vectors " : "; memory: vectors ", FormatByteCount(mem.vectors),
                   ", per-thread sums ", FormatByteCount(mem.scratch), ", Jacobian cache ",
-                  run_.backend->CachesJacobian() ? FormatByteCount(mem.jacobian_cache) : std::string("off (recomputing)"),
+                  !run_.backend->CachesJacobian() ? std::string("off (recomputing)")
+                  : mem.jacobian_wanted > 0
+                      ? StrCat(FormatByteCount(mem.jacobian_cache), " of ", FormatByteCount(mem.jacobian_wanted),
+                               " wanted (the rays beyond it are recomputed)")
+                      : FormatByteCount(mem.jacobian_cache),
                   mem.available > 0 ? StrCat(" of ", FormatByteCount(mem.available), " available") : std::string()));
 }
 

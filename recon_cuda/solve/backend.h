@@ -128,6 +128,9 @@ struct MemoryEstimate {
   int64_t vectors = 0;        // the solver's parameter vectors
   int64_t scratch = 0;        // per-thread sums and other working memory
   int64_t jacobian_cache = 0; // what MultiplyJtJ reuses from Linearize (0 when recomputing)
+  // What a record of every ray would take, where jacobian_cache holds only part of it (the CUDA
+  // backend's record where memory is short: the other rays are recomputed); 0: all of it.
+  int64_t jacobian_wanted = 0;
   int64_t rays = 0;           // training rays
   int64_t available = 0;      // what the backend may use (free RAM or device memory)
   int64_t Total() const { return vectors + scratch + jacobian_cache + rays; }
@@ -218,8 +221,8 @@ class Backend {
   // p that is 0 where it is 0 (the reduced system of projected Gauss-Newton). A backend may drop
   // work that then adds exact zeros to those entries (the CPU backend drops recorded samples in
   // empty space whose cells' densities are all held); the entries where free is 1 stay exactly
-  // as they were. The CUDA backend, which recomputes the partials, skips those samples on the fly
-  // (jacobian.h SkippableSample).
+  // as they were. The CUDA backend skips those samples on the fly (jacobian.h SkippableSample),
+  // from its record and where it recomputes.
   virtual void RestrictJacobian(VecId /*free*/) {}
   // z's pose part (VolumeShape::poses) = the photos' 6 x 6 pose blocks of J^T J at the last
   // Linearize, their diagonal replaced by max(diag, floor), solved for r's pose part over the

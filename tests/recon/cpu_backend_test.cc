@@ -398,7 +398,7 @@ TEST(CpuBackendTest, CompactRecordStepsBridgeLongGaps) {
         const float t = read.Next(&sp);
         ASSERT_LT(next, want[r].size());
         if (sp.dl == 0.f) {  // a filler: nothing, one full step back
-          EXPECT_EQ(last - read.k(), cpu::CompactSampleJ::kMaxStep);
+          EXPECT_EQ(last - read.k(), CompactSampleJ::kMaxStep);
           EXPECT_GT(read.k(), want[r][next]);
           EXPECT_EQ(sp.dc, 0.f);
           EXPECT_EQ(sp.ds[2], 0.f);
@@ -407,8 +407,8 @@ TEST(CpuBackendTest, CompactRecordStepsBridgeLongGaps) {
           EXPECT_EQ(read.k(), k);
           EXPECT_EQ(t, static_cast<float>(k) + 0.5f);
           const SamplePartials<float> p = partials(k);
-          EXPECT_EQ(sp.dc, cpu::FromBfloat16(cpu::ToBfloat16(p.dc)));
-          EXPECT_EQ(sp.ds[2], cpu::FromBfloat16(cpu::ToBfloat16(p.ds[2])));
+          EXPECT_EQ(sp.dc, FromBfloat16(ToBfloat16(p.dc)));
+          EXPECT_EQ(sp.ds[2], FromBfloat16(ToBfloat16(p.ds[2])));
           EXPECT_EQ(sp.dl, 2.f);
         }
         last = read.k();

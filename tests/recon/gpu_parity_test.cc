@@ -31,6 +31,7 @@
 #include "recon_cuda/backends/cpu_backend.h"
 #include "recon_cuda/backends/cuda_backend.h"
 #include "recon_cuda/backends/cuda_kernels.h"
+#include "recon_cuda/backends/device_record_plan.h"
 #include "recon_cuda/backends/distributed_backend.h"
 #include "recon_cuda/data/volume.h"
 #include "recon_cuda/solve/solver.h"
@@ -71,7 +72,9 @@ class GpuParityTest : public ::testing::Test {
   void SetUp() override {
     std::string reason;
     PERF_SKIP_OR_FAIL_WITHOUT_GPU(ProbeCudaDevice(nullptr, &reason), reason);
-    gpu = MakeCudaBackend({});
+    CudaBackendOptions g;
+    g.record_jacobian = false;  // J^T J p recomputed from x, exactly as the CPU's exact record has it
+    gpu = MakeCudaBackend(g);
     CpuBackendOptions o;
     o.threads = 2;
     o.compact_jacobian = false;  // the exact record: the parity tolerances hold the CPU's math, not its storage
@@ -665,6 +668,162 @@ TEST_F(GpuParityTest, TheEstimateCoversWhatALevelUses) {
   const int64_t used = CudaMemoryInUse() - before;
   // Allocation granularity (2 MiB pages) and CUB's launch state.
   EXPECT_LE(used, e.Total() + (int64_t{16} << 20)) << "used " << used << " B, estimated " << e.Total() << " B";
+  // With the Jacobian record (allocated by the first Gauss-Newton Linearize): within its estimate too.
+  gpu->SetLevel(p.Level(), 1);  // the fixture's level down to one vector
+  auto recorded = MakeCudaBackend({});
+  const int64_t before_record = CudaMemoryInUse();
+  const MemoryEstimate er = recorded->SetLevel(p.Level(), kVectors);
+  EXPECT_GT(er.jacobian_cache, 0);
+  recorded->Upload(kX, p.x);
+  recorded->Linearize(kX, 1, kG, kD);
+  recorded->Upload(kP, p.x);
+  recorded->MultiplyJtJ(kP, kOut);
+  const int64_t used_record = CudaMemoryInUse() - before_record;
+  EXPECT_LE(used_record, er.Total() + (int64_t{16} << 20))
+      << "used " << used_record << " B, estimated " << er.Total() << " B";
+}
+
+// The Jacobian record (ray_record.h), kept by default (CudaBackendOptions::record_jacobian), against
+// the fixture's backend, which recomputes every ray, and the CPU's compact record (the same
+// bfloat16 storage: ray_record_test runs the device's code on the host against it): J^T J p
+// within the compact record's 3e-3 of the recomputed product (cpu_backend_test
+// CompactRecordIsTheExactOneRoundedToBfloat16), and within 1e-3 of the CPU's compact one (the
+// same bfloat16 values, except where a partial lies within float rounding of a bfloat16 boundary:
+// the device's FMAs and expf move partials by ~1e-7 relative); on a dense and a sparse level, with
+// spherical harmonics, with exposures, poses and the robust loss, on every ray and on a subset,
+// on every parameter and restricted to the free ones (half the densities held). The volume's and
+// the photos' entries are compared apart, each on its own scale.
+TEST_F(GpuParityTest, RecordedJtJpEqualsTheRecomputedOne) {
+  CpuBackendOptions co;
+  co.threads = 2;
+  co.merged_jacobian = false;  // compact samples
+  auto cpu_compact = MakeCpuBackend(co);
+  auto recorded = MakeCudaBackend({});
+  struct Case {
+    std::string name;
+    LevelProblem level;
+    std::vector<float> x;
+    RaySubset jtj;
+  };
+  std::vector<Case> cases;
+  const TinyProblem dense = Problem(51);
+  cases.push_back({"dense", dense.Level(), dense.x, {}});
+  cases.push_back({"dense, every 3rd ray from 2", dense.Level(), dense.x, {3, 2}});
+  TinyProblem sparse(52, 16, 4, 6, 24, 18);
+  QuantiseColours(&sparse.rays);
+  const test::SparseVersion s(sparse, {0, 1, 1, 0, 0, 0, 1, 0});
+  cases.push_back({"sparse", s.level, s.x, {}});
+  TinyProblem sh = Problem(53);
+  sh.AddSh(1, 54);
+  cases.push_back({"degree 1", sh.Level(), sh.x, {}});
+  TinyProblem photos = Problem(55);
+  photos.AddExposures(56);
+  photos.AddPoses(57);
+  LevelProblem robust = photos.Level();
+  robust.residuals.robust_scale = 0.1f;
+  cases.push_back({"exposures, poses, robust loss", robust, photos.x, {}});
+  enum : VecId { kFree = kVectors };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const VolumeShape& shape = c.level.shape;
+    const std::vector<float> pv = test::RandomDirection(shape, 58);
+    std::vector<float> free(shape.ParamCount(), 1.f), held_p = pv;
+    for (int64_t cell = 0; cell < shape.StoredCells(); cell += 2) free[GridParam(cell, 3)] = held_p[GridParam(cell, 3)] = 0.f;
+    Backend* const backends[] = {gpu.get(), recorded.get(), cpu_compact.get()};
+    for (Backend* b : backends) {
+      b->SetLevel(c.level, kVectors + 1);
+      b->Upload(kX, c.x);
+      b->Upload(kFree, free);
+      b->Linearize(kX, 11, kG, kD, RaySubset{}, c.jtj);
+    }
+    EXPECT_TRUE(recorded->CachesJacobian());
+    EXPECT_FALSE(gpu->CachesJacobian());
+    for (const bool restricted : {false, true}) {
+      SCOPED_TRACE(restricted ? "restricted" : "every parameter");
+      std::vector<float> out[3];
+      PassStats stats[3];
+      for (int k = 0; k < 3; ++k) {
+        backends[k]->Upload(kP, restricted ? held_p : pv);
+        if (restricted) backends[k]->RestrictJacobian(kFree);
+        stats[k] = backends[k]->MultiplyJtJ(kP, kOut);
+        if (restricted) backends[k]->Multiply(kOut, kFree);
+        out[k] = Get(backends[k], kOut);
+      }
+      EXPECT_EQ(stats[1].rays, stats[0].rays);
+      EXPECT_NEAR(static_cast<double>(stats[1].samples), static_cast<double>(stats[0].samples), 1e-3 * stats[0].samples);
+      const auto photos_at = static_cast<std::ptrdiff_t>(shape.ExposureStart());
+      const auto part = [&](const std::vector<float>& v, bool tail) {
+        return tail ? std::vector<float>(v.begin() + photos_at, v.end()) : std::vector<float>(v.begin(), v.begin() + photos_at);
+      };
+      for (const bool tail : {false, true}) {
+        if (tail && shape.exposures == 0) continue;
+        SCOPED_TRACE(tail ? "the photos' entries" : "the volume's entries");
+        test::ExpectAllClose(part(out[1], tail), part(out[0], tail), 3e-3, 3e-3, "recorded against recomputed");
+        test::ExpectAllClose(part(out[1], tail), part(out[2], tail), 1e-3, 1e-3, "recorded against the CPU's compact record");
+      }
+      EXPECT_NE(out[1], out[0]) << "the record is bfloat16";
+    }
+  }
+  // A short Gauss-Newton solve with the record reaches the recomputing one's cost (to 3 %, as
+  // ShortSolvesReachTheSameCost's two backends do).
+  const TinyProblem p = Problem(59);
+  SolverOptions so;
+  so.max_iterations = 6;
+  so.seed = 3;
+  SolverSummary with, without;
+  std::vector<float> xr = p.x, xg = p.x;
+  for (Backend* b : {gpu.get(), recorded.get()}) b->SetLevel(p.Level(), RequiredVectors(so.type));
+  Solve(so, recorded.get(), &xr, {}, &with);
+  Solve(so, gpu.get(), &xg, {}, &without);
+  EXPECT_NEAR(with.final_cost, without.final_cost, 0.03 * without.final_cost);
+  EXPECT_LT(with.final_cost, 0.8 * with.initial_cost);
+}
+
+// A record that does not fit the device memory the level leaves (CudaBackendOptions::max_memory
+// here) keeps the rays that find room and recomputes the others, and the level's estimate says
+// so (jacobian_wanted: what a whole record would take; the level's log line names both). The
+// product then mixes bfloat16 rows and recomputed ones: within 3e-3 of either, equal to neither.
+// Below an eighth of the record, none is kept.
+TEST_F(GpuParityTest, ARecordThatDoesNotFitRecomputesTheRestAndSaysSo) {
+  const TinyProblem p = Problem(60);
+  const LevelProblem level = p.Level();
+  auto full = MakeCudaBackend({});
+  const MemoryEstimate all = full->EstimateMemory(level, kVectors);
+  EXPECT_GT(all.jacobian_cache, 0);
+  EXPECT_EQ(all.jacobian_wanted, 0);
+  const DeviceRecordPlan plan = PlanDeviceRecord(level, int64_t{1} << 40);
+  // The backend keeps 256 MiB aside (its margin on so small a budget).
+  const int64_t base = all.Needed() + (int64_t{256} << 20) + plan.slots * plan.slot_bytes;
+  CudaBackendOptions o;
+  o.max_memory = base + plan.wanted / 4 * DeviceRecordPlan::kEntryBytes;
+  auto part = MakeCudaBackend(o);
+  const MemoryEstimate e = part->SetLevel(level, kVectors);
+  EXPECT_TRUE(part->CachesJacobian());
+  EXPECT_GT(e.jacobian_cache, 0);
+  EXPECT_GT(e.jacobian_wanted, e.jacobian_cache);
+  full->SetLevel(level, kVectors);
+  gpu->SetLevel(level, kVectors);
+  const std::vector<float> pv = test::RandomDirection(level.shape, 61);
+  std::vector<float> out[3];
+  PassStats stats[3];
+  Backend* const backends[] = {gpu.get(), full.get(), part.get()};
+  for (int k = 0; k < 3; ++k) {
+    backends[k]->Upload(kX, p.x);
+    backends[k]->Upload(kP, pv);
+    backends[k]->Linearize(kX, 5, kG, kD);
+    stats[k] = backends[k]->MultiplyJtJ(kP, kOut);
+    out[k] = Get(backends[k], kOut);
+  }
+  EXPECT_EQ(stats[2].rays, stats[0].rays);
+  test::ExpectAllClose(out[2], out[0], 3e-3, 3e-3, "part recorded against recomputed");
+  test::ExpectAllClose(out[2], out[1], 3e-3, 3e-3, "part recorded against all recorded");
+  EXPECT_NE(out[2], out[0]) << "some rays were recorded";
+  EXPECT_NE(out[2], out[1]) << "some rays were recomputed";
+  o.max_memory = base + plan.wanted / 10 * DeviceRecordPlan::kEntryBytes;
+  auto none = MakeCudaBackend(o);
+  const MemoryEstimate n = none->SetLevel(level, kVectors);
+  EXPECT_FALSE(none->CachesJacobian());
+  EXPECT_EQ(n.jacobian_cache, 0);
 }
 
 // The 8-bit upload of colours and alphas: rounded to nearest, clamped, NaN to 0 (a cast of NaN
