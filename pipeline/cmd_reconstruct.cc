@@ -12,7 +12,9 @@
 #include "recon_cuda/backends/nccl_comm.h"
 #endif
 #include "recon_cuda/run/render_views.h"
+#ifndef PERF_NO_LIVE_VIEW  // perf_gpu: no viewer (pipeline/CMakeLists.txt)
 #include "viewer/live_view.h"
+#endif
 
 namespace perf {
 
@@ -70,18 +72,71 @@ void AddPoseOptions(CLI::App* cmd, recon::ReconstructOptions& o) {
                   "(default: 0.03; 0.1 with --refine-intrinsics focal)");
 }
 
+// perf reconstruct's command line (AddReconstructCommand) and its run (RunReconstruct).
+struct ReconstructArgs {
+  recon::ReconstructOptions o;
+  std::string workspace;
+  std::string solver = "gn";
+  bool no_aux = false, no_alpha = false, no_pyramid = false, no_hold = false, no_grow = false, quiet = false;
+#ifndef PERF_NO_LIVE_VIEW
+  bool view = false;
+  viewer::ViewOptions view_options;
+#endif
+};
+
+// perf reconstruct with the parsed options.
+void RunReconstruct(ReconstructArgs& args) {
+  recon::ReconstructOptions& o = args.o;
+  o.workspace = args.workspace;
+  if (args.solver == "gn") {
+    o.solver.type = recon::SolverType::kGaussNewton;
+  } else if (args.solver == "adam") {
+    o.solver.type = recon::SolverType::kAdam;
+  } else {
+    throw InputError("command line", "--solver", args.solver, "unknown solver", "use gn or adam");
+  }
+  o.solver.adam.lr_opacity = o.solver.adam.lr_colour;
+  if (args.no_aux) o.residuals.lambda = o.residuals.alpha_weight = 0;
+  if (args.no_pyramid) o.pyramid = false;
+  if (args.no_grow) o.grow_box = false;
+  if (args.no_hold) o.solver.hold_at_bounds = false;
+  if (args.no_alpha) o.residuals.use_alpha = false;
+  // Under mpirun every rank fits its share of the photos; rank 0 holds the lock, writes and reports.
+  o.comm = &World();
+#ifdef PERF_WITH_NCCL
+  o.device_comm = [](Communicator& host) { return recon::MakeNcclCommunicator(host); };
+#endif
+  const bool root = o.comm->IsRoot();
+  std::unique_ptr<WorkspaceLock> lock;
+  if (root) lock = LockWorkspace(o.workspace, "reconstruct");
+  Progress progress("reconstruct", args.quiet || !root);
+#ifndef PERF_NO_LIVE_VIEW
+  const std::unique_ptr<viewer::LiveView> live =
+      StartLiveView(args.view, root, args.view_options, o.workspace, "reconstruct");
+  if (live) o.preview_every = 1;
+#endif
+  o.on_event = [&](const recon::ReconstructOptions::Event& e) {
+    if (StopRequested().load()) {
+#ifndef PERF_NO_LIVE_VIEW
+      if (live) live->End("stopped");
+#endif
+      throw Interrupted("the workspace is consistent; run the same command with --resume to go on");
+    }
+    ShowReconstructEvent(progress, e);
+#ifndef PERF_NO_LIVE_VIEW
+    if (live && e.message.empty()) live->Iteration(e.level, e.levels, e.iteration, e.iterations);
+#endif
+  };
+  const StopOnCtrlC ctrl_c;
+  const recon::ReconstructResult r = recon::Reconstruct(o);
+  progress.Finish();
+  if (!args.quiet && root) std::cout << recon::ReconstructSummary(r);
+}
+
 }  // namespace
 
 void AddReconstructCommand(CLI::App& app) {
-  struct Args {
-    recon::ReconstructOptions o;
-    std::string workspace;
-    std::string solver = "gn";
-    bool no_aux = false, no_alpha = false, no_pyramid = false, no_hold = false, no_grow = false, quiet = false;
-    bool view = false;
-    viewer::ViewOptions view_options;
-  };
-  auto args = std::make_shared<Args>();
+  auto args = std::make_shared<ReconstructArgs>();
   recon::ReconstructOptions& o = args->o;
   CLI::App* cmd = app.add_subcommand(
       "reconstruct",
@@ -176,48 +231,10 @@ void AddReconstructCommand(CLI::App& app) {
                 "Let CG move parameters at a bound of their range that the gradient pushes out (plain projected GN)");
   AddMinBoxOpacityOption(cmd, &o.min_box_opacity, "Previews and held-out PSNR");
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
+#ifndef PERF_NO_LIVE_VIEW
   AddLiveViewOptions(cmd, &args->view, &args->view_options.port, &o.preview_image, "it stops with the solve");
-  cmd->callback([args]() {
-    recon::ReconstructOptions& o = args->o;
-    o.workspace = args->workspace;
-    if (args->solver == "gn") {
-      o.solver.type = recon::SolverType::kGaussNewton;
-    } else if (args->solver == "adam") {
-      o.solver.type = recon::SolverType::kAdam;
-    } else {
-      throw InputError("command line", "--solver", args->solver, "unknown solver", "use gn or adam");
-    }
-    o.solver.adam.lr_opacity = o.solver.adam.lr_colour;
-    if (args->no_aux) o.residuals.lambda = o.residuals.alpha_weight = 0;
-    if (args->no_pyramid) o.pyramid = false;
-    if (args->no_grow) o.grow_box = false;
-    if (args->no_hold) o.solver.hold_at_bounds = false;
-    if (args->no_alpha) o.residuals.use_alpha = false;
-    // Under mpirun every rank fits its share of the photos; rank 0 holds the lock, writes and reports.
-    o.comm = &World();
-#ifdef PERF_WITH_NCCL
-    o.device_comm = [](Communicator& host) { return recon::MakeNcclCommunicator(host); };
 #endif
-    const bool root = o.comm->IsRoot();
-    std::unique_ptr<WorkspaceLock> lock;
-    if (root) lock = LockWorkspace(o.workspace, "reconstruct");
-    Progress progress("reconstruct", args->quiet || !root);
-    const std::unique_ptr<viewer::LiveView> live =
-        StartLiveView(args->view, root, args->view_options, o.workspace, "reconstruct");
-    if (live) o.preview_every = 1;
-    o.on_event = [&](const recon::ReconstructOptions::Event& e) {
-      if (StopRequested().load()) {
-        if (live) live->End("stopped");
-        throw Interrupted("the workspace is consistent; run the same command with --resume to go on");
-      }
-      ShowReconstructEvent(progress, e);
-      if (live && e.message.empty()) live->Iteration(e.level, e.levels, e.iteration, e.iterations);
-    };
-    const StopOnCtrlC ctrl_c;
-    const recon::ReconstructResult r = recon::Reconstruct(o);
-    progress.Finish();
-    if (!args->quiet && root) std::cout << recon::ReconstructSummary(r);
-  });
+  cmd->callback([args]() { RunReconstruct(*args); });
 }
 
 void AddRenderCommand(CLI::App& app) {

@@ -6,6 +6,7 @@ set -euo pipefail
 PACKAGES=(
   build-essential cmake ninja-build ccache pkg-config git python3
   libopenimageio-dev openimageio-tools   # image I/O and filtered resize; oiiotool for tests
+  libpng-dev zlib1g-dev                  # perf_gpu's PNG I/O, linked statically (runs on bare GPU machines)
   libopencv-dev                          # undistortion, image metrics
   libeigen3-dev                          # geometry
   libceres-dev                           # derivative checks, reference solves
@@ -21,6 +22,7 @@ PACKAGES=(
   clang                                  # libFuzzer target for the binary readers (optional)
   libcpp-httplib-dev libjs-three         # perf view: its HTTP server and the page's three.js
   chromium                               # perf view's page tests (headless)
+  python3-numpy python3-pil              # the GPU run scripts' dry runs (bench/masks_from_opacity.py)
 )
 
 missing=()

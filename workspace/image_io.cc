@@ -89,10 +89,6 @@ CameraTags ReadCameraTags(const fs::path& path) {
   return t;
 }
 
-int64_t DecodedBytes(const ImageInfo& info) {
-  return int64_t{info.width} * info.height * std::min(info.channels, 4) * static_cast<int64_t>(sizeof(float));
-}
-
 Image ReadImage(const fs::path& path, ImageInfo* info) {
   CheckRegularFile(path);
   auto in = OpenInput(path);
@@ -177,39 +173,6 @@ Image ResizeImage(const Image& image, int width, int height) {
     throw InternalError("OpenImageIO resize failed: " + dst.geterror());
   }
   return out;
-}
-
-Image MaskChannel(const Image& in) {
-  const int c = (in.channels == 2 || in.channels == 4) ? in.channels - 1 : 0;
-  Image out(in.width, in.height, 1);
-  for (size_t p = 0; p < out.pixels.size(); ++p) out.pixels[p] = in.pixels[p * in.channels + c];
-  return out;
-}
-
-Image ToRgb(const Image& in, const std::array<double, 3>& background, Image* alpha) {
-  const bool has_alpha = in.channels == 2 || in.channels == 4;
-  const int colour = has_alpha ? in.channels - 1 : in.channels;
-  Image rgb(in.width, in.height, 3);
-  if (has_alpha && alpha) *alpha = Image(in.width, in.height, 1);
-  for (int y = 0; y < in.height; ++y) {
-    for (int x = 0; x < in.width; ++x) {
-      const float a = has_alpha ? in.at(x, y, in.channels - 1) : 1.f;
-      for (int c = 0; c < 3; ++c) {
-        const float v = in.at(x, y, colour == 1 ? 0 : c);
-        rgb.at(x, y, c) = has_alpha ? v + (1.f - a) * static_cast<float>(background[c]) : v;
-      }
-      if (has_alpha && alpha) alpha->at(x, y, 0) = a;
-    }
-  }
-  return rgb;
-}
-
-bool HasImageExtension(const fs::path& path) {
-  static const std::array<std::string_view, 10> kExt = {".jpg", ".jpeg", ".png", ".tif", ".tiff",
-                                                        ".exr", ".bmp", ".webp", ".hdr", ".dpx"};
-  std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
-  return std::find(kExt.begin(), kExt.end(), ext) != kExt.end();
 }
 
 }  // namespace perf

@@ -23,6 +23,7 @@
 #include <filesystem>
 #include <limits>
 #include <random>
+#include <sstream>
 #include <string>
 #include <utility>
 
@@ -33,7 +34,9 @@
 #include "recon_cuda/backends/cuda_kernels.h"
 #include "recon_cuda/backends/device_record_plan.h"
 #include "recon_cuda/backends/distributed_backend.h"
+#include "recon_cuda/data/checkpoint.h"
 #include "recon_cuda/data/volume.h"
+#include "recon_cuda/solve/hierarchy.h"
 #include "recon_cuda/solve/solver.h"
 #include "tests/recon/recon_test_util.h"
 #include "tests/recon/require_gpu.h"
@@ -824,6 +827,76 @@ TEST_F(GpuParityTest, ARecordThatDoesNotFitRecomputesTheRestAndSaysSo) {
   const MemoryEstimate n = none->SetLevel(level, kVectors);
   EXPECT_FALSE(none->CachesJacobian());
   EXPECT_EQ(n.jacobian_cache, 0);
+}
+
+// A fit crosses between the backends through its checkpoints (issue 61: a workspace fitted on a
+// GPU machine exports and scores on a CPU one, and the other way round). Level 1 of two fitted on
+// the CPU, written as perf reconstruct writes it and read back, goes on at level 2 on the device
+// (as perf reconstruct --resume does: NextLevelShape, Resample); the device's level-2 checkpoint,
+// read back, renders on the CPU as the device renders it (what perf export and eval read). Against
+// both levels on the CPU: the final costs within 3 % (the solves' paths differ slightly, as in
+// ShortSolvesReachTheSameCost).
+TEST_F(GpuParityTest, AFitCrossesBetweenTheBackendsThroughItsCheckpoints) {
+  const test::SyntheticScene scene(16, 8, 20, 24, 5);
+  RaySet rays = MakeRaySet(scene.train);
+  QuantiseColours(&rays);
+  TrainingViews views;
+  for (const PosedImage& p : scene.train) views.views.push_back({p.camera, p.image.width, p.image.height});
+  views.rays = [&](int) { return rays; };
+  HierarchyOptions o;
+  o.levels = 2;
+  o.start_resolution = 8;
+  o.iterations = 4;
+  o.pyramid = false;
+  o.solver.seed = 3;
+  VolumePlacement placement;
+  for (int a = 0; a < 3; ++a) {
+    placement.box_center[a] = (&scene.geometry.box.center.x)[a];
+    placement.box_size[a] = (&scene.geometry.box.size.x)[a];
+    placement.shell_center[a] = (&scene.geometry.shell_center.x)[a];
+  }
+  for (int i = 0; i < 9; ++i) placement.box_rotation[i] = scene.geometry.box.world_from_box.m[i];
+  placement.shell_radii.assign(scene.geometry.shell_radii.begin(), scene.geometry.shell_radii.end());
+  // Writes the level a backend finished as a checkpoint and reads it back.
+  const auto through_file = [&](const HierarchyLevel& h, const std::vector<float>& x) {
+    std::stringstream file;
+    WriteCheckpoint(file, {h.level, o.iterations, 0, h.shape, placement, x});
+    return ReadCheckpoint(file, "level checkpoint");
+  };
+  Checkpoint cpu_level1, both_on_cpu, gpu_level2;
+  double cost_cpu = 0, cost_crossed = 0;
+  HierarchyCallbacks cb;
+  cb.level_done = [&](const HierarchyLevel& h, const SolverSummary& summary, const std::vector<float>& x) {
+    (h.level == 0 ? cpu_level1 : both_on_cpu) = through_file(h, x);
+    if (h.level == 1) cost_cpu = summary.final_cost;
+  };
+  SolveHierarchy(cpu.get(), scene.geometry, views, o, {}, cb);
+  ASSERT_EQ(cpu_level1.shape.n, 8);
+  // Level 2 on the device from the CPU's level-1 checkpoint.
+  const VolumeGeometry geometry = GeometryOf(cpu_level1);
+  HierarchyStart start;
+  start.level = 1;
+  start.shape = NextLevelShape(o, geometry, cpu_level1.shape, cpu_level1.params, views.views, 1);
+  start.x = Resample(cpu_level1.shape, cpu_level1.params, start.shape);
+  HierarchyCallbacks gcb;
+  gcb.level_done = [&](const HierarchyLevel& h, const SolverSummary& summary, const std::vector<float>& x) {
+    gpu_level2 = through_file(h, x);
+    cost_crossed = summary.final_cost;
+  };
+  SolveHierarchy(gpu.get(), geometry, views, o, std::move(start), gcb);
+  ASSERT_EQ(gpu_level2.shape.n, 16);
+  EXPECT_NEAR(cost_crossed, cost_cpu, 0.03 * cost_cpu);
+  EXPECT_EQ(gpu_level2.shape.StoredBricks(), both_on_cpu.shape.StoredBricks()) << "the same level 2 was chosen";
+  // The device's checkpoint renders on the CPU as on the device.
+  const LevelProblem render_only{gpu_level2.shape, GeometryOf(gpu_level2), nullptr, {}};
+  for (Backend* b : {cpu.get(), gpu.get()}) {
+    b->SetLevel(render_only, 1);
+    b->Upload(0, gpu_level2.params);
+  }
+  const PinholeCamera<float>& camera = scene.test.at(0).camera;
+  const RenderOutput rc = cpu->Render(0, camera, 24, 24, 0.f), rg = gpu->Render(0, camera, 24, 24, 0.f);
+  test::ExpectAllClose(rg.colour, rc.colour, 1e-4, 1e-4, "the device's checkpoint rendered on both");
+  test::ExpectAllClose(rg.opacity, rc.opacity, 1e-4, 1e-4, "its opacity on both");
 }
 
 // The 8-bit upload of colours and alphas: rounded to nearest, clamped, NaN to 0 (a cast of NaN
