@@ -113,7 +113,10 @@ void RunReconstruct(ReconstructArgs& args) {
 #ifndef PERF_NO_LIVE_VIEW
   const std::unique_ptr<viewer::LiveView> live =
       StartLiveView(args.view, root, args.view_options, o.workspace, "reconstruct");
-  if (live) o.preview_every = 1;
+  if (live) {
+    o.preview_every = 1;
+    o.on_volume = [&live](recon::Checkpoint volume, int iteration) { live->Volume(std::move(volume), iteration); };
+  }
 #endif
   o.on_event = [&](const recon::ReconstructOptions::Event& e) {
     if (StopRequested().load()) {

@@ -285,6 +285,9 @@ recon::ReconstructOptions RunOptions::ReconstructStage(const PresetSettings& pre
   ro.sh_from_level = preset.sh_from_level;
   ro.solver.cost_tolerance = cost_tolerance;
   ro.preview_every = live != nullptr ? 1 : 0;  // the live page shows the newest
+  if (live != nullptr) {  // and draws the solver's volume
+    ro.on_volume = [l = live](recon::Checkpoint volume, int iteration) { l->Volume(std::move(volume), iteration); };
+  }
   ro.preview_image = view_image;
   ro.resume = fresh && !force;
   ro.restart_if_settings_changed = true;  // the outputs must be what this command line asks for

@@ -40,6 +40,10 @@ LiveView::LiveView(ViewOptions options) : server_(Live(options)) {
     j["preview"] = NewestPreview(workspace);
     return j;
   });
+  server_.SetLiveField([this] {
+    std::lock_guard<std::mutex> lock(mu_);
+    return field_;
+  });
   port_ = server_.Bind();
   thread_ = std::thread([this] { server_.Serve(); });
 }
@@ -67,6 +71,15 @@ void LiveView::Iteration(int level, int levels, int iteration, int iterations) {
   levels_ = levels;
   iteration_ = iteration;
   iterations_ = iterations;
+}
+
+void LiveView::Volume(recon::Checkpoint volume, int iteration) {
+  auto field = std::make_shared<LiveField>();
+  field->volume = std::move(volume);
+  field->iteration = iteration;
+  std::lock_guard<std::mutex> lock(mu_);
+  field->version = field_ ? field_->version + 1 : 1;
+  field_ = std::move(field);
 }
 
 void LiveView::End(const std::string& state) {

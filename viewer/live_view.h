@@ -1,7 +1,8 @@
 // The page of `perf view` while a command runs (`perf run --view`, `perf reconstruct --view`): the
 // same server on the workspace, started before the command's first stage, with /api/status saying
 // the stage, the level and iteration, this level's ETA and the newest preview render
-// (WORKSPACE/preview/, written each iteration with --view). The command reports through the
+// (WORKSPACE/preview/, written each iteration with --view), and the solver's newest volume for the
+// page's field (/api/field, field_source.h). The command reports through the
 // methods below (cheap: a lock and a few numbers); the server never waits on the command.
 #pragma once
 
@@ -13,6 +14,7 @@
 #include <string>
 #include <thread>
 
+#include "viewer/field_source.h"
 #include "viewer/view_server.h"
 
 namespace perf::viewer {
@@ -32,6 +34,8 @@ class LiveView {
   void Iteration(int level, int levels, int iteration, int iterations);
   // "finished" or "stopped" (Ctrl-C): the page says so.
   void End(const std::string& state);
+  // The solver's volume after `iteration` (ReconstructOptions::on_volume), which the page draws.
+  void Volume(recon::Checkpoint volume, int iteration);
 
  private:
   nlohmann::json Status() const;
@@ -44,6 +48,7 @@ class LiveView {
   int level_ = 0, levels_ = 0, iteration_ = 0, iterations_ = 0;
   std::chrono::steady_clock::time_point level_start_ = std::chrono::steady_clock::now();
   double eta_seconds_ = -1;
+  std::shared_ptr<const LiveField> field_;  // the newest Volume
 };
 
 }  // namespace perf::viewer

@@ -11,6 +11,7 @@
 #include "common/atomic_file.h"
 #include "common/errors.h"
 #include "sfm_import/colmap_model.h"
+#include "viewer/field_source.h"
 #include "viewer/page_assets.h"
 #include "viewer/view_files.h"
 #include "workspace/scene.h"
@@ -77,10 +78,12 @@ struct ViewServer::Impl {
   std::once_flag points_once;
   std::string points;
   std::function<nlohmann::json()> live;  // set before Bind
+  std::unique_ptr<FieldSource> fields;    // /api/fields, /api/field
   // Stop() may come before Serve() listens (httplib's stop() is a no-op until then).
   std::atomic<bool> stop_requested{false}, serving{false};
 
   void Routes();
+  void FieldRoutes();
   void ServeJson(const char* route, fs::path file);
   void ServeLibrary(const char* route, fs::path file);
 };
@@ -111,6 +114,8 @@ void ViewServer::Impl::Routes() {
   server.Get("/", page(kIndexHtml, "text/html; charset=utf-8"));
   server.Get("/view.js", page(kViewJs, "text/javascript"));
   server.Get("/view.css", page(kViewCss, "text/css"));
+  server.Get("/field.js", page(kFieldJs, "text/javascript"));
+  server.Get("/field_view.js", page(kFieldViewJs, "text/javascript"));
   ServeLibrary("/lib/three.min.js", "build/three.min.js");
   ServeLibrary("/lib/OrbitControls.js", "examples/js/controls/OrbitControls.js");
   ServeLibrary("/lib/GLTFLoader.js", "examples/js/loaders/GLTFLoader.js");
@@ -153,6 +158,7 @@ void ViewServer::Impl::Routes() {
     res.set_header("X-Next-Offset", std::to_string(from + text.size()));
     res.set_content(text, "application/x-ndjson");
   });
+  FieldRoutes();
   server.Get("/api/points", [this](const httplib::Request&, httplib::Response& res) {
     std::call_once(points_once, [this] { points = SparsePoints(o.workspace).dump(); });
     res.set_content(points, "application/json");
@@ -192,8 +198,41 @@ void ViewServer::Impl::Routes() {
   });
 }
 
+// The fitted volume (field_source.h): /api/fields lists the levels and the live volume;
+// /api/field?level=K (a level's checkpoint; none or "newest": the newest volume) sends one, gzip'd
+// when the page takes it.
+void ViewServer::Impl::FieldRoutes() {
+  server.Get("/api/fields", [this](const httplib::Request&, httplib::Response& res) {
+    res.set_header("Cache-Control", "no-store");
+    res.set_content(fields->Listing().dump(), "application/json");
+  });
+  server.Get("/api/field", [this](const httplib::Request& req, httplib::Response& res) {
+    int level = -1;
+    if (req.has_param("level") && req.get_param_value("level") != "newest") {
+      const std::string v = req.get_param_value("level");
+      if (v.empty() || v.size() > 2 || !std::all_of(v.begin(), v.end(), ::isdigit)) {
+        res.status = 400;
+        return res.set_content("level: expected a level number or newest", "text/plain");
+      }
+      level = std::stoi(v);
+    }
+    std::optional<FieldSource::Response> r;
+    try {
+      r = fields->Payload(level, req.get_header_value("Accept-Encoding").find("gzip") != std::string::npos);
+    } catch (const Error& e) {  // a damaged checkpoint: the page says so
+      res.status = 422;
+      return res.set_content(e.what(), "text/plain");
+    }
+    if (!r) return NotFound(res, level < 0 ? "volume (no level is finished yet)" : "volume of that level");
+    res.set_header("Cache-Control", "no-store");
+    if (r->gzip) res.set_header("Content-Encoding", "gzip");
+    res.set_content(*r->bytes, "application/octet-stream");
+  });
+}
+
 ViewServer::ViewServer(ViewOptions options) : impl_(std::make_unique<Impl>()) {
   impl_->o = std::move(options);
+  impl_->fields = std::make_unique<FieldSource>(impl_->o.workspace);
   if (impl_->o.require_scene && !fs::is_regular_file(impl_->o.workspace / "scene.json")) {
     throw InputError(impl_->o.workspace.string(), "scene.json", "(missing)", "not a PERF workspace",
                      "run perf import (or perf run) first");
@@ -243,6 +282,10 @@ std::string ViewServer::Url() const {
 }
 
 void ViewServer::SetLiveStatus(std::function<nlohmann::json()> status) { impl_->live = std::move(status); }
+
+void ViewServer::SetLiveField(std::function<std::shared_ptr<const LiveField>()> field) {
+  impl_->fields->SetLive(std::move(field));
+}
 
 bool IsLoopback(const std::string& host) {
   return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;

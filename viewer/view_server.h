@@ -1,5 +1,6 @@
 // `perf view`: one page over a workspace, served on a local port (cpp-httplib), that shows the
-// box, the shells, every camera with its photo, the mesh and the sparse points, the held-out views
+// fitted volume from any viewpoint (field_source.h), the box, the shells, every camera with its
+// photo, the mesh and the sparse points, the held-out views
 // next to their photos, masks and cut-outs with their scores, the PSNR curve and the stage times.
 // The server only reads the workspace, answers a fixed set of routes (viewer/view_files.h for the
 // files) and holds no lock: a solve writing the workspace is never blocked by it.
@@ -13,6 +14,8 @@
 #include <string>
 
 namespace perf::viewer {
+
+struct LiveField;
 
 struct ViewOptions {
   std::filesystem::path workspace;
@@ -42,6 +45,9 @@ class ViewServer {
   // A running command's state for /api/status (live_view.h): a JSON object merged into the
   // status; called from the server's threads.
   void SetLiveStatus(std::function<nlohmann::json()> status);
+  // A running command's newest volume for /api/field (field_source.h); called from the server's
+  // threads.
+  void SetLiveField(std::function<std::shared_ptr<const LiveField>()> field);
 
  private:
   struct Impl;

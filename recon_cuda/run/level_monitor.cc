@@ -94,6 +94,7 @@ bool LevelMonitor::Iteration(const HierarchyLevel& h, const IterationSummary& s)
     line["test_psnr"] = held_out_psnr_;
   }
   if (preview) WritePreview(h, s.iteration, exposures);
+  HandOverVolume(h, s.iteration);
   run_.log.Write(line);
   ReconstructOptions::Event e;
   e.level = h.level;
@@ -112,7 +113,7 @@ void LevelMonitor::LevelDone(const HierarchyLevel& h, const SolverSummary& summa
   if (h.level == 0) CheckBox(h, x);
   if (!grow_faces_.empty()) {  // this fit is discarded (before_level ends the hierarchy here)
     result.solve_seconds += EndLevelClock();
-    preview_seconds_ = 0;
+    preview_seconds_ = volume_seconds_ = 0;
     return;
   }
   lr_.iterations = summary.iterations;
@@ -151,7 +152,7 @@ void LevelMonitor::LevelDone(const HierarchyLevel& h, const SolverSummary& summa
   if (run_.previous) run_.previous->Discard();
   lr_.seconds = EndLevelClock();
   run_.log.Write(LevelLine(summary));
-  preview_seconds_ = 0;
+  preview_seconds_ = volume_seconds_ = 0;
   run_.Say(StrCat("level ", h.level + 1, "/", run_.levels, " done in ", lr_.seconds, " s: ", summary.BriefReport(),
                   run_.test_views == 0 ? std::string() : StrCat("; held-out PSNR ", lr_.test_psnr, " dB")));
   result.levels.push_back(lr_);
@@ -242,6 +243,19 @@ void LevelMonitor::WritePreview(const HierarchyLevel& h, int iteration, const Ph
   preview_seconds_ += SecondsSince(t0);
 }
 
+void LevelMonitor::HandOverVolume(const HierarchyLevel& h, int iteration) {
+  if (!run_.root || !o_.on_volume) return;
+  const auto t0 = WallClock::now();
+  if (iteration > 0 && std::chrono::duration<double>(t0 - volume_at_).count() < o_.volume_every_seconds) return;
+  volume_at_ = t0;
+  std::vector<float> x(h.shape.ParamCount());
+  run_.backend->Download(h.params, x);
+  o_.on_volume(MakeCheckpoint(run_.scene, h.level, h.shape, iteration + 1, h.solver.type, std::move(x)), iteration);
+  const double seconds = SecondsSince(t0);
+  eval_seconds_ += seconds;
+  volume_seconds_ += seconds;
+}
+
 json LevelMonitor::LevelLine(const SolverSummary& summary) {
   json line{{"event", "level"}, {"level", lr_.level}, {"n", lr_.shape.n}};
   line.update(summary.ToJson());
@@ -252,6 +266,7 @@ json LevelMonitor::LevelLine(const SolverSummary& summary) {
                {"train_psnr", lr_.train_psnr},
                {"test_psnr", lr_.test_psnr},
                {"preview_seconds", preview_seconds_},
+               {"volume_seconds", volume_seconds_},
                {"status", lr_.status}});
   if (run_.ranks != nullptr) {
     // Every rank's seconds in its own passes and in the sums (waiting for the slowest included).

@@ -44,6 +44,9 @@ class LevelMonitor {
   // an earlier run's refined poses from scene.json.
   void ReportPoses(const HierarchyLevel& h, const PhotoCorrections& fitted);
   void WritePreview(const HierarchyLevel& h, int iteration, const PhotoCorrections& exposures);
+  // ReconstructOptions::on_volume after iteration `iteration`: the level's first, then at most every
+  // volume_every_seconds.
+  void HandOverVolume(const HierarchyLevel& h, int iteration);
   // The log's "level" line; with several ranks, every rank's pass and sum seconds (collective).
   nlohmann::json LevelLine(const SolverSummary& summary);
   // Ends the level's clock: its solver seconds (held-out scoring and previews left out).
@@ -56,6 +59,8 @@ class LevelMonitor {
   WallClock::time_point t_level_ = WallClock::now();
   double eval_seconds_ = 0;  // held-out evaluation and previews within the level
   double preview_seconds_ = 0;  // the previews alone within the level (what --view adds)
+  double volume_seconds_ = 0;   // the volumes handed to a live page within the level (HandOverVolume)
+  WallClock::time_point volume_at_{};  // when the last was
   LevelReport lr_;
   double level_start_elapsed_ = 0, iter_time_ = 0;  // for the log's elapsed solver time
   int held_out_iteration_ = -1;  // the iteration whose held-out PSNR was logged last

@@ -12,6 +12,7 @@
 #include "common/comm.h"
 #include "recon_cuda/backends/make_backend.h"
 #include "recon_cuda/core/render_rule.h"
+#include "recon_cuda/data/checkpoint.h"
 #include "recon_cuda/run/level_choice.h"
 #include "recon_cuda/run/photo_fit.h"
 #include "recon_cuda/solve/hierarchy.h"
@@ -119,6 +120,12 @@ struct ReconstructOptions {
     std::string message;  // non-empty: a line to print
   };
   std::function<void(const Event&)> on_event;
+  // The solver's volume for a live page (perf run --view, viewer/live_view.h): rank 0 hands over
+  // the level's parameters after an iteration, the level's first and then at most every
+  // volume_every_seconds (5; the copy's seconds are logged per level as volume_seconds). Unset:
+  // never.
+  std::function<void(Checkpoint volume, int iteration)> on_volume;
+  double volume_every_seconds = 5;
 
   // Throws InputError naming the bad option.
   void Check() const;

@@ -6,12 +6,19 @@
 #include <signal.h>
 
 #include <chrono>
+#include <cmath>
+#include <cstring>
 #include <cstdio>
 #include <nlohmann/json.hpp>
+#include <map>
 #include <regex>
+#include <set>
 #include <thread>
 
 #include "common/atomic_file.h"
+#include "common/errors.h"
+#include "recon_cuda/data/checkpoint.h"
+#include "tests/pipeline/synthetic_workspace.h"
 #include "tests/test_util.h"
 #include "workspace/image_io.h"
 #include "workspace/scene.h"
@@ -122,6 +129,93 @@ TEST(ViewPage, ShowsTheCamerasTheScoresAndTheMesh) {
   EXPECT_NE(view.Output().find("stopped"), std::string::npos) << view.Output();
 }
 
+// data-field-png's image (a PNG data URL) as RGB, through a file OpenImageIO reads.
+Image FieldImage(const std::string& dom, const fs::path& file) {
+  const std::string url = Attribute(dom, "data-field-png");
+  const std::string prefix = "data:image/png;base64,";
+  if (url.rfind(prefix, 0) != 0) return {};
+  std::string bytes;
+  int bits = 0, acc = 0;
+  for (char ch : url.substr(prefix.size())) {
+    const char* at = std::strchr("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/", ch);
+    if (ch == '=' || !at || ch == '\0') break;
+    acc = (acc << 6) | static_cast<int>(at - "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/");
+    if ((bits += 6) >= 8) bytes.push_back(static_cast<char>((acc >> (bits -= 8)) & 0xff));
+  }
+  WriteFileAtomically(file, bytes);
+  const Image rgba = ReadImage(file);
+  Image rgb(rgba.width, rgba.height, 3);
+  for (int y = 0; y < rgb.height; ++y)
+    for (int x = 0; x < rgb.width; ++x)
+      for (int c = 0; c < 3; ++c) rgb.at(x, y, c) = rgba.at(x, y, c) / std::max(rgba.at(x, y, 3), 1e-6f);
+  return rgb;
+}
+
+double Psnr(const Image& a, const Image& b) {
+  double sse = 0;
+  for (size_t i = 0; i < a.pixels.size(); ++i) sse += (a.pixels[i] - b.pixels[i]) * (a.pixels[i] - b.pixels[i]);
+  return sse > 0 ? -10 * std::log10(sse / a.pixels.size()) : 99;
+}
+
+// The page's field against perf render of the same camera and checkpoint: the two marchers
+// (viewer/page/field.js and recon_cuda/core) agree to >= 35 dB (measured 71-72 dB: the page's half
+// floats and the last bit of exp), with the render rule off and on. A held-out view of the
+// example's two levels (a dense 32^3 level without bands; a sparse 64^3 one with degree-1 bands,
+// learned shells), and of a synthetic capture fitted with the shells fixed at the background.
+TEST(ViewPage, TheFieldIsWhatPerfRenders) {
+  if (!fs::exists(kChromium)) GTEST_SKIP() << "chromium is not installed (scripts/setup.sh installs it)";
+  const fs::path example = fs::path(PERF_SOURCE_DIR) / "examples" / "bonsai_mini";
+  test::TempDir dir;
+  const fs::path ws = dir / "ws", synthetic = dir / "synthetic";
+  auto r = RunCommand(test::PerfBinary() + " run --colmap " + (example / "sparse" / "0").string() + " --images " +
+                      (example / "images").string() + " --workspace " + ws.string() +
+                      " --preset preview --max-size 96 --levels 2 --iterations 3 --exposure off --refine-poses off"
+                      " --log-level quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  test::MakeSyntheticWorkspace(dir / "capture", synthetic);
+  r = RunCommand(test::PerfBinary() + " reconstruct " + synthetic.string() +
+                 " --levels 1 --start-resolution 16 --iterations 3 --background fixed --no-grow-box -q");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const recon::Checkpoint sparse = recon::ReadCheckpoint(recon::CheckpointPath(ws, 1));
+  ASSERT_TRUE(sparse.shape.sparse());
+  ASSERT_EQ(sparse.shape.sh_degree, 1);
+  ASSERT_FALSE(recon::ReadCheckpoint(recon::CheckpointPath(ws, 0)).shape.sparse());
+  struct Case {
+    fs::path ws;
+    int level;
+    float rule;
+  };
+  for (const Case& k : {Case{ws, 0, 0.f}, Case{ws, 1, 0.f}, Case{ws, 1, 0.7f}, Case{synthetic, 0, 0.f}}) {
+    SCOPED_TRACE(testing::Message() << k.ws.filename() << " level " << k.level << ", rule " << k.rule);
+    const Scene scene = ReadScene(k.ws / "scene.json");
+    std::string name;
+    for (const SceneImage& im : scene.images) {
+      if (im.split == Split::kTest && name.empty()) name = im.name;
+    }
+    ASSERT_FALSE(name.empty());
+    const fs::path renders = dir / StrCat("renders_", k.ws.filename().string(), k.level, k.rule > 0);
+    r = RunCommand(test::PerfBinary() + " render " + k.ws.string() + " --checkpoint " +
+                   recon::CheckpointPath(k.ws, k.level).string() + " --view " + name + " --min-box-opacity " +
+                   std::to_string(k.rule) + " -o " + renders.string() + " -q");
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    const Image render = ReadImage(renders / fs::path(name).filename().replace_extension(".png"));
+    Background view("view " + k.ws.string() + " --port 0", dir / "view.log", std::regex(R"(http://127\.0\.0\.1:(\d+)/)"));
+    ASSERT_GT(view.port, 0) << view.Output();
+    const auto dom = RunCommand(Chromium("--dump-dom '" + view.Url() + "?field=" + name + "&dump=1&level=" +
+                                         std::to_string(k.level) + "&rule=" + std::to_string(k.rule) + "'") +
+                                " 2>/dev/null");
+    ASSERT_EQ(Attribute(dom.output, "data-field-ready"), "1") << dom.output.substr(0, 3000);
+    EXPECT_EQ(Attribute(dom.output, "data-field-error"), "");
+    const Image field = FieldImage(dom.output, dir / "field.png");
+    ASSERT_EQ(field.width, render.width);
+    ASSERT_EQ(field.height, render.height);
+    const double psnr = Psnr(field, render);
+    std::printf("field vs perf render: %.2f dB\n", psnr);
+    EXPECT_GE(psnr, 35.0);
+    EXPECT_TRUE(view.Interrupt());
+  }
+}
+
 // `perf run --view` on a small capture: the page follows the solve (its iteration counter advances
 // and it shows the newest preview), says when the run finished, and Ctrl-C then ends the command.
 TEST(ViewPage, FollowsALiveRun) {
@@ -134,14 +228,21 @@ TEST(ViewPage, FollowsALiveRun) {
                  dir / "run.log", std::regex(R"(its page is at http://127\.0\.0\.1:(\d+)/)"));
   ASSERT_GT(run.port, 0) << run.Output();
   const std::string page = run.Url();
-  // Looks at the page now and then while the solve goes on.
+  // Looks at the page now and then while the solve goes on, its field at a held-out photo's camera
+  // (the import's first held-out one: every 8th by name from the first).
   std::vector<int> seen;
+  std::map<std::string, std::pair<int, double>> volumes;  // live version: level, PSNR against the photo
   bool preview = false, finished = false;
   for (int look = 0; look < 40 && !finished; ++look) {
-    const auto dom = RunCommand(Chromium("--dump-dom " + page, 5000) + " 2>/dev/null");
+    const auto dom = RunCommand(Chromium("--dump-dom '" + page + "?field=DSCF5608.JPG'", 5000) + " 2>/dev/null");
     const std::string state = Attribute(dom.output, "data-state");
     const std::string it = Attribute(dom.output, "data-iterations");
     if (state == "running" && !it.empty()) seen.push_back(std::stoi(it));
+    const std::string version = Attribute(dom.output, "data-field-version");
+    if (version.rfind("live", 0) == 0 && !Attribute(dom.output, "data-field-psnr").empty()) {
+      volumes[version] = {std::stoi(Attribute(dom.output, "data-field-level")),
+                          std::stod(Attribute(dom.output, "data-field-psnr"))};
+    }
     preview = preview || dom.output.find("src=\"/files/preview/") != std::string::npos;
     finished = state == "finished";
     if (finished) {
@@ -152,6 +253,20 @@ TEST(ViewPage, FollowsALiveRun) {
   ASSERT_GE(seen.size(), 2u) << "the page never saw the solve running twice";
   EXPECT_GT(seen.back(), seen.front()) << "the iteration counter did not advance";
   EXPECT_TRUE(preview);
+  // The page drew the solver's volume as it went: a new one in each level, better against the photo
+  // at the end than at the start.
+  std::set<int> levels;
+  for (const auto& [version, v] : volumes) levels.insert(v.first);
+  EXPECT_EQ(levels, (std::set<int>{0, 1})) << volumes.size() << " live volumes seen";
+  ASSERT_GE(volumes.size(), 2u);
+  const auto by_version = [](const auto& a, const auto& b) {
+    return std::stoi(a.first.substr(5)) < std::stoi(b.first.substr(5));
+  };
+  const auto first = std::min_element(volumes.begin(), volumes.end(), by_version);
+  const auto last = std::max_element(volumes.begin(), volumes.end(), by_version);
+  EXPECT_GT(last->second.second, first->second.second) << "PSNR against the photo: " << first->second.second
+                                                        << " dB at " << first->first << ", " << last->second.second
+                                                        << " dB at " << last->first;
   EXPECT_NE(run.Output().find("the page stays at"), std::string::npos);
   EXPECT_TRUE(run.Interrupt());
 }

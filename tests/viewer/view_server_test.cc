@@ -15,6 +15,7 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
+#include "recon_cuda/data/checkpoint.h"
 #include "tests/test_util.h"
 
 namespace perf::viewer {
@@ -98,6 +99,43 @@ TEST(ViewServer, ServesThePageAndTheWorkspace) {
     EXPECT_EQ(c.Get("/lib/three.min.js")->status, 200);
     EXPECT_EQ(c.Get("/lib/GLTFLoader.js")->status, 200);
   }
+}
+
+// The fitted volume's routes (field_source.h): the levels listed, a level's payload (gzip'd when
+// the client takes it, as httplib's client does by asking), no volume before the first level, a
+// bad level refused, a damaged checkpoint named.
+TEST(ViewServer, ServesTheFittedVolume) {
+  Served s;
+  auto c = s.Client();
+  EXPECT_EQ(c.Get("/field.js")->status, 200);
+  EXPECT_EQ(c.Get("/field_view.js")->status, 200);
+  EXPECT_EQ(c.Get("/api/fields")->body, R"({"levels":[],"live":null,"newest":null})");
+  EXPECT_EQ(c.Get("/api/field")->status, 404);
+  recon::Checkpoint ck;
+  ck.shape = recon::VolumeShape(8, 2, 2);
+  ck.placement.shell_radii = {2, 4};
+  ck.params.assign(ck.shape.ParamCount(), 0.5f);
+  recon::WriteCheckpoint(recon::CheckpointPath(s.ws, 0), ck);
+  EXPECT_NE(c.Get("/api/fields")->body.find(R"("newest":0)"), std::string::npos);
+  httplib::Headers plain{{"Accept-Encoding", "identity"}};
+  auto raw = c.Get("/api/field?level=0", plain);
+  ASSERT_TRUE(raw);
+  EXPECT_EQ(raw->status, 200);
+  EXPECT_EQ(raw->get_header_value("Content-Type"), "application/octet-stream");
+  EXPECT_EQ(raw->body.substr(0, 7), "PERFFLD");
+  EXPECT_EQ(raw->body.size(), 256u + 2 * ck.params.size());
+  auto gz = c.Get("/api/field", {{"Accept-Encoding", "gzip"}});
+  ASSERT_TRUE(gz);
+  EXPECT_EQ(gz->status, 200);
+  EXPECT_EQ(gz->body, raw->body) << "httplib's client undid the gzip";
+  for (const char* bad : {"/api/field?level=x", "/api/field?level=-1", "/api/field?level=123"}) {
+    EXPECT_EQ(c.Get(bad)->status, 400) << bad;
+  }
+  EXPECT_EQ(c.Get("/api/field?level=3")->status, 404);
+  std::ofstream(recon::CheckpointPath(s.ws, 1)) << "not a checkpoint";
+  auto damaged = c.Get("/api/field?level=1");
+  EXPECT_EQ(damaged->status, 422);
+  EXPECT_NE(damaged->body.find("level_1.perfvol"), std::string::npos) << damaged->body;
 }
 
 TEST(ViewServer, RefusesTraversalUnknownRoutesAndWrites) {

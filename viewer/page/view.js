@@ -2,7 +2,8 @@
 // routes and draws it with three.js (Debian's libjs-three). Works offline; polls the solve's log
 // so that a running solve's curve grows. Test hooks: body[data-cameras] (frusta drawn),
 // body[data-views] (held-out rows), body[data-mesh] (loaded, missing or failed),
-// body[data-ready] (1 once everything has been asked for and answered).
+// body[data-ready] (1 once everything has been asked for and answered); the field's are
+// field_view.js's.
 'use strict';
 
 const $ = (id) => document.getElementById(id);
@@ -141,10 +142,11 @@ function drawScene(scene3, sc, points, onMesh) {
 
 function startViewer(sc, points, onMesh) {
   const canvas = $('scene3d');
-  const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
+  // Transparent: the fitted field (field_view.js) is drawn behind it.
+  const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true, alpha: true });
   renderer.setPixelRatio(window.devicePixelRatio || 1);
+  renderer.setClearColor(0x000000, 0);
   const scene3 = new THREE.Scene();
-  scene3.background = new THREE.Color(0x20232a);
   const frame = drawScene(scene3, sc, points, onMesh);
   const camera = new THREE.PerspectiveCamera(45, 1, frame.extent * 0.01, frame.extent * 200);
   // Looking at the box from above the cameras' mean direction, far enough to see them.
@@ -158,8 +160,9 @@ function startViewer(sc, points, onMesh) {
     new THREE.Vector3(im.world_from_cam[0][3], im.world_from_cam[1][3], im.world_from_cam[2][3]).distanceTo(frame.centre));
   distances.sort((a, b) => a - b);
   const reach = Math.max(frame.extent, distances.length ? distances[Math.floor(distances.length * 0.9)] : 0);
-  const onlyMesh = only === 'mesh';
-  camera.position.copy(frame.centre).add(dir.normalize().multiplyScalar(onlyMesh ? frame.extent * 1.6 : reach * 2.7));
+  // Without the cameras (?layers=mesh, ?layers=field, ...): close to the box.
+  const close = only !== null && !only.split(',').includes('cameras');
+  camera.position.copy(frame.centre).add(dir.normalize().multiplyScalar(close ? frame.extent * 1.6 : reach * 2.7));
   // Up: the cameras' mean up (-y of each camera in the world).
   const up = new THREE.Vector3();
   for (const im of sc.images) up.add(new THREE.Vector3(-im.world_from_cam[0][1], -im.world_from_cam[1][1], -im.world_from_cam[2][1]));
@@ -175,7 +178,7 @@ function startViewer(sc, points, onMesh) {
   };
   window.addEventListener('resize', resize);
   resize();
-  for (const box of document.querySelectorAll('#legend input')) {
+  for (const box of document.querySelectorAll('#legend input[data-layer]')) {
     const name = box.dataset.layer;
     box.checked = !only || only.split(',').includes(name);
     box.addEventListener('change', () => { if (layers[name]) layers[name].visible = box.checked; });
@@ -186,6 +189,7 @@ function startViewer(sc, points, onMesh) {
     requestAnimationFrame(loop);
   };
   loop();
+  return { camera, controls };
 }
 
 // ---------------------------------------------------------------- panels
@@ -400,7 +404,8 @@ async function main() {
     return;
   }
   try {
-    startViewer(sc, points, meshDone);
+    const view3 = startViewer(sc, points, meshDone);
+    if (typeof PerfFieldView !== 'undefined') PerfFieldView.start(sc, view3.camera, view3.controls, fileUrl);
   } catch (e) {
     $('status').textContent = `the 3-D view failed: ${e.message}`;
     $('status').className = 'error';
