@@ -26,17 +26,11 @@ set -u
 HERE=$(cd "$(dirname "$0")" && pwd)
 OUT=${OUT:-$PWD/gpu_check_out}
 BUDGET=${BUDGET:-570}
-mkdir -p "$OUT"
-OUT=$(cd "$OUT" && pwd)
-SUMMARY=$OUT/summary.txt
-: > "$SUMMARY"
-START=$(date +%s)
-COMMIT=$(cat "$HERE/COMMIT" 2>/dev/null || echo unknown)
 # Prepend: the driver's libcuda.so.1 must stay reachable (replacing LD_LIBRARY_PATH can hide it).
 export LD_LIBRARY_PATH="$HERE/bin${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 export PATH="$PATH:/usr/local/cuda/bin:/usr/local/cuda/compute-sanitizer"
 
-# left, step, fail and $verdict (gpu_steps.sh, staged beside this script).
+# $SUMMARY, $START, $COMMIT, left, step, fail and $verdict (gpu_steps.sh, staged beside this script).
 source "$HERE/gpu_steps.sh"
 
 echo "commit $COMMIT, budget $BUDGET s, results in $OUT" | tee -a "$SUMMARY"

@@ -12,24 +12,12 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BUILD=$(cd "${1:?usage: bench/gpu_check_dry_run.sh BUILD_DIR}" && pwd)
-if nvidia-smi -L > /dev/null 2>&1; then
-  echo "a GPU is visible: run bench/gpu_check.sh itself"
-  exit 77
-fi
-TMP=$(mktemp -d)
-trap 'rm -rf "$TMP"' EXIT
+source bench/dry_run_lib.sh  # skips where a GPU is; TMP, expect, problems
 STAGE=$TMP/gpu_run
-
-problems=0
-expect() {  # expect DESCRIPTION COMMAND...: counts a problem when COMMAND fails
-  local what=$1
-  shift
-  if "$@"; then echo "ok: $what"; else echo "PROBLEM: $what" >&2; problems=$((problems + 1)); fi
-}
 
 t0=$(date +%s)
 STAGE=$STAGE bench/stage_gpu_run.sh "$BUILD"
-for f in gpu_check.sh decode_images.py COMMIT bin/perf_bench_gpu bin/gpu_parity_test bin/libtbb.so.12 lego/bench.json; do
+for f in gpu_check.sh gpu_steps.sh decode_images.py COMMIT bin/perf_bench_gpu bin/gpu_parity_test bin/libtbb.so.12 lego/bench.json; do
   expect "staged $f" test -s "$STAGE/$f"
 done
 expect "staged PNGs" test "$(find "$STAGE/lego/images" -name '*.png' | wc -l)" -ge 100

@@ -1,8 +1,16 @@
 # The steps of a timed GPU run, sourced by gpu_check.sh and perf_gpu_run.sh (staged beside them):
 # each step runs under `timeout` within what is left of the run's budget and leaves its output in
-# $OUT/NAME.log and a line in $SUMMARY. Needs BUDGET, START, OUT and SUMMARY set.
+# $OUT/NAME.log and a line in $SUMMARY. Needs HERE (the staged folder), OUT and BUDGET; makes OUT
+# absolute and sets SUMMARY (OUT/summary.txt, emptied), START and COMMIT (HERE/COMMIT).
 #   STEP_SIGNAL: the signal `timeout` sends first (default TERM; INT lets perf stop at its next
 #   iteration with a consistent workspace), KILL 15 s later.
+
+mkdir -p "$OUT"
+OUT=$(cd "$OUT" && pwd)
+SUMMARY=$OUT/summary.txt
+: > "$SUMMARY"
+START=$(date +%s)
+COMMIT=$(cat "$HERE/COMMIT" 2>/dev/null || echo unknown)
 
 left() { echo $((BUDGET - ($(date +%s) - START))); }
 

@@ -15,21 +15,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BUILD=$(cd "${1:?usage: bench/perf_gpu_dry_run.sh BUILD_DIR}" && pwd)
-if nvidia-smi -L > /dev/null 2>&1; then
-  echo "a GPU is visible: run bench/perf_gpu_run.sh itself"
-  exit 77
-fi
+source bench/dry_run_lib.sh  # skips where a GPU is; TMP, expect, problems
 PYTHON=${PYTHON:-/usr/bin/python3}
-TMP=$(mktemp -d)
-trap 'rm -rf "$TMP"' EXIT
 STAGE=$TMP/perf_gpu_run
-
-problems=0
-expect() {  # expect DESCRIPTION COMMAND...: counts a problem when COMMAND fails
-  local what=$1
-  shift
-  if "$@"; then echo "ok: $what"; else echo "PROBLEM: $what" >&2; problems=$((problems + 1)); fi
-}
 
 t0=$(date +%s)
 COLMAP=examples/bonsai_mini/sparse/0 IMAGES=examples/bonsai_mini/images WS=$TMP/ws STAGE=$STAGE PACK=$TMP/pack \

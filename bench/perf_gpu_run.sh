@@ -27,14 +27,8 @@ BUDGET=${BUDGET:-560}
 RUNS=${RUNS:-default high}
 DEVICE=${DEVICE:-cuda}
 PYTHON=${PYTHON:-python3}  # with numpy and Pillow
-mkdir -p "$OUT"
-OUT=$(cd "$OUT" && pwd)
-SUMMARY=$OUT/summary.txt
-: > "$SUMMARY"
-START=$(date +%s)
-COMMIT=$(cat "$HERE/COMMIT" 2>/dev/null || echo unknown)
 export PATH="$PATH:/usr/local/cuda/bin"
-source "$HERE/gpu_steps.sh"
+source "$HERE/gpu_steps.sh"  # $SUMMARY, $START, $COMMIT, left, step, fail, $verdict
 
 # The reconstruct options of a run: the `perf run` presets' (30 iterations a level, each ending
 # once its cost flattens; view-dependent colour, the cameras refined and each photo's exposure
