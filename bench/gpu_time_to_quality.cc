@@ -93,7 +93,6 @@ int main(int argc, char** argv) {
   app.add_option("--cg-exit-ratio", s.solver.cg_exit_ratio,
                  "PCG leaves when |r|^2 falls by less than this factor (paper: 0.85; default inf: never)")
       ->check(CLI::PositiveNumber);
-  app.add_flag("--block-jacobi", s.solver.block_jacobi, "PCG preconditioned by each grid cell's 4 x 4 block");
   app.add_option("--jtj-ray-stride", s.solver.jtj_ray_stride,
                  "PCG's J^T J p on every k-th ray (subsampled Gauss-Newton; 1: every ray)")
       ->check(CLI::Range(1, 64))
@@ -165,7 +164,6 @@ int main(int argc, char** argv) {
                         {"line_search_ray_stride", s.solver.line_search_ray_stride},
                         {"cg_exit_ratio", std::isfinite(s.solver.cg_exit_ratio) ? json(s.solver.cg_exit_ratio) : json()},
                         {"jtj_ray_stride", s.solver.jtj_ray_stride},
-                        {"block_jacobi", s.solver.block_jacobi},
                         {"min_box_opacity", s.min_box_opacity},
                         {"sparse", s.sparse},
                         {"record_jacobian", !no_record},

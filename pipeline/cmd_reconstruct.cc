@@ -41,8 +41,6 @@ void AddSolverOptions(CLI::App* cmd, recon::SolverOptions* solver) {
       ->capture_default_str();
   cmd->add_option("--initial-step", solver->initial_step, "First step length tried by the line search (paper: 1)")
       ->capture_default_str();
-  cmd->add_flag("--block-jacobi", solver->block_jacobi,
-                "PCG preconditioned by each grid cell's 4 x 4 block (colours and density) instead of the diagonal");
   cmd->add_option("--diagonal-floor", solver->diagonal_floor,
                   "Preconditioner floor relative to the largest diag(J^T J) entry")->capture_default_str();
   cmd->add_option("--line-search-stride", solver->line_search_ray_stride,

@@ -88,9 +88,6 @@ class CpuBackend final : public Backend {
   void Axpy(VecId y, double a, VecId x) override { vectors_.Axpy(y, a, x); }
   void Xpby(VecId y, VecId x, double b) override { vectors_.Xpby(y, x, b); }
   void DivideClamped(VecId z, VecId r, VecId d, float floor) override { vectors_.DivideClamped(z, r, d, floor); }
-  void BlockPrecondition(VecId z, VecId r, VecId d, VecId cross, VecId free, float floor) override {
-    vectors_.BlockPrecondition(z, r, d, cross, free, floor, level_.shape.GridParamCount());
-  }
   void AxpyDiag(VecId y, double a, VecId d, VecId x) override { vectors_.AxpyDiag(y, a, d, x); }
   double Dot(VecId a, VecId b) const override { return vectors_.Dot(a, b); }
   double MaxAbs(VecId v) const override { return vectors_.MaxAbs(v); }
@@ -136,14 +133,11 @@ class CpuBackend final : public Backend {
     vectors_.AdamStep(x, g, m, v, s, t, level_.shape);
   }
 
-  PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset, RaySubset jtj,
-                      VecId cross) override {
+  PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset, RaySubset jtj) override {
     PERF_CHECK(subset.Valid() && jtj.Valid());
-    PERF_CHECK(cross == kNoVector || diag != kNoVector);
     const auto t0 = WallClock::now();
     const VolumeView<float> vol = MakeView(level_.shape, level_.geometry, vec(x).data());
     const bool want_diag = diag != kNoVector;
-    want_cross_ = cross != kNoVector;
     const bool record = cache_ && want_diag;  // Adam (no diagonal) never multiplies by J^T J
     const uint64_t pass = BeginPass();
     PassStats stats = ForBlocks(want_diag ? 2 : 1, pass, [&](int64_t block, int64_t begin, int64_t end, Scratch& s) {
@@ -153,13 +147,6 @@ class CpuBackend final : public Backend {
       return want_diag ? LinearizeBlock<true>(vol, seed, subset, jtj, begin, end, s, out)
                        : LinearizeBlock<false>(vol, seed, subset, jtj, begin, end, s, out);
     });
-    if (want_cross_) {
-      std::vector<const float*> parts;
-      for (Scratch& sc : scratch_) {
-        if (sc.pass == pass && !sc.cross.empty()) parts.push_back(sc.cross.data());
-      }
-      SumParts(vectors_, parts, vec(cross).data());
-    }
     if (want_diag) {
       ReduceInterleaved(pass, g, diag);
       pose_blocks_.assign(static_cast<size_t>(level_.shape.poses) * kPoseBlock, 0.0);
@@ -342,7 +329,6 @@ class CpuBackend final : public Backend {
                                 AddSink{kDiag ? s.acc.data() : nullptr, 1, 4}, out,
                                 out && !out->compact ? &out->shells[r_out * level_.shape.num_shells] : nullptr,
                                 r_out};
-      if (kDiag && !s.cross.empty()) v.c = AddSink{s.cross.data()};
       VolumeU(e, r, v.r);
       GainSquared(e, v.g2);
       v.SetSh(ShOfRay(vol, ray));
@@ -434,7 +420,6 @@ class CpuBackend final : public Backend {
         }
         if (width > 0 && s.pass != pass) {
           s.acc.assign(params * width, 0.f);
-          s.cross.assign(width == 2 && want_cross_ ? params : 0, 0.f);
           s.pose_blocks.assign(width == 2 ? static_cast<size_t>(level_.shape.poses) * kPoseBlock : 0, 0.0);
           s.pass = pass;
         }
@@ -480,7 +465,6 @@ class CpuBackend final : public Backend {
   std::vector<double> pose_blocks_;  // the last Linearize's pose blocks (pose_blocks.h), with a diagonal
   tbb::enumerable_thread_specific<Scratch> scratch_;
   bool cache_ = false, linearized_ = false, recorded_ = false;
-  bool want_cross_ = false;  // the running Linearize sums the cells' cross terms (Scratch::cross)
   LevelPlan plan_;  // the level's record and its estimated entries
   int max_samples_ = 0;
   TrainingRays<float> rays_{};     // the level's rays (alphas: nullptr unless UsesAlpha)

@@ -141,7 +141,6 @@ struct Scratch {
   std::vector<SamplePartials<float>> partials;  // [max samples a ray]: a recorded ray's, unpacked
   BlockJ row;                               // one ray, when recomputing
   std::vector<float> acc;                   // per-thread sums (Linearize: g and diag interleaved)
-  std::vector<float> cross;                 // Linearize's per-thread cross terms, when asked for
   std::vector<double> pose_blocks;          // per-thread sums of the pose blocks (kPoseBlock a photo)
   RayCells cells;                           // MultiplyJtJ: a ray's cells and their summed partials
   uint64_t pass = 0;                        // the pass acc was zeroed for
@@ -164,7 +163,6 @@ struct LinearizeVisitor {
   RaySh<float> sh{};   // the ray's spherical harmonics (degree 0: none; SetSh)
   float yr[kMaxShStride] = {}, yg2[kMaxShStride] = {};  // SetSh's y_k r_c and y_k^2 g2_c at 3 k + c
   CellMerger<float, K> merger{};
-  AddSink c{nullptr};  // the cells' cross terms (jacobian.h AddCrossFromRow); nullptr: not wanted
   // GN: the Forward record that Backward walks back to front, and the next of its samples whose
   // cells' sums lines are asked for (PrefetchAhead), a few samples ahead of the merged scatter.
   const SampleRecord<float>* ahead = nullptr;
@@ -240,7 +238,6 @@ struct LinearizeVisitor {
     }
     g.Add4(GridParam(cell, 0), acc[0], acc[1], acc[2], acc[3]);
     AddDiagFromRow(cell, acc + 4, g2, d);
-    if (c.a) AddCrossFromRow(cell, acc + 4, g2, c);
     if (sh.degree > 0 && acc[4] != 0.f) AddBands(ShParam(sh.start, sh.degree, cell, 0, 0), acc[4]);
   }
   // The bands' J^T r and diagonal of a cell whose merged dc is `dc`, band block at `base` (a

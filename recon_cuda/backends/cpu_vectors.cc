@@ -86,22 +86,6 @@ void CpuVectors::DivideClamped(VecId z, VecId r, VecId d, float floor) {
   });
 }
 
-void CpuVectors::BlockPrecondition(VecId z, VecId r, VecId d, VecId cross, VecId free, float floor,
-                                   int64_t grid_params) {
-  float* pz = (*this)[z].data();
-  const float *pr = (*this)[r].data(), *pd = (*this)[d].data(), *pc = (*this)[cross].data(),
-              *pf = (*this)[free].data();
-  ForChunks([&](int64_t b, int64_t e) {  // chunks start at multiples of 4: whole cells
-    for (int64_t i = b; i < e; ++i) {
-      if (i >= grid_params) {
-        pz[i] = pr[i] / std::max(pd[i], floor);
-      } else if (i % 4 == 0) {
-        SolveCellBlock(pd + i, pc + i, pr + i, pf + i, floor, pz + i);
-      }
-    }
-  });
-}
-
 void CpuVectors::AxpyDiag(VecId y, double a, VecId d, VecId x) {
   float* py = (*this)[y].data();
   const float* pd = (*this)[d].data();

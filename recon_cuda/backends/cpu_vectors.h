@@ -35,8 +35,6 @@ class CpuVectors {
   void Axpy(VecId y, double a, VecId x);
   void Xpby(VecId y, VecId x, double b);
   void DivideClamped(VecId z, VecId r, VecId d, float floor);
-  // backend.h BlockPrecondition: grid cells below grid_params.
-  void BlockPrecondition(VecId z, VecId r, VecId d, VecId cross, VecId free, float floor, int64_t grid_params);
   void AxpyDiag(VecId y, double a, VecId d, VecId x);
   void Multiply(VecId y, VecId m);
   double Dot(VecId a, VecId b) const;
@@ -60,7 +58,7 @@ class CpuVectors {
   }
 
  private:
-  static constexpr int64_t kChunk = 1 << 15;  // elements per task (a multiple of 4: BlockPrecondition)
+  static constexpr int64_t kChunk = 1 << 15;  // elements per task
 
   template <class Fn, class Combine>
   double ReduceChunks(Fn&& fn, Combine&& combine) const;

@@ -132,9 +132,6 @@ class CudaBackend final : public Backend {
   void DivideClamped(VecId z, VecId r, VecId d, float floor) override {
     cuda::DivideClamped(ptr(z), ptr(r), ptr(d), floor, n());
   }
-  void BlockPrecondition(VecId z, VecId r, VecId d, VecId cross, VecId free, float floor) override {
-    cuda::BlockPrecondition(ptr(z), ptr(r), ptr(d), ptr(cross), ptr(free), floor, level_.shape.GridParamCount(), n());
-  }
   void AxpyDiag(VecId y, double a, VecId d, VecId x) override {
     cuda::AxpyDiag(ptr(y), static_cast<float>(a), ptr(d), ptr(x), n());
   }
@@ -186,15 +183,14 @@ class CudaBackend final : public Backend {
     cuda::AdamStep(ptr(x), ptr(g), ptr(m), ptr(v), AdamCoefficientsAt(s, t), n(), level_.shape.Layout());
   }
 
-  PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset, RaySubset jtj,
-                      VecId cross) override {
+  PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset, RaySubset jtj) override {
     PERF_CHECK(subset.Valid() && jtj.Valid());
     const auto t0 = WallClock::now();
     const RecordView rec = diag != kNoVector && Record(jtj) ? record_->View(jtj) : RecordView{};
     const cuda::RayStats r =
         cuda::Linearize(Input(x, seed), ptr(g), diag == kNoVector ? nullptr : ptr(diag),
-                        cross == kNoVector ? nullptr : ptr(cross), pose_blocks_.size() > 0 ? pose_blocks_.data() : nullptr,
-                        rec, n(), subset.stride, subset.offset, scratch_->Stats());
+                        pose_blocks_.size() > 0 ? pose_blocks_.data() : nullptr, rec, n(), subset.stride,
+                        subset.offset, scratch_->Stats());
     recorded_ = rec.heads != nullptr;
     every_ray_recorded_ = recorded_ && cuda::RecordedEntries(rec) <= rec.capacity;
     blocks_fresh_ = diag != kNoVector && pose_blocks_.size() > 0;

@@ -68,9 +68,8 @@ size_t StatsTempBytes(int64_t blocks);
 // photos' pose blocks (pose.h AddPoseBlock), needed with diag when the rays refine poses.
 // rec: with diag, the Jacobian record (ray_record.h) the rays of its subset write (its counter
 // zeroed first); rec.heads nullptr: none.
-// cross: with diag, the cells' cross terms (backend.h Linearize), or nullptr.
-RayStats Linearize(const PassInput& in, float* g, float* diag, float* cross, float* pose_blocks,
-                   const RecordView& rec, int64_t params, int stride, int offset, const StatsScratch& s);
+RayStats Linearize(const PassInput& in, float* g, float* diag, float* pose_blocks, const RecordView& rec,
+                   int64_t params, int stride, int offset, const StatsScratch& s);
 // The entries Linearize's rays asked rec for (more than rec.capacity: some rays found no room and
 // were not recorded). Synchronises.
 int64_t RecordedEntries(const RecordView& rec);
@@ -94,9 +93,6 @@ void Copy(float* y, const float* x, int64_t n);
 void Axpy(float* y, float a, const float* x, int64_t n);               // y += a x
 void Xpby(float* y, const float* x, float b, int64_t n);               // y = x + b y
 void DivideClamped(float* z, const float* r, const float* d, float floor, int64_t n);
-// backend.h BlockPrecondition: the grid's cells are the first grid_params values.
-void BlockPrecondition(float* z, const float* r, const float* d, const float* cross, const float* free, float floor,
-                       int64_t grid_params, int64_t n);
 void AxpyDiag(float* y, float a, const float* d, const float* x, int64_t n);  // y += a d x
 // layout: where each part of the parameters starts (param_ops.h KindOfParam).
 void Project(float* x, int64_t n, const ParamLayout& layout);

@@ -57,7 +57,6 @@ struct ScatterVisitor {
   float g2[3] = {1, 1, 1};  // the squared gains of the ray's photo (jacobian.h GainSquared)
   RaySh<float> sh{};        // the ray's spherical harmonics (degree 0: none)
   RecordWriter record{};    // with kDiag: the ray's entries of the Jacobian record (ray_record.h)
-  AtomicSink cross{nullptr};  // with kDiag: the cells' cross terms (jacobian.h AddCrossFromRow), or none
 
   __device__ void Shell(int, const CubeCoord<float>&, const TexelSample<float>& ts, const ShellPartials<float>& sp) {
     ScatterJtuShell(ts, sp, u, g);
@@ -74,10 +73,7 @@ struct ScatterVisitor {
   // A cell's merged sums are complete.
   __device__ void operator()(int64_t cell, const float* acc) {
     g.Add4(GridParam(cell, 0), acc[0], acc[1], acc[2], acc[3]);
-    if constexpr (kDiag) {
-      AddDiagFromRow(cell, acc + 4, g2, d);
-      if (cross.a) AddCrossFromRow(cell, acc + 4, g2, cross);
-    }
+    if constexpr (kDiag) AddDiagFromRow(cell, acc + 4, g2, d);
     if (sh.degree > 0) {
       ScatterSh(sh, cell, acc, g);
       if constexpr (kDiag) AddDiagSh(sh, cell, acc[4], g2, d);
@@ -108,9 +104,9 @@ struct JpVisitor {
 // poses keep their registers. With kDiag (Gauss-Newton), the rays of rec's subset write their
 // entries of the Jacobian record as Backward visits their samples (rec.heads nullptr: none do).
 template <bool kDiag, bool kPoses>
-__global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, float* g, float* diag, float* cross,
-                                                               float* pose_blocks, RecordView rec, int stride,
-                                                               int offset, RayStats* partials) {
+__global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, float* g, float* diag, float* pose_blocks,
+                                                               RecordView rec, int stride, int offset,
+                                                               RayStats* partials) {
   const int64_t i = static_cast<int64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
   RayStats mine;
   ExposureSums eg, ed, pg, pd;
@@ -131,7 +127,6 @@ __global__ void __launch_bounds__(kRayThreads) LinearizeKernel(PassInput in, flo
     VolumeU(e, rs, v.u);
     GainSquared(e, v.g2);
     v.sh = ShOfRay(in.vol, r.ray);
-    if constexpr (kDiag) v.cross.a = cross;
     bool records = false;
     int64_t first = -1;
     if constexpr (kDiag) {
@@ -370,12 +365,10 @@ size_t StatsTempBytes(int64_t blocks) {
   return bytes;
 }
 
-RayStats Linearize(const PassInput& in, float* g, float* diag, float* cross, float* pose_blocks,
-                   const RecordView& rec, int64_t params, int stride, int offset, const StatsScratch& s) {
+RayStats Linearize(const PassInput& in, float* g, float* diag, float* pose_blocks, const RecordView& rec,
+                   int64_t params, int stride, int offset, const StatsScratch& s) {
   PERF_CUDA_CHECK(cudaMemset(g, 0, params * sizeof(float)));
   if (diag) PERF_CUDA_CHECK(cudaMemset(diag, 0, params * sizeof(float)));
-  PERF_CHECK(cross == nullptr || diag != nullptr);
-  if (cross) PERF_CUDA_CHECK(cudaMemset(cross, 0, params * sizeof(float)));
   const bool poses = in.rays.pose_slot != nullptr;
   PERF_CHECK(!(poses && diag) || pose_blocks != nullptr);
   PERF_CHECK(rec.heads == nullptr || (diag != nullptr && rec.used != nullptr && rec.stride >= 1 &&
@@ -389,15 +382,15 @@ RayStats Linearize(const PassInput& in, float* g, float* diag, float* cross, flo
   PERF_CHECK(blocks <= s.capacity);
   if (diag && poses) {
     LinearizeKernel<true, true>
-        <<<GridFor(blocks), kRayThreads>>>(in, g, diag, cross, pose_blocks, rec, stride, offset, s.partials);
+        <<<GridFor(blocks), kRayThreads>>>(in, g, diag, pose_blocks, rec, stride, offset, s.partials);
   } else if (diag) {
-    LinearizeKernel<true, false><<<GridFor(blocks), kRayThreads>>>(in, g, diag, cross, nullptr, rec, stride, offset, s.partials);
+    LinearizeKernel<true, false><<<GridFor(blocks), kRayThreads>>>(in, g, diag, nullptr, rec, stride, offset, s.partials);
   } else if (poses) {
     LinearizeKernel<false, true>
-        <<<GridFor(blocks), kRayThreads>>>(in, g, nullptr, nullptr, nullptr, RecordView{}, stride, offset, s.partials);
+        <<<GridFor(blocks), kRayThreads>>>(in, g, nullptr, nullptr, RecordView{}, stride, offset, s.partials);
   } else {
     LinearizeKernel<false, false>
-        <<<GridFor(blocks), kRayThreads>>>(in, g, nullptr, nullptr, nullptr, RecordView{}, stride, offset, s.partials);
+        <<<GridFor(blocks), kRayThreads>>>(in, g, nullptr, nullptr, RecordView{}, stride, offset, s.partials);
   }
   PERF_CUDA_CHECK_LAUNCH("LinearizeKernel");
   return Total(s, blocks);

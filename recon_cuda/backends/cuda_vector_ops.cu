@@ -96,20 +96,6 @@ void Xpby(float* y, const float* x, float b, int64_t n) {
 void DivideClamped(float* z, const float* r, const float* d, float floor, int64_t n) {
   ForEach(n, [=] __device__(int64_t i) { z[i] = r[i] / Max(d[i], floor); }, "DivideClamped");
 }
-
-void BlockPrecondition(float* z, const float* r, const float* d, const float* cross, const float* free, float floor,
-                       int64_t grid_params, int64_t n) {
-  const int64_t cells = grid_params / 4;
-  // Thread i: cell i's block, or (i >= cells) the Jacobi step of value grid_params + i - cells.
-  ForEach(cells + (n - grid_params), [=] __device__(int64_t i) {
-    if (i < cells) {
-      SolveCellBlock(d + 4 * i, cross + 4 * i, r + 4 * i, free + 4 * i, floor, z + 4 * i);
-    } else {
-      const int64_t j = grid_params + (i - cells);
-      z[j] = r[j] / Max(d[j], floor);
-    }
-  }, "BlockPrecondition");
-}
 void AxpyDiag(float* y, float a, const float* d, const float* x, int64_t n) {
   ForEach(n, [=] __device__(int64_t i) { y[i] += a * d[i] * x[i]; }, "AxpyDiag");
 }

@@ -68,12 +68,11 @@ void DistributedBackend::Sum(PassStats* s) {
 }
 
 PassStats DistributedBackend::Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset,
-                                        RaySubset jtj, VecId cross) {
+                                        RaySubset jtj) {
   PERF_CHECK(subset.Valid() && jtj.Valid());
-  PassStats s = inner_->Linearize(x, seed, g, diag, Local(subset), Local(jtj), cross);
+  PassStats s = inner_->Linearize(x, seed, g, diag, Local(subset), Local(jtj));
   if (g != kNoVector) Sum(g);
   if (diag != kNoVector) Sum(diag);
-  if (cross != kNoVector) Sum(cross);
   Sum(&s);
   return s;
 }

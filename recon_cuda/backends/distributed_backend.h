@@ -48,9 +48,6 @@ class DistributedBackend final : public Backend {
   void Axpy(VecId y, double a, VecId x) override { inner_->Axpy(y, a, x); }
   void Xpby(VecId y, VecId x, double b) override { inner_->Xpby(y, x, b); }
   void DivideClamped(VecId z, VecId r, VecId d, float floor) override { inner_->DivideClamped(z, r, d, floor); }
-  void BlockPrecondition(VecId z, VecId r, VecId d, VecId cross, VecId free, float floor) override {
-    inner_->BlockPrecondition(z, r, d, cross, free, floor);
-  }
   void AxpyDiag(VecId y, double a, VecId d, VecId x) override { inner_->AxpyDiag(y, a, d, x); }
   double Dot(VecId a, VecId b) const override { return inner_->Dot(a, b); }
   double MaxAbs(VecId v) const override { return inner_->MaxAbs(v); }
@@ -71,8 +68,8 @@ class DistributedBackend final : public Backend {
     inner_->AdamStep(x, g, m, v, s, t);
   }
 
-  PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset = {}, RaySubset jtj = {},
-                      VecId cross = kNoVector) override;
+  PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset = {},
+                      RaySubset jtj = {}) override;
   PassStats MultiplyJtJ(VecId p, VecId out) override;
   PassStats Cost(VecId x, uint32_t seed, RaySubset subset) override;
   RenderOutput Render(VecId x, const PinholeCamera<float>& camera, int width, int height,

@@ -331,16 +331,6 @@ PERF_HD_INLINE void AddDiagFromRow(int64_t cell, const T* row, const T* g2, Sink
             g2[0] * row[1] * row[1] + g2[1] * row[2] * row[2] + g2[2] * row[3] * row[3] + row[4] * row[4]);
 }
 
-// A cell's off-diagonal entries of J^T J within its 4 x 4 block (colour c, density), from its
-// merged row values (RowValues order): residual c's entries are g_c dc for colour c and g_c ds_c
-// for the density (no other residual reaches colour c), so the ray adds g_c^2 dc ds_c; into the
-// cell's entries 0 .. 2 (3 gets 0). For the block-Jacobi preconditioner (param_ops.h
-// SolveCellBlock).
-template <class T, class Sink>
-PERF_HD_INLINE void AddCrossFromRow(int64_t cell, const T* row, const T* g2, Sink& sink) {
-  sink.Add4(GridParam(cell, 0), g2[0] * row[0] * row[1], g2[1] * row[0] * row[2], g2[2] * row[0] * row[3], T(0));
-}
-
 // A shell's texels are reached by one lookup per ray: only repeats at the face border merge.
 template <class T, class Sink>
 PERF_HD_INLINE void AddDiagShell(const TexelSample<T>& ts, const ShellPartials<T>& sp, const T* g2, Sink& sink) {

@@ -121,31 +121,4 @@ PERF_HD_INLINE void AdamUpdate(const AdamCoefficients& a, ParamKind kind, float 
   *x -= lr * (*m * a.c1) / (Sqrt(*v * a.c2) + a.epsilon);
 }
 
-// The block-Jacobi step of one grid cell (SolverOptions::block_jacobi): z = B^-1 r for the cell's
-// 4 x 4 block of J^T J, B = [diag(a) b; b^T s] with a = max(d_c, floor) the colours' diagonal,
-// s = max(d_sigma, floor) the density's and b the colours' couplings to it (jacobian.h
-// AddCrossFromRow). Colours couple only where they and the density are free (held ones keep their
-// 0: r is 0 there). By the Schur complement of the colours: z_sigma = (r_sigma - sum_c b_c r_c /
-// a_c) / (s - sum_c b_c^2 / a_c), z_c = (r_c - b_c z_sigma) / a_c. B is positive semi-definite
-// (a sum of outer products over rays) and the floors only raise its diagonal, so the complement
-// is positive but for rounding: below 1e-6 s the cell falls back to the Jacobi step.
-PERF_HD_INLINE void SolveCellBlock(const float* d, const float* b, const float* r, const float* free, float floor,
-                                   float* z) {
-  float a[3], bc[3];
-  const float s = Max(d[3], floor);
-  float schur = s, rhs = r[3];
-  for (int c = 0; c < 3; ++c) {
-    a[c] = Max(d[c], floor);
-    bc[c] = free[c] != 0.f && free[3] != 0.f ? b[c] : 0.f;
-    schur -= bc[c] * bc[c] / a[c];
-    rhs -= bc[c] * r[c] / a[c];
-  }
-  if (!(schur > 1e-6f * s)) {
-    for (int c = 0; c < 4; ++c) z[c] = r[c] / Max(d[c], floor);
-    return;
-  }
-  z[3] = rhs / schur;
-  for (int c = 0; c < 3; ++c) z[c] = (r[c] - bc[c] * z[3]) / a[c];
-}
-
 }  // namespace perf::recon

@@ -34,7 +34,7 @@ std::vector<PoseValues> FitViewPoses(Backend* backend, const VolumeShape& volume
   so.pose_prior = options.pose_prior;
   so.line_search_ray_stride = 1;
   so.psnr_ray_stride = 0;
-  backend->SetLevel(problem, RequiredVectors(so));
+  backend->SetLevel(problem, RequiredVectors(so.type));
   SolverSummary summary;
   Solve(so, backend, &x, nullptr, &summary);
   if (summary.status == SolverStatus::kFailure) throw Error(StrCat("the pose fit failed: ", summary.message));

@@ -39,7 +39,7 @@ void CheckLevelsFit(const Backend& backend, const VolumeGeometry& geometry, cons
   const int last = ho.sparse ? std::min(start + 1, ho.levels) : ho.levels;
   for (int level = start; level < last; ++level) {
     const LevelProblem problem{LevelShape(ho, geometry.num_shells(), level), geometry, nullptr, ho.residuals, false};
-    const MemoryEstimate e = backend.EstimateMemory(problem, RequiredVectors(ho.solver));
+    const MemoryEstimate e = backend.EstimateMemory(problem, RequiredVectors(ho.solver.type));
     // The host also holds the parameters and their resampled copy between levels.
     const int64_t host = 2 * problem.shape.ParamCount() * static_cast<int64_t>(sizeof(float));
     if (e.available > 0 && e.vectors + e.scratch + host > e.available) {

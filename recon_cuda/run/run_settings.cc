@@ -47,7 +47,6 @@ json RunSettings(const ReconstructOptions& o) {
          {"cost_tolerance", s.cost_tolerance},
          {"max_cg_iterations", s.max_cg_iterations},
          {"cg_exit_ratio", s.cg_exit_ratio},
-         {"block_jacobi", s.block_jacobi},
          {"damping", s.damping},
          {"diagonal_floor", s.diagonal_floor},
          {"hold_at_bounds", s.hold_at_bounds},

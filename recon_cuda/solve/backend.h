@@ -201,10 +201,6 @@ class Backend {
   virtual void Xpby(VecId y, VecId x, double b) = 0;  // y = x + b y
   // z = r / max(d, floor): the Jacobi preconditioner (paper "Preconditioner").
   virtual void DivideClamped(VecId z, VecId r, VecId d, float floor) = 0;
-  // The block-Jacobi preconditioner (SolverOptions::block_jacobi): on every stored grid cell z =
-  // its 4 x 4 block's solve (param_ops.h SolveCellBlock: diagonal d, couplings `cross` from
-  // Linearize, `free` the iteration's free parameters), z = r / max(d, floor) elsewhere.
-  virtual void BlockPrecondition(VecId z, VecId r, VecId d, VecId cross, VecId free, float floor) = 0;
   // y += a (d .* x): Levenberg-Marquardt damping with the diagonal d.
   virtual void AxpyDiag(VecId y, double a, VecId d, VecId x) = 0;
   // Deterministic (independent of the thread count) in double.
@@ -250,10 +246,8 @@ class Backend {
   // g and diag: outputs, or kNoVector to skip (Adam needs no diagonal). subset: the rays whose
   // cost PassStats::subset_cost sums. jtj: the rays MultiplyJtJ multiplies until the next
   // Linearize (subsampled Gauss-Newton; the CPU backend records only their partials).
-  // cross: with diag, also each grid cell's colour-density entries of J^T J (jacobian.h
-  // AddCrossFromRow) in the cell's entries 0 .. 2; every other entry 0. kNoVector: not wanted.
   virtual PassStats Linearize(VecId x, uint32_t seed, VecId g, VecId diag, RaySubset subset = {},
-                              RaySubset jtj = {}, VecId cross = kNoVector) = 0;
+                              RaySubset jtj = {}) = 0;
   // out = J_S^T J_S p, J_S the rows of the last Linearize's jtj rays at its x and seed (x must not
   // have changed since); not scaled to all rays.
   virtual PassStats MultiplyJtJ(VecId p, VecId out) = 0;

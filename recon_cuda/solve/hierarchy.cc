@@ -61,14 +61,14 @@ std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geomet
     problem.jtj_ray_stride = o.solver.jtj_ray_stride;
     problem.start = x;
     if (o.stop_when_out_of_memory && level > 0) {
-      h.memory = backend->EstimateMemory(problem, RequiredVectors(o.solver));
+      h.memory = backend->EstimateMemory(problem, RequiredVectors(o.solver.type));
       if (!h.memory.Fits()) {
         if (cb.out_of_memory) cb.out_of_memory(h);
         x = std::move(fitted);
         break;
       }
     }
-    h.memory = backend->SetLevel(problem, RequiredVectors(o.solver));
+    h.memory = backend->SetLevel(problem, RequiredVectors(o.solver.type));
     h.solver = o.solver;
     h.solver.max_iterations = o.IterationsAt(level);
     h.solver.seed = Hash(o.init.seed, static_cast<uint32_t>(level), 0x1e7e1u);

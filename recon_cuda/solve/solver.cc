@@ -17,8 +17,6 @@ namespace {
 // read again in the iteration), its preconditioned residual z lives in kAp between J^T J p's
 // (A p is spent once the residual and step have it), and the line search's trial point in kAp too.
 enum : VecId { kX, kG, kDiag, kStep, kDir, kAp, kFree, kGnVectors };
-// With SolverOptions::block_jacobi: the cells' cross terms (backend.h Linearize), one vector more.
-constexpr VecId kCross = kGnVectors;
 constexpr VecId kResidual = kG, kZ = kAp, kTrial = kAp;
 // Adam reuses kX and kG; its moments and free mask live in three more.
 enum : VecId { kAdamM = 2, kAdamV = 3, kAdamFree = 4, kAdamVectors = 5 };
@@ -57,10 +55,6 @@ const char* StatusName(SolverStatus s) {
 
 int RequiredVectors(SolverType type) {
   return type == SolverType::kGaussNewton ? static_cast<int>(kGnVectors) : static_cast<int>(kAdamVectors);
-}
-
-int RequiredVectors(const SolverOptions& o) {
-  return RequiredVectors(o.type) + (o.type == SolverType::kGaussNewton && o.block_jacobi ? 1 : 0);
 }
 
 SolverVectors VectorsOf(SolverType type) {
@@ -205,13 +199,8 @@ int SolvePcg(const SolverOptions& o, Backend* b, const SmoothnessWeights& w, Sol
   b->Axpy(kResidual, -2.0, kG);  // r0 = b - A 0 = -g, in g's own vector (g - 2 g: exact)
   const double floor = std::max(o.diagonal_floor * b->MaxAbsVolume(kDiag), 1e-30);
   const bool poses = b->level().shape.poses > 0;
-  // z = M^-1 r: Jacobi, or each cell's 4 x 4 block (block_jacobi); the photos' pose blocks.
-  const auto precondition = [&] {
-    if (o.block_jacobi) b->BlockPrecondition(kZ, kResidual, kDiag, kCross, kFree, static_cast<float>(floor));
-    else b->DivideClamped(kZ, kResidual, kDiag, static_cast<float>(floor));
-    if (poses) b->PreconditionPoses(kZ, kResidual, kDiag, kFree, static_cast<float>(floor));
-  };
-  precondition();
+  b->DivideClamped(kZ, kResidual, kDiag, static_cast<float>(floor));
+  if (poses) b->PreconditionPoses(kZ, kResidual, kDiag, kFree, static_cast<float>(floor));
   b->Copy(kDir, kZ);
   double rz = b->Dot(kResidual, kZ);
   double r_prev = b->Dot(kResidual, kResidual);
@@ -233,7 +222,8 @@ int SolvePcg(const SolverOptions& o, Backend* b, const SmoothnessWeights& w, Sol
     const double r = b->Dot(kResidual, kResidual);
     if (r < o.cg_relative_tolerance * r0 || r / r_prev > o.cg_exit_ratio || k == o.max_cg_iterations) break;
     r_prev = r;
-    precondition();
+    b->DivideClamped(kZ, kResidual, kDiag, static_cast<float>(floor));
+    if (poses) b->PreconditionPoses(kZ, kResidual, kDiag, kFree, static_cast<float>(floor));
     const double rz_next = b->Dot(kResidual, kZ);
     b->Xpby(kDir, kZ, rz_next / rz);
     rz = rz_next;
@@ -278,8 +268,7 @@ void Solve(const SolverOptions& o, Backend* b, std::vector<float>* x, const Iter
     // Subsampled Gauss-Newton: J^T J p on every jtj_ray_stride-th ray, a different share each iteration.
     const RaySubset jtj{o.jtj_ray_stride, it % o.jtj_ray_stride};
     PassStats lin =
-        b->Linearize(kX, seed, kG, o.type == SolverType::kGaussNewton ? kDiag : kNoVector, ls_subset, jtj,
-                     o.type == SolverType::kGaussNewton && o.block_jacobi ? kCross : kNoVector);
+        b->Linearize(kX, seed, kG, o.type == SolverType::kGaussNewton ? kDiag : kNoVector, ls_subset, jtj);
     ++summary->linearize_passes;
     if (o.type == SolverType::kGaussNewton) {
       if (it == 0) summary->smoothness = CalibrateSmoothness(o, b);

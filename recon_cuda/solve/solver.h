@@ -53,10 +53,6 @@ struct SolverOptions {
   double cg_relative_tolerance = 1e-10;  // or when |r|^2 < this |r_0|^2
   // Levenberg-Marquardt style damping: solves (J^T J + damping D) d = -g. 0: plain Gauss-Newton.
   double damping = 0.0;
-  // PCG's preconditioner: each grid cell's 4 x 4 block of J^T J (its colours and density, coupled
-  // through the density's effect on the colours it weighs; param_ops.h SolveCellBlock) instead of
-  // the diagonal alone (Jacobi, the paper's). One parameter vector more. Off by default.
-  bool block_jacobi = false;
   // Preconditioner floor relative to the largest diagonal entry: guards parameters no ray reaches
   // and holds back barely constrained ones, which otherwise overshoot (docs/tuning.md "Solver").
   double diagonal_floor = 1e-4;
@@ -163,8 +159,6 @@ void Solve(const SolverOptions& options, Backend* backend, std::vector<float>* x
            SolverSummary* summary);
 
 int RequiredVectors(SolverType type);
-// The vectors Solve needs with these options (block_jacobi: one more).
-int RequiredVectors(const SolverOptions& options);
 
 // Where Solve keeps its state among the backend's first RequiredVectors(type) vectors.
 struct SolverVectors {

@@ -73,44 +73,6 @@ TEST(CpuBackendTest, LinearizeMatchesTheDenseJacobian) {
   }
 }
 
-// The block-Jacobi preconditioner's couplings (backend.h Linearize's `cross`): every cell's J^T J
-// entries (colour c, density) as the dense Jacobian has them, with the photos' exposures (their
-// gains scale the colour rows) and the robust loss; 0 in every other entry. With SH bands too (the
-// bands are left to Jacobi).
-TEST(CpuBackendTest, CrossTermsAreTheCellBlocksOfTheDenseJacobian) {
-  TinyProblem plain(5), photos(6);
-  photos.AddSh(1, 7);
-  photos.AddExposures(8);
-  for (const bool with_photos : {false, true}) {
-    SCOPED_TRACE(with_photos ? "bands, exposures, robust loss" : "plain");
-    const TinyProblem& p = with_photos ? photos : plain;
-    LevelProblem level = p.Level();
-    if (with_photos) level.residuals.robust_scale = 0.2f;
-    auto b = Cpu(2);
-    b->SetLevel(level, kVectors);
-    b->Upload(kX, p.x);
-    b->Linearize(kX, 13, kG, kD, RaySubset{}, RaySubset{}, kOut);
-    std::vector<float> cross(p.shape.ParamCount());
-    b->Download(kOut, cross);
-    const DenseJacobian j(p, p.x, 13, 0.1, true, true, with_photos ? 0.2 : 0.0);
-    std::vector<double> want(cross.size(), 0.0);
-    for (int64_t cell = 0; cell < p.shape.StoredCells(); ++cell) {
-      for (int c = 0; c < 3; ++c) want[GridParam(cell, c)] = j.JtJ(GridParam(cell, c), GridParam(cell, 3));
-    }
-    ExpectClose(cross, want, "the cells' colour-density entries of J^T J");
-    // Linearize without it leaves the vector alone, and the diagonal is the same either way.
-    std::vector<float> d_with(cross.size()), d_without(cross.size());
-    b->Download(kD, d_with);
-    b->Fill(kOut, 5.f);
-    b->Linearize(kX, 13, kG, kD);
-    b->Download(kD, d_without);
-    EXPECT_EQ(d_with, d_without);
-    std::vector<float> untouched(cross.size());
-    b->Download(kOut, untouched);
-    EXPECT_EQ(untouched, std::vector<float>(cross.size(), 5.f));
-  }
-}
-
 // Rays with the photos' alpha: the fourth residual is w ((1 - T_box) - alpha) with w =
 // alpha_weight, not lambda (ray_math.h AuxResidual); Linearize and J^T J p against the dense
 // Jacobian of that residual.

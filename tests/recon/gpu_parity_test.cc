@@ -782,31 +782,6 @@ TEST_F(GpuParityTest, RecordedJtJpEqualsTheRecomputedOne) {
   EXPECT_LT(with.final_cost, 0.8 * with.initial_cost);
 }
 
-// The block-Jacobi preconditioner (SolverOptions::block_jacobi): Linearize's cross terms and the
-// preconditioner's step on the device equal the CPU's, on a dense and a sparse level with bands.
-TEST_F(GpuParityTest, BlockJacobiCrossTermsAndStep) {
-  TinyProblem dense = Problem(62);
-  TinyProblem banded(63, 16, 4, 6, 24, 18);
-  QuantiseColours(&banded.rays);
-  banded.AddSh(1, 64);
-  const test::SparseVersion s(banded, {1, 1, 0, 0, 1, 0, 1, 0});
-  enum : VecId { kCrossV = kVectors, kFreeV, kZ };
-  for (const auto& [level, x] : {std::pair{dense.Level(), dense.x}, std::pair{s.level, s.x}}) {
-    SCOPED_TRACE(level.shape.sparse() ? "sparse with bands" : "dense");
-    SetLevel(level, x, kVectors + 3);
-    std::vector<float> free(level.shape.ParamCount(), 1.f);
-    for (size_t i = 3; i < free.size(); i += 12) free[i] = 0.f;  // every third cell's density held
-    for (Backend* b : {cpu.get(), gpu.get()}) {
-      b->Linearize(kX, 9, kG, kD, RaySubset{}, RaySubset{}, kCrossV);
-      b->Upload(kFreeV, free);
-      b->Multiply(kG, kFreeV);
-      b->BlockPrecondition(kZ, kG, kD, kCrossV, kFreeV, 1e-4f * static_cast<float>(b->MaxAbsVolume(kD)));
-    }
-    ExpectClose(Get(gpu.get(), kCrossV), Get(cpu.get(), kCrossV), "the cells' cross terms");
-    test::ExpectAllClose(Get(gpu.get(), kZ), Get(cpu.get(), kZ), 1e-3, 1e-3, "the block-Jacobi step");
-  }
-}
-
 // A record that does not fit the device memory the level leaves (CudaBackendOptions::max_memory
 // here) keeps the rays that find room and recomputes the others, and the level's estimate says
 // so (jacobian_wanted: what a whole record would take; the level's log line names both). The

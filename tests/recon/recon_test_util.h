@@ -287,12 +287,6 @@ struct DenseJacobian {
   }
 
   std::vector<double> Jtr() const { return Jtu(residuals); }
-  // The entry (a, b) of J^T J.
-  double JtJ(int64_t a, int64_t b) const {
-    double sum = 0;
-    for (const std::vector<double>& row : rows) sum += row[a] * row[b];
-    return sum;
-  }
   std::vector<double> Jtu(const std::vector<double>& u) const {
     std::vector<double> g(rows[0].size(), 0.0);
     for (size_t r = 0; r < rows.size(); ++r)

@@ -93,19 +93,16 @@ TEST(SolverVectorsTest, ParamsStepAndScratchAreDistinct) {
   }
 }
 
-// The same with the block-Jacobi preconditioner (SolverOptions::block_jacobi): another path to the
-// same solution.
 TEST(SolverBoundsTest, StepSolvesTheFreeParametersSystem) {
   const TinyProblem p = AtBounds(11);
   const int64_t n = p.shape.ParamCount();
   const DenseJacobian j(p, p.x, 0, 0.1, false);
   const std::vector<double> g = j.Jtr();
-  for (const auto [hold, block] : {std::pair{true, false}, std::pair{false, false}, std::pair{true, true}}) {
-    SCOPED_TRACE(testing::Message() << (hold ? "hold at bounds" : "plain projected GN") << (block ? ", block Jacobi" : ""));
+  for (const bool hold : {true, false}) {
+    SCOPED_TRACE(hold ? "hold at bounds" : "plain projected GN");
     auto b = MakeCpuBackend({});
+    b->SetLevel(Fixed(p), RequiredVectors(SolverType::kGaussNewton));
     SolverOptions o;
-    o.block_jacobi = block;
-    b->SetLevel(Fixed(p), RequiredVectors(o));
     o.max_iterations = 1;
     o.max_cg_iterations = 400;
     o.cg_exit_ratio = std::numeric_limits<double>::infinity();
@@ -154,57 +151,6 @@ TEST(SolverBoundsTest, StepSolvesTheFreeParametersSystem) {
       EXPECT_GT(moved, 10);
     }
   }
-}
-
-// One cell's block-Jacobi step (param_ops.h SolveCellBlock) solves its 4 x 4 block B z = r, B
-// built as J^T J is (outer products of rows whose colour c entry pairs with a density entry) plus a
-// diagonal; a held density, or a held colour, leaves that coupling out; a block that the floor
-// makes near-singular in float falls back to the Jacobi step.
-TEST(SolveCellBlockTest, SolvesTheCellsBlock) {
-  std::mt19937 rng(3);
-  std::normal_distribution<float> nd;
-  for (int trial = 0; trial < 50; ++trial) {
-    double B[4][4] = {};
-    for (int row = 0; row < 6; ++row) {  // a colour row (dc at c, ds at sigma) or the opacity row
-      const int c = row % 4;
-      double v[4] = {};
-      if (c < 3) v[c] = nd(rng);
-      v[3] = nd(rng);
-      for (int a = 0; a < 4; ++a)
-        for (int k = 0; k < 4; ++k) B[a][k] += v[a] * v[k];
-    }
-    float d[4], b[3], r[4], z[4];
-    const float free[4] = {1, 1, 1, 1};
-    for (int a = 0; a < 4; ++a) {
-      B[a][a] += 0.1;
-      d[a] = static_cast<float>(B[a][a]);
-      r[a] = nd(rng);
-    }
-    for (int c = 0; c < 3; ++c) b[c] = static_cast<float>(B[c][3]);
-    SolveCellBlock(d, b, r, free, 1e-6f, z);
-    for (int a = 0; a < 4; ++a) {
-      double bz = 0;
-      for (int k = 0; k < 4; ++k) bz += B[a][k] * z[k];
-      ASSERT_NEAR(bz, r[a], 1e-3 * (1 + std::abs(r[a]))) << "trial " << trial << " row " << a;
-    }
-    // A held density: every colour on its own diagonal (Jacobi), the density's r (0 when held) too.
-    const float held_sigma[4] = {1, 1, 1, 0};
-    r[3] = 0;
-    SolveCellBlock(d, b, r, held_sigma, 1e-6f, z);
-    for (int a = 0; a < 4; ++a) EXPECT_FLOAT_EQ(z[a], r[a] / d[a]);
-    // A held colour (its r 0) keeps its 0 and its coupling out; the others still couple.
-    const float held_red[4] = {0, 1, 1, 1};
-    r[0] = 0;
-    r[3] = 1;
-    SolveCellBlock(d, b, r, held_red, 1e-6f, z);
-    EXPECT_EQ(z[0], 0.f);
-    EXPECT_NE(z[3], r[3] / d[3]);
-  }
-  // A singular block (colour and density rows identical): the Jacobi step.
-  const float d[4] = {1, 1, 1, 3}, b[3] = {1, 1, 1}, r[4] = {1, 2, 3, 4}, free[4] = {1, 1, 1, 1};
-  float z[4];
-  SolveCellBlock(d, b, r, free, 1e-6f, z);
-  for (int a = 0; a < 4; ++a) EXPECT_FLOAT_EQ(z[a], r[a] / d[a]);
 }
 
 // Fixed shells are constants for both solvers: bit-identical after the solve, while the grid
