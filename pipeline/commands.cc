@@ -2,10 +2,13 @@
 #include "pipeline/commands.h"
 
 #include <CLI/CLI.hpp>
+#include <cmath>
 #include <csignal>
 #include <iostream>
 #include "common/errors.h"
 #include "common/inputs.h"
+#include "common/owned_files.h"
+#include "export/export_set.h"
 #include "common/system_memory.h"
 #include "pipeline/cli_choice.h"
 #include "recon_cuda/core/render_rule.h"
@@ -34,9 +37,30 @@ std::unique_ptr<WorkspaceLock> LockWorkspace(const std::filesystem::path& worksp
   std::error_code ec;
   if (!create && !std::filesystem::is_directory(workspace, ec)) return nullptr;
   auto lock = std::make_unique<WorkspaceLock>(workspace, command);
-  ProtectRecordedInputs(workspace);  // before anything is swept, written, moved or removed
-  SweepStaleTemporaries(workspace);
+  // Before anything is swept, written, moved or removed: what PERF made here, and the inputs.
+  UseOwnershipRecord(workspace);
+  ProtectRecordedInputs(workspace);
+  SweepOwnedTemporaries();
+  exporter::FinishStagedExport(workspace);
   return lock;
+}
+
+void RemoveNewWorkspaceOnFailure(const WorkspaceLock* lock, const std::filesystem::path& workspace,
+                                 bool any_failure, const std::function<void()>& body) {
+  const auto remove = [&] {
+    if (lock == nullptr || !lock->created_workspace()) return;
+    std::error_code ec;
+    std::filesystem::remove_all(workspace, ec);  // made by this command, under its lock: all of it is ours
+  };
+  try {
+    body();
+  } catch (const InputError&) {
+    remove();
+    throw;
+  } catch (...) {
+    if (any_failure) remove();
+    throw;
+  }
 }
 
 namespace {
@@ -76,7 +100,8 @@ void AddShDegreeOption(CLI::App* cmd, int* sh_degree, const std::string& default
   CLI::Option* option = cmd->add_option(
       "--sh-degree", *sh_degree,
       "View-dependent colour: spherical harmonics of degree 1 (3 more values per channel and cell) or 2 (8 more) "
-      "beyond each cell's colour; 0: none");
+      "beyond each cell's colour; 0: none")
+      ->check(CLI::Range(0, 2));
   if (default_text.empty()) {
     option->capture_default_str();
   } else {
@@ -129,6 +154,20 @@ std::unique_ptr<viewer::LiveView> StartLiveView(bool view, bool root, viewer::Vi
             << live->port() << ":127.0.0.1:" << live->port() << " THIS_HOST)\n"
             << std::flush;
   return live;
+}
+
+void RefuseNotANumber(CLI::App& app) {
+  const CLI::Validator not_nan(
+      [](std::string& v) -> std::string {
+        double d = 0;
+        return CLI::detail::lexical_cast(v, d) && std::isnan(d) ? StrCat(v, " is not a number") : std::string();
+      },
+      "");
+  for (CLI::App* sub : app.get_subcommands([](CLI::App*) { return true; })) {
+    for (CLI::Option* option : sub->get_options()) {
+      if (option->get_type_name().rfind("FLOAT", 0) == 0) option->check(not_nan);
+    }
+  }
 }
 
 void AddMinBoxOpacityOption(CLI::App* cmd, float* min_box_opacity, const std::string& use) {

@@ -4,6 +4,7 @@
 
 #include <atomic>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -42,6 +43,12 @@ void AddThreadsOption(CLI::App* cmd, int* threads, int all_cores);
 std::unique_ptr<WorkspaceLock> LockWorkspace(const std::filesystem::path& workspace, std::string_view command,
                                              bool create = false);
 
+// Runs `body` with `lock` held (may be null: another rank's). When it throws and the lock made the
+// workspace folder, the folder goes with it: after any failure (`any_failure`), or only when the
+// command refused its input (InputError: nothing of use was made; a failed COLMAP step keeps its log).
+void RemoveNewWorkspaceOnFailure(const WorkspaceLock* lock, const std::filesystem::path& workspace,
+                                 bool any_failure, const std::function<void()>& body);
+
 // Ctrl-C while one lives: the first sets StopRequested() (the command stops at its next safe
 // point and says how to resume, exit 130); the second kills as usual.
 class StopOnCtrlC {
@@ -79,6 +86,11 @@ void AddLiveViewOptions(CLI::App* cmd, bool* view, int* port, std::string* image
 // serving, at stage `command`, and its URL and ssh -L line printed.
 std::unique_ptr<viewer::LiveView> StartLiveView(bool view, bool root, viewer::ViewOptions options,
                                                 const std::filesystem::path& workspace, const std::string& command);
+
+// Every floating-point option of every subcommand of `app` refuses NaN (CLI11's ranges let it
+// through, and a NaN passes every `<` check after them): exit 2 naming the option. Call once the
+// commands are added.
+void RefuseNotANumber(CLI::App& app);
 
 // --min-box-opacity: the render rule (recon_cuda/core/render_rule.h) for what `use` names.
 void AddMinBoxOpacityOption(CLI::App* cmd, float* min_box_opacity, const std::string& use);

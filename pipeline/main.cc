@@ -48,6 +48,7 @@ int main(int argc, char** argv) {
   perf::AddEvalCommand(app);
   perf::AddRunCommand(app);
   perf::AddViewCommand(app);
+  perf::RefuseNotANumber(app);
   // Exit codes (README "Safety"): 0 ok, 1 internal error (a bug), 2 bad input (a file, field or
   // option named in the message; also a workspace another perf command holds), 3 file system
   // (cannot read or write, disk full), 4 the work itself failed (e.g. the solver diverged),

@@ -10,6 +10,7 @@
 #include <array>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <random>
 #include <string>
@@ -67,7 +68,12 @@ inline CommandResult RunCommand(const std::string& cmd) {
   return r;
 }
 
-inline std::string PerfBinary() { return std::string(PERF_BINARY_DIR) + "/perf"; }
+// The perf binary under test: this build's, or PERF_TEST_BINARY's (e.g. an older build, to check
+// that a new test fails there).
+inline std::string PerfBinary() {
+  const char* other = std::getenv("PERF_TEST_BINARY");
+  return other != nullptr && *other != 0 ? std::string(other) : std::string(PERF_BINARY_DIR) + "/perf";
+}
 
 // Starts `command` (a shell command line, its output discarded) in the background; stops it with
 // `sig` `delay_ms` after `sign` exists (or after 5 minutes without it), and returns its wait status.
