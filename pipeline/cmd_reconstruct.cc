@@ -237,7 +237,9 @@ void AddRenderCommand(CLI::App& app) {
                   "Which photos: test, train or all (all includes those left out for a wrong-looking pose)");
   cmd->add_option("--view", o.names, "Only this image (a scene.json name); repeatable");
   cmd->add_option("--checkpoint", args->checkpoint, "Checkpoint to render (default: the last level in WORKSPACE/recon)");
-  cmd->add_option("-o,--out", args->out, "Output folder (default: WORKSPACE/renders)");
+  cmd->add_option("-o,--out", args->out,
+                  "Output folder (default: WORKSPACE/renders); a file already there is replaced only if it is a render "
+                  "PERF wrote");
   AddMinBoxOpacityOption(cmd, &o.min_box_opacity, "Renders");
   cmd->add_flag("--opacity", o.write_opacity, "Also write <name>_opacity.png, the box opacity 1 - T (16-bit)");
   AddDeviceOptions(cmd, &o.device, &o.threads);

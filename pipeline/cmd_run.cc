@@ -57,7 +57,7 @@ void AddRunCommand(CLI::App& app) {
                      "it stays up after the run until Ctrl-C");
   cmd->add_option("--log-level", args->log_level, "info (progress and summary) or quiet (errors only)")
       ->capture_default_str();
-  cmd->add_option("--log-json", args->log_json, "Append JSON lines of stage events to this file (for scripts)");
+  cmd->add_option("--log-json", args->log_json, "Append JSON lines of stage events to this file (for scripts): a new file, or one PERF started");
   cmd->callback([args]() {
     RunOptions& o = args->o;
     o.images = args->images;

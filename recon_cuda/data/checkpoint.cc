@@ -10,6 +10,7 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
+#include "common/world_range.h"
 
 namespace perf::recon {
 namespace {
@@ -23,9 +24,6 @@ constexpr uint32_t kHeaderBytesV2 = kHeaderBytesV1 + 8;  // + the brick count
 constexpr uint32_t kHeaderBytesV3 = kHeaderBytesV2 + 8;  // + the exposure count and SH degree
 constexpr uint32_t kHeaderBytes = kHeaderBytesV3 + 8;    // + the refined poses' count and 4 zero bytes (version 4)
 constexpr int64_t kMaxExposures = 1 << 20;
-// The placement's sane range: a box side from a micrometre in metres to a million km, the shells
-// within it; beyond it the exports' transforms overflow or vanish.
-constexpr double kMinBoxSide = 1e-6, kMaxWorldSpan = 1e9;
 
 // Whether the row-major 3x3 `r` is a rotation: R^T R = I and det R = 1, within float rounding.
 bool IsRotation(const double (&r)[9]) {
