@@ -12,6 +12,9 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <map>
 #include <random>
 #include <string>
 #include <thread>
@@ -66,6 +69,17 @@ inline CommandResult RunCommand(const std::string& cmd) {
   const int status = ::pclose(pipe);
   r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   return r;
+}
+
+// Every regular file under `dir` (recursively) with its bytes: a snapshot to compare after a command.
+inline std::map<std::filesystem::path, std::string> FilesUnder(const std::filesystem::path& dir) {
+  std::map<std::filesystem::path, std::string> files;
+  for (const auto& e : std::filesystem::recursive_directory_iterator(dir)) {
+    if (!e.is_regular_file()) continue;
+    std::ifstream in(e.path(), std::ios::binary);
+    files[e.path()] = std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  return files;
 }
 
 // The perf binary under test: this build's, or PERF_TEST_BINARY's (e.g. an older build, to check

@@ -6,7 +6,6 @@
 #include <sys/stat.h>
 
 #include <fstream>
-#include <map>
 #include <nlohmann/json.hpp>
 
 #include "common/atomic_file.h"
@@ -20,14 +19,6 @@ namespace fs = std::filesystem;
 using test::RunCommand;
 
 std::string Perf(const std::string& args) { return "timeout 120 " + test::PerfBinary() + " " + args; }
-
-std::map<fs::path, std::string> Snapshot(const fs::path& dir) {
-  std::map<fs::path, std::string> files;
-  for (const auto& e : fs::recursive_directory_iterator(dir)) {
-    if (e.is_regular_file()) files[e.path()] = ReadFileToString(e.path());
-  }
-  return files;
-}
 
 void ExpectRefusedNaming(const test::CommandResult& r, const fs::path& file) {
   EXPECT_EQ(r.exit_code, 2) << r.output;
@@ -66,12 +57,12 @@ TEST(OwnershipCliPlain, APhotoNamedLikeATemporaryInALaidOverWorkspaceStays) {
 TEST_F(OwnershipCli, RenderIntoThePhotosWithoutAnInputRecordIsRefused) {
   ASSERT_EQ(Reconstruct().exit_code, 0);
   fs::remove(ws_ / "inputs.json");
-  const auto photos = Snapshot(dir_ / "images");
+  const auto photos = test::FilesUnder(dir_ / "images");
   const auto r = RunCommand(Perf("render -q " + ws_.string() + " --split all -o " + (dir_ / "images").string()));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find((dir_ / "images").string()), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("choose another path"), std::string::npos) << r.output;
-  EXPECT_TRUE(Snapshot(dir_ / "images") == photos) << "a photo was written over";
+  EXPECT_TRUE(test::FilesUnder(dir_ / "images") == photos) << "a photo was written over";
   // A render into a new folder works, and again over its own renders.
   for (int k = 0; k < 2; ++k) {
     const auto again = RunCommand(Perf("render -q " + ws_.string() + " -o " + (dir_ / "renders").string()));
