@@ -20,6 +20,11 @@ namespace perf {
 class LogFile {
  public:
   LogFile() = default;  // writes nothing
+  ~LogFile() {
+    if (fd_.valid()) RecordLogWritten(path_, fd_.get());
+  }
+  LogFile(LogFile&&) = default;
+  LogFile& operator=(LogFile&&) = default;
   // Appends to `path`, or starts it afresh (append false). `what` names the log in errors.
   LogFile(const std::filesystem::path& path, bool append, std::string what) : path_(path), what_(std::move(what)) {
     CheckNotInput(path, "the " + what_);

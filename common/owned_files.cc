@@ -49,15 +49,20 @@ Entry EntryOf(Kind kind, const struct stat& st) {
   return Entry{kind, st.st_dev, st.st_ino, static_cast<int64_t>(st.st_size), MtimeNs(st), ::getpid()};
 }
 
-// Whether `st` (a path's lstat) is the thing `e` recorded.
+// Whether `st` (a path's lstat) is the thing `e` recorded. A finished file is known by its size
+// and modification time to the nanosecond, which a copy of the workspace keeps (cp -a, rsync -a)
+// and an edit does not; a log also by its inode while PERF appends to it; a folder or a
+// temporary by its inode alone.
 bool Matches(const Entry& e, const struct stat& st) {
-  if (e.dev != st.st_dev || e.ino != st.st_ino || S_ISLNK(st.st_mode)) return false;
+  if (S_ISLNK(st.st_mode)) return false;
+  const bool same_inode = e.dev == st.st_dev && e.ino == st.st_ino;
+  const bool same_content = e.size == st.st_size && e.mtime_ns == MtimeNs(st);
   switch (e.kind) {
-    case Kind::kFile: return S_ISREG(st.st_mode) && e.size == st.st_size && e.mtime_ns == MtimeNs(st);
-    case Kind::kLog: return S_ISREG(st.st_mode);
+    case Kind::kFile: return S_ISREG(st.st_mode) && same_content;
+    case Kind::kLog: return S_ISREG(st.st_mode) && (same_inode || same_content);
     case Kind::kFolder:
-    case Kind::kWork: return S_ISDIR(st.st_mode);
-    case Kind::kTemp: return S_ISREG(st.st_mode) || S_ISDIR(st.st_mode);
+    case Kind::kWork: return S_ISDIR(st.st_mode) && same_inode;
+    case Kind::kTemp: return (S_ISREG(st.st_mode) || S_ISDIR(st.st_mode)) && same_inode;
   }
   return false;
 }
@@ -360,6 +365,13 @@ UniqueFd OpenLog(const fs::path& path, bool append, std::string_view what) {
   }
   if (Record* r = Installed().get(); r != nullptr && !r->Find(path, st)) r->Add(path, EntryOf(Kind::kLog, st));
   return fd;
+}
+
+void RecordLogWritten(const fs::path& path, int fd) {
+  Record* r = Installed().get();
+  struct stat st {};
+  if (r == nullptr || ::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) return;
+  r->Add(path, EntryOf(Kind::kLog, st));
 }
 
 int SweepOwnedTemporaries() {

@@ -1,6 +1,7 @@
 // PERF changes only what PERF made (DESIGN.md "Safety"). Every file or folder PERF creates for a
 // workspace is written to the workspace's journal, WORKSPACE/.perf/owned.jsonl, with its identity
-// (device and inode; for a finished file also its size and modification time) before it can matter;
+// (a finished file: its size and modification time to the nanosecond, which a copy of the workspace
+// keeps; a log, folder or temporary: also its device and inode) before it can matter;
 // PERF replaces, appends to, moves or removes a path only when the journal names that path with
 // the very file that is there now. Anything else in the way (a user's file, a planted link, the
 // output of an older PERF that kept no journal, a file changed since) is "not ours": refused by
@@ -72,6 +73,9 @@ bool RemoveOwnedTree(const std::filesystem::path& dir);
 // Opens a log for appending (append true) or afresh, without following a link at `path`: a new
 // file is made (O_EXCL) and journalled; an existing one must be ours, else InputError naming it.
 UniqueFd OpenLog(const std::filesystem::path& path, bool append, std::string_view what);
+// A log's size and time once PERF is done writing it (open as `fd`), so that a copy of the
+// workspace still knows it as PERF's (best effort; a killed run leaves its inode only).
+void RecordLogWritten(const std::filesystem::path& path, int fd);
 
 // Removes the temporaries the record lists whose process has ended, if the path still holds the
 // temporary that process made; then rewrites the journal without entries that name nothing any

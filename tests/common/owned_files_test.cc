@@ -8,9 +8,11 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cstdlib>
 #include <fstream>
 
 #include "common/atomic_file.h"
+#include "common/log_file.h"
 #include "common/errors.h"
 #include "tests/test_util.h"
 
@@ -21,10 +23,13 @@ namespace fs = std::filesystem;
 
 class OwnedFiles : public ::testing::Test {
  protected:
-  void SetUp() override { UseOwnershipRecord(ws_); }
+  void SetUp() override {
+    fs::create_directories(ws_);
+    UseOwnershipRecord(ws_);
+  }
   void TearDown() override { DropOwnershipRecord(); }
   test::TempDir dir_;
-  fs::path ws_ = dir_.path();
+  fs::path ws_ = dir_ / "ws";
 };
 
 TEST_F(OwnedFiles, OnlyWhatPerfWroteIsReplaced) {
@@ -69,6 +74,21 @@ TEST_F(OwnedFiles, TheRecordOutlivesTheProcess) {
   UseOwnershipRecord(other);
   EXPECT_FALSE(IsOwned(other / "scene.json"));
   EXPECT_THROW(WriteFileAtomically(other / "scene.json", "{}"), InputError);
+}
+
+// A copy of the workspace (cp -a keeps sizes and times, not inodes) is still PERF's to replace:
+// its finished files, and a log PERF had closed.
+TEST_F(OwnedFiles, ACopyOfTheWorkspaceStaysPerfs) {
+  WriteFileAtomically(ws_ / "export.json", "{}");
+  { LogFile log(ws_ / "log.jsonl", true, "log"); log.Write("a\n"); }
+  DropOwnershipRecord();
+  const fs::path copy = dir_ / "copy";
+  ASSERT_EQ(std::system(("cp -a " + ws_.string() + "/. " + copy.string()).c_str()), 0);
+  UseOwnershipRecord(copy);
+  EXPECT_TRUE(IsOwned(copy / "export.json"));
+  EXPECT_TRUE(IsOwned(copy / "log.jsonl"));
+  std::ofstream(copy / "export.json", std::ios::app) << " ";  // edited in the copy: not PERF's any more
+  EXPECT_FALSE(IsOwned(copy / "export.json"));
 }
 
 TEST_F(OwnedFiles, LogsNeverFollowALinkNorAppendToAUsersFile) {
