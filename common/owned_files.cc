@@ -265,7 +265,7 @@ void CheckReplaceable(const fs::path& target, std::string_view what) {
   const auto st = Lstat(target);
   const char* kind = st && S_ISLNK(st->st_mode) ? "a symbolic link" : st && S_ISDIR(st->st_mode) ? "a folder" : "a file";
   throw InputError(target.string(), "", "",
-                   StrCat(what, " would replace ", kind, " that PERF did not write (or that changed since)"),
+                   StrCat(what, " would change ", kind, " that PERF did not write (or that changed since)"),
                    kNotOursHint);
 }
 
