@@ -6,11 +6,14 @@
 
 #include <atomic>
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <sstream>
+#include <vector>
 
 #include "common/errors.h"
+#include "common/owned_files.h"
 #include "common/unique_fd.h"
 
 namespace fs = std::filesystem;
@@ -38,10 +41,22 @@ void SyncDirectory(const fs::path& dir) {
   if (fd.valid()) ::fsync(fd.get());
 }
 
-// Moves the finished temporary into place unless the target is an input (the one place every
-// writer checks that), then syncs the folder.
+// For tests: PERF_TEST_FAIL_WRITE names a file (its name, e.g. mesh.obj) whose every write fails
+// as on a full disk, so that a failure part way through a stage can be reproduced.
+void FailIfTestSaysSo(const fs::path& target) {
+  static const char* const name = std::getenv("PERF_TEST_FAIL_WRITE");
+  if (name != nullptr && *name != 0 && target.filename() == name) {
+    throw IoError(target.string(), "writing failed: injected (PERF_TEST_FAIL_WRITE)", kDiskHint);
+  }
+}
+
+// Moves the finished temporary into place unless the target is an input or a file PERF did not
+// write (the one place every writer checks that), journalling it first, then syncs the folder.
 void Commit(const fs::path& tmp, const fs::path& target, Durability durability) {
+  FailIfTestSaysSo(target);
   CheckNotInput(target);
+  CheckReplaceable(target);
+  RecordOutput(target, tmp);
   std::error_code ec;
   fs::rename(tmp, target, ec);
   if (ec) {
@@ -63,6 +78,19 @@ void RemovingOnFailure(const fs::path& tmp, Body&& body) {
   }
 }
 
+// Makes the temporary for `target` (O_EXCL: never a file that was there) and journals it, so
+// that a sweep after a kill may remove it (owned_files.h). Checks first that the target may be
+// replaced, so that no work is done for an output that would be refused.
+UniqueFd CreateTemporary(const fs::path& target, fs::path* tmp) {
+  CheckNotInput(target);
+  CheckReplaceable(target);
+  *tmp = TempPathFor(target);
+  UniqueFd fd(::open(tmp->c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC | O_NOFOLLOW, 0644));
+  if (fd.get() < 0) throw IoError(target.string(), "cannot create the file: " + Errno(), kDiskHint);
+  RemovingOnFailure(*tmp, [&] { RecordTemporary(*tmp); });
+  return fd;
+}
+
 }  // namespace
 
 fs::path TempPathFor(const fs::path& target) {
@@ -73,9 +101,8 @@ fs::path TempPathFor(const fs::path& target) {
 }
 
 void WriteFileAtomically(const fs::path& target, std::string_view contents, Durability durability) {
-  const fs::path tmp = TempPathFor(target);
-  UniqueFd fd(::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644));
-  if (fd.get() < 0) throw IoError(target.string(), "cannot create the file: " + Errno(), kDiskHint);
+  fs::path tmp;
+  UniqueFd fd = CreateTemporary(target, &tmp);
   RemovingOnFailure(tmp, [&] {
     WriteAll(fd.get(), contents, target);
     if (durability == Durability::kDurable && ::fsync(fd.get()) != 0) {
@@ -96,7 +123,8 @@ void WriteStreamAtomically(const fs::path& target, const std::function<void(std:
 
 void WriteAtomically(const fs::path& target, const std::function<void(const fs::path&)>& write,
                      Durability durability) {
-  const fs::path tmp = TempPathFor(target);
+  fs::path tmp;
+  CreateTemporary(target, &tmp).Close();  // the library writes over the journalled empty file
   RemovingOnFailure(tmp, [&] {
     write(tmp);
     // What the library left must be a file whose data reached the file system.
@@ -112,7 +140,15 @@ void WriteAtomically(const fs::path& target, const std::function<void(const fs::
 
 void EnsureWritableDirectory(const fs::path& dir) {
   std::error_code ec;
-  fs::create_directories(dir, ec);
+  // Made one level at a time, each journalled (owned_files.h): PERF may remove it again once empty.
+  std::vector<fs::path> missing;
+  for (fs::path p = dir; !p.empty() && !fs::exists(p, ec); p = p.parent_path()) {
+    missing.push_back(p);
+    if (p == p.parent_path()) break;
+  }
+  for (auto it = missing.rbegin(); it != missing.rend() && !ec; ++it) {
+    if (fs::create_directory(*it, ec)) RecordFolder(*it);
+  }
   if (ec || !fs::is_directory(dir)) {
     throw IoError(dir.string(), "cannot create the folder: " + (ec ? ec.message() : "not a folder"),
                   "choose a writable location");
@@ -120,6 +156,21 @@ void EnsureWritableDirectory(const fs::path& dir) {
   if (::access(dir.c_str(), W_OK | X_OK) != 0) {
     throw IoError(dir.string(), "the folder is not writable", "choose a writable location or fix its permissions");
   }
+}
+
+void EnsureWorkFolder(const fs::path& dir) {
+  std::error_code ec;
+  if (fs::exists(dir, ec) || fs::is_symlink(dir, ec)) {
+    CheckReplaceable(dir, "using it as PERF's working folder");
+    EnsureWritableDirectory(dir);
+    return;
+  }
+  EnsureWritableDirectory(dir.parent_path().empty() ? fs::path(".") : dir.parent_path());
+  if (!fs::create_directory(dir, ec) || ec) {
+    throw IoError(dir.string(), "cannot create the folder: " + (ec ? ec.message() : "it appeared meanwhile"),
+                  "choose a writable location");
+  }
+  RecordWorkFolder(dir);
 }
 
 // Throws InputError naming `path` unless `st` (its status) is a regular file's.

@@ -5,7 +5,8 @@
 // temporary and throws IoError naming the final path.
 //
 // A user's inputs are read-only (DESIGN.md "Safety"): no atomic write may replace a file
-// registered with ProtectInput (inputs.h).
+// registered with ProtectInput (inputs.h), nor, once a command installed the workspace's record,
+// any file PERF did not write (owned_files.h); temporaries and new folders are journalled there.
 #pragma once
 
 #include <filesystem>
@@ -23,7 +24,8 @@ namespace perf {
 enum class Durability { kAtomic, kDurable };
 
 // A temporary path in the same directory as `target`, keeping its extension:
-// <stem>.tmp<pid>-<n><ext>. SweepStaleTemporaries (workspace_lock.h) recognises the pattern.
+// <stem>.tmp<pid>-<n><ext>. The name only helps a reader: the sweep removes a temporary because
+// the workspace's journal lists it (owned_files.h), never because of its name.
 std::filesystem::path TempPathFor(const std::filesystem::path& target);
 
 // Writes `contents` to `target` atomically (see above).
@@ -45,6 +47,10 @@ void WriteAtomically(const std::filesystem::path& target,
 // Creates `dir` (and parents) if needed and checks that files can be created in it; throws
 // IoError naming the directory and what to do otherwise.
 void EnsureWritableDirectory(const std::filesystem::path& dir);
+
+// EnsureWritableDirectory for a folder PERF gives to a program it runs (COLMAP's): made here and
+// journalled as PERF's as a whole, or one that already is; InputError naming it otherwise.
+void EnsureWorkFolder(const std::filesystem::path& dir);
 
 // Throws InputError naming `path` unless it is a regular file (or a link to one): a reader given
 // a FIFO would wait forever and one given a device would read without end. IoError if missing.

@@ -25,8 +25,9 @@ namespace fs = std::filesystem;
 namespace perf {
 namespace {
 
-// Owns a spawned child until it has been reaped, so an exception while reading its output
-// never leaves a stray process running.
+// Owns a spawned child, the leader of its own process group, until it has been reaped, so an
+// exception while reading its output never leaves a stray process running; the child's own
+// children (a tool's helpers, a shell's commands) are in its group and end with it.
 class ChildGuard {
  public:
   explicit ChildGuard(pid_t pid) : pid_(pid) {}
@@ -34,27 +35,39 @@ class ChildGuard {
   ChildGuard& operator=(const ChildGuard&) = delete;
   ~ChildGuard() {
     if (pid_ <= 0 || reaped_status_) return;  // (a reaped pid may already be another process's)
-    ::kill(pid_, SIGTERM);
+    ::kill(-pid_, SIGTERM);
     int status = 0;
     while (::waitpid(pid_, &status, 0) < 0 && errno == EINTR) {
     }
+    ::kill(-pid_, SIGKILL);  // what of the group outlived its leader
   }
-  // Ends a child that has gone quiet: SIGTERM, and SIGKILL if it is still running after `grace`
-  // seconds. Does not reap it (Wait does).
+  // Ends a child that has gone quiet, with its process group: SIGTERM, and SIGKILL to whatever of
+  // the group still runs once the child ended or `grace` seconds passed. Does not reap it (Wait does).
   void Stop(double grace) {
-    ::kill(pid_, SIGTERM);
+    ::kill(-pid_, SIGTERM);
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(grace);
     while (std::chrono::steady_clock::now() < deadline) {
       int status = 0;
       const pid_t r = ::waitpid(pid_, &status, WNOHANG);
       if (r == pid_) {  // ended: keep its status for Wait
         reaped_status_ = status;
-        return;
+        break;
       }
-      if (r < 0 && errno != EINTR) return;
+      if (r < 0 && errno != EINTR) break;
       ::usleep(20000);
     }
-    ::kill(pid_, SIGKILL);
+    // The group keeps its id while any member lives, so this reaches only the child's own.
+    ::kill(-pid_, SIGKILL);
+  }
+  // Whether the child has ended (its status kept for Wait); then ends what of its group is left,
+  // which may hold the output pipe open for ever.
+  bool Ended() {
+    if (reaped_status_) return true;
+    int status = 0;
+    if (::waitpid(pid_, &status, WNOHANG) != pid_) return false;
+    reaped_status_ = status;
+    ::kill(-pid_, SIGKILL);
+    return true;
   }
   // Waits for the child; returns its wait status.
   int Wait(const fs::path& program) {
@@ -160,8 +173,14 @@ ProcessResult RunProcess(const fs::path& program, const std::vector<std::string>
   posix_spawn_file_actions_adddup2(&actions, write_end.get(), STDOUT_FILENO);
   posix_spawn_file_actions_adddup2(&actions, write_end.get(), STDERR_FILENO);
   posix_spawn_file_actions_addopen(&actions, STDIN_FILENO, "/dev/null", O_RDONLY, 0);
+  // Its own process group (pgid = its pid), so that a stop reaches everything it starts.
+  posix_spawnattr_t attr;
+  posix_spawnattr_init(&attr);
+  posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETPGROUP);
+  posix_spawnattr_setpgroup(&attr, 0);
   pid_t pid = -1;
-  const int spawn_error = ::posix_spawn(&pid, program.c_str(), &actions, nullptr, argv.data(), envp.data());
+  const int spawn_error = ::posix_spawn(&pid, program.c_str(), &actions, &attr, argv.data(), envp.data());
+  posix_spawnattr_destroy(&attr);
   posix_spawn_file_actions_destroy(&actions);
   if (spawn_error != 0) {
     throw IoError(program.string(), StrCat("cannot start the program: ", std::strerror(spawn_error)),
@@ -182,14 +201,23 @@ ProcessResult RunProcess(const fs::path& program, const std::vector<std::string>
         child.Stop(kIdleKillGraceSeconds);
         break;
       }
-      pollfd p{read_end.get(), POLLIN, 0};
-      const int wait_ms = static_cast<int>(std::ceil((idle_timeout_seconds - quiet) * 1000));
-      const int ready = ::poll(&p, 1, std::max(1, wait_ms));
-      if (ready < 0 && errno != EINTR) {
-        throw IoError(program.string(), StrCat("cannot wait for the program's output: ", std::strerror(errno)));
-      }
-      if (ready <= 0) continue;
     }
+    // Woken at least every kHeartbeatSeconds: on_output gets an empty chunk, so that a caller can
+    // stop a quiet child (Ctrl-C) by throwing.
+    pollfd p{read_end.get(), POLLIN, 0};
+    double wait = kHeartbeatSeconds;
+    if (idle_timeout_seconds > 0) {
+      wait = std::min(wait, idle_timeout_seconds - std::chrono::duration<double>(Clock::now() - last_output).count());
+    }
+    const int ready = ::poll(&p, 1, std::max(1, static_cast<int>(std::ceil(wait * 1000))));
+    if (ready < 0 && errno != EINTR) {
+      throw IoError(program.string(), StrCat("cannot wait for the program's output: ", std::strerror(errno)));
+    }
+    if (ready == 0) {
+      on_output({});
+      if (child.Ended()) break;  // whatever still holds the pipe was its, and is ended
+    }
+    if (ready <= 0) continue;
     const ssize_t n = ::read(read_end.get(), buf, sizeof buf);
     if (n < 0 && errno == EINTR) continue;
     if (n < 0) throw IoError(program.string(), StrCat("cannot read the program's output: ", std::strerror(errno)));

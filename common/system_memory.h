@@ -6,7 +6,9 @@
 
 namespace perf {
 
-// Free memory as /proc/meminfo's MemAvailable (bytes), 0 if unknown.
+// The memory this process may still take (bytes), 0 if unknown: the least of /proc/meminfo's
+// MemAvailable, what its cgroup's memory.max leaves and what the address-space limit (ulimit -v)
+// leaves, so that a size is refused before the allocation a limit would fail.
 int64_t AvailableMemory();
 
 // Throws ResourceError when `bytes` for `what` exceed the available memory (unknown: passes).

@@ -1,5 +1,5 @@
 // One writer per workspace (DESIGN.md "Safety"): every command that writes a workspace holds an
-// advisory flock(2) on the workspace folder while it runs (WORKSPACE/.perf.lock names the holder
+// advisory flock(2) on the workspace folder while it runs (WORKSPACE/.perf/lock names the holder
 // and is removed when it is done). The kernel drops the lock when the process ends, however it
 // ends, so a killed run never leaves a stale lock behind.
 #pragma once
@@ -26,14 +26,8 @@ class WorkspaceLock {
 
  private:
   UniqueFd fd_;  // the workspace folder; closing it releases the flock
-  std::filesystem::path info_;  // .perf.lock
-  bool created_ = false;
+  std::filesystem::path info_;  // .perf/lock
+  bool created_ = false, created_private_ = false;
 };
-
-// Removes what atomic writes of processes that no longer run left behind (temporaries named
-// <stem>.tmp<pid>-<n><ext>, files or folders; atomic_file.h) in the workspace's top level and
-// in the folders PERF owns there, never a registered input (inputs.h) that happens to be named
-// so. Returns the number removed.
-int SweepStaleTemporaries(const std::filesystem::path& workspace);
 
 }  // namespace perf

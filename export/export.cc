@@ -12,6 +12,7 @@
 #include "common/atomic_file.h"
 #include "common/errors.h"
 #include "common/stopwatch.h"
+#include "export/export_set.h"
 #include "export/mesh_simplify.h"
 #include "export/mesh_texture.h"
 #include "recon_cuda/data/training_data.h"
@@ -30,19 +31,20 @@ void Progress(const ExportOptions& o, const std::string& step, int done, int tot
   if (o.progress) o.progress(step, done, total);
 }
 
-// Writes one output, creating its folder, and records it relative to the workspace.
+// Writes one output into the staging folder (export_set.h), creating its folder, and records it
+// relative to the workspace.
 class Outputs {
  public:
-  Outputs(fs::path workspace, ExportResult* result) : workspace_(std::move(workspace)), result_(result) {}
+  Outputs(fs::path staging, ExportResult* result) : staging_(std::move(staging)), result_(result) {}
   fs::path Prepare(const fs::path& relative) {
-    const fs::path path = workspace_ / relative;
+    const fs::path path = staging_ / relative;
     if (created_.insert(path.parent_path()).second) EnsureWritableDirectory(path.parent_path());
     result_->files.push_back(relative);
     return path;
   }
 
  private:
-  fs::path workspace_;
+  fs::path staging_;
   ExportResult* result_;
   std::set<fs::path> created_;
 };
@@ -176,9 +178,32 @@ void ExportRenders(const ExportOptions& o, const Scene& scene, LoadedCheckpoint&
   }
 }
 
-nlohmann::json Manifest(const ExportOptions& o, const ExportResult& r, const fs::path& workspace) {
+// The groups of outputs (export_set.h ExportGroup) this export writes: their old files go.
+std::set<std::string> GroupsWritten(const ExportOptions& o) {
+  std::set<std::string> groups{"sparse_refined"};
+  for (const auto& [on, group] : {std::pair{o.masks, "masks"}, {o.foreground, "foreground"}, {o.volume, "volume"},
+                                  {o.mesh, "mesh"}, {o.renders, "renders"}}) {
+    if (on) groups.insert(group);
+  }
+  return groups;
+}
+
+// export.json: this export's files and sections, and those of the old manifest's groups that this
+// export leaves as they were (still on disk), so that it describes every file there.
+nlohmann::json Manifest(const ExportOptions& o, const ExportResult& r, const fs::path& workspace,
+                        const nlohmann::json& old) {
   nlohmann::json files = nlohmann::json::array();
   for (const fs::path& f : r.files) files.push_back(f.generic_string());
+  const std::set<std::string> groups = GroupsWritten(o);
+  if (old.is_object() && old.contains("files") && old["files"].is_array()) {
+    for (const auto& f : old["files"]) {
+      std::error_code ec;
+      if (f.is_string() && !groups.count(ExportGroup(f.get<std::string>())) && !ExportGroup(f.get<std::string>()).empty() &&
+          fs::exists(workspace / f.get<std::string>(), ec)) {
+        files.push_back(f);
+      }
+    }
+  }
   nlohmann::json j;
   j["format"] = "perf-export";
   j["version"] = 1;
@@ -229,6 +254,10 @@ nlohmann::json Manifest(const ExportOptions& o, const ExportResult& r, const fs:
   }
   j["seconds"] = r.seconds;
   j["files"] = files;
+  for (const auto& [group, section] : {std::pair{"volume", "volume"}, {"mesh", "mesh"}, {"renders", "renders"}}) {
+    if (!groups.count(group) && old.is_object() && old.contains(section)) j[section] = old[section];
+  }
+  if (!o.masks && !o.foreground && old.is_object() && old.contains("masks")) j["masks"] = old["masks"];
   return j;
 }
 
@@ -264,6 +293,31 @@ void ExportMesh(const ExportOptions& o, const Scene& scene, LoadedCheckpoint& l,
   Progress(o, "mesh", 3, 4);
   WriteStreamAtomically(out.Prepare("mesh.glb"), [&](std::ostream& s) { WriteGlb(s, mesh, textured.uvs, png); });
   Progress(o, "mesh", 4, 4);
+}
+
+// Every output into `staging`, then export.json, then the set committed (export_set.h).
+void WriteSet(const ExportOptions& o, const Scene& scene, LoadedCheckpoint& l, const fs::path& staging,
+              const nlohmann::json& old_manifest, WallClock::time_point start, ExportResult* r) {
+  Outputs out(staging, r);
+  if (o.masks || o.foreground) ExportMasks(o, scene, l, out, r);
+  if (o.volume) {
+    Progress(o, "volume", 0, 1);
+    r->vdb = WriteVdb(l.checkpoint, out.Prepare("volume.vdb"), o.vdb);
+    Progress(o, "volume", 1, 1);
+  }
+  if (o.mesh) ExportMesh(o, scene, l, out, r);
+  if (o.renders) ExportRenders(o, scene, l, out, r);
+  if (l.checkpoint.shape.poses != 0) {  // without refined poses an old sparse_refined/ goes (stale)
+    r->refined_model = WriteRefinedModel(scene, staging);
+    if (!r->refined_model.dir.empty()) {
+      for (const char* f : {"cameras.bin", "images.bin", "points3D.bin"}) r->files.push_back(r->refined_model.dir / f);
+    }
+  }
+  r->seconds = SecondsSince(start);
+  WriteFileAtomically(staging / "export.json", Manifest(o, *r, o.workspace, old_manifest).dump(2) + "\n");
+  std::vector<fs::path> set = r->files;
+  set.push_back("export.json");
+  CommitStagedExport(o.workspace, set, GroupsWritten(o), old_manifest);
 }
 
 }  // namespace
@@ -316,26 +370,18 @@ ExportResult RunExport(const ExportOptions& o) {
     EnsureWritableDirectory(o.workspace / "renders" / "test");
     if (o.orbit.frames > 0) EnsureWritableDirectory(o.workspace / "renders" / "orbit");
   }
-  Outputs out(o.workspace, &r);
-
-  if (o.masks || o.foreground) ExportMasks(o, scene, l, out, &r);
-  if (o.volume) {
-    Progress(o, "volume", 0, 1);
-    r.vdb = WriteVdb(l.checkpoint, out.Prepare("volume.vdb"), o.vdb);
-    Progress(o, "volume", 1, 1);
-  }
-  if (o.mesh) ExportMesh(o, scene, l, out, &r);
-  if (o.renders) ExportRenders(o, scene, l, out, &r);
-  if (l.checkpoint.shape.poses == 0) {
-    RemoveStaleRefinedModel(o.workspace);
-  } else {
-    r.refined_model = WriteRefinedModel(scene, o.workspace);
-    if (!r.refined_model.dir.empty()) {
-      for (const char* f : {"cameras.bin", "images.bin", "points3D.bin"}) r.files.push_back(r.refined_model.dir / f);
+  const nlohmann::json old_manifest = ReadOldManifest(o.workspace);
+  const fs::path staging = StartStagedExport(o.workspace);
+  try {
+    WriteSet(o, scene, l, staging, old_manifest, start, &r);
+  } catch (...) {
+    try {
+      FinishStagedExport(o.workspace);  // not committed: the staged files go (a commit under way is finished)
+    } catch (const Error&) {
+      // Left for the next command that locks the workspace.
     }
+    throw;
   }
-  r.seconds = SecondsSince(start);
-  WriteFileAtomically(o.workspace / "export.json", Manifest(o, r, o.workspace).dump(2) + "\n");
   return r;
 }
 

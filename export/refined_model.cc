@@ -4,7 +4,6 @@
 #include <map>
 
 #include "common/errors.h"
-#include "common/inputs.h"
 #include "sfm_import/camera_models.h"
 #include "sfm_import/colmap_model.h"
 
@@ -55,19 +54,6 @@ RefinedModel WriteRefinedModel(const Scene& posed, const fs::path& workspace) {
   r.dir = "sparse_refined";
   colmap::WriteReconstruction(workspace / r.dir, rec, colmap::ModelFormat::kBinary);
   return r;
-}
-
-bool RemoveStaleRefinedModel(const fs::path& workspace) {
-  const fs::path dir = workspace / "sparse_refined";
-  bool removed = false;
-  for (const char* f : {"cameras.bin", "images.bin", "points3D.bin"}) {
-    const fs::path file = dir / f;
-    std::error_code ec;
-    if (fs::is_regular_file(file, ec) && !IsProtectedInput(file)) removed = fs::remove(file, ec) || removed;
-  }
-  std::error_code ec;
-  if (fs::is_directory(dir, ec) && fs::is_empty(dir, ec)) fs::remove(dir, ec);
-  return removed;
 }
 
 }  // namespace perf::exporter

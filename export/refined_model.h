@@ -19,12 +19,8 @@ struct RefinedModel {
 };
 
 // `posed`: the scene as the checkpoint poses it (recon/render_views.h PosedAsCheckpoint).
-// Writes WORKSPACE/sparse_refined/{cameras,images,points3D}.bin, each atomically.
+// Writes WORKSPACE/sparse_refined/{cameras,images,points3D}.bin, each atomically (perf export
+// passes its staging folder as WORKSPACE; an old set without refined cameras goes as stale there).
 RefinedModel WriteRefinedModel(const Scene& posed, const std::filesystem::path& workspace);
-
-// Removes an earlier export's WORKSPACE/sparse_refined (its three files, then the folder if that
-// leaves it empty) when the checkpoint being exported refines no cameras; a file that is one of
-// the workspace's inputs stays. Returns whether something was removed.
-bool RemoveStaleRefinedModel(const std::filesystem::path& workspace);
 
 }  // namespace perf::exporter

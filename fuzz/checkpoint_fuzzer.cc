@@ -50,6 +50,20 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       std::abort();
     }
   }
+  // Positions in float, and values, not only the header: a NaN parameter read without a word once
+  // scored as a perfect PSNR.
+  for (double v : p.box_center) {
+    if (!std::isfinite(static_cast<float>(v))) {
+      std::fprintf(stderr, "checkpoint read with a box centre of %g\n", v);
+      std::abort();
+    }
+  }
+  for (float v : c.params) {
+    if (!std::isfinite(v)) {
+      std::fprintf(stderr, "checkpoint read with a parameter of %g\n", v);
+      std::abort();
+    }
+  }
   const double* r = p.box_rotation;
   const double det = r[0] * (r[4] * r[8] - r[5] * r[7]) - r[1] * (r[3] * r[8] - r[5] * r[6]) +
                      r[2] * (r[3] * r[7] - r[4] * r[6]);

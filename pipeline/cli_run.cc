@@ -1,6 +1,7 @@
 #include "pipeline/cli_run.h"
 
 #include <CLI/CLI.hpp>
+#include <cmath>
 #include <csignal>
 #include <iostream>
 #include <new>
@@ -32,6 +33,22 @@ int End(int code) {
   return code;
 }
 
+// Every floating-point option of every subcommand refuses NaN (CLI11's ranges let it through, and a
+// NaN passes every `<` check after them): exit 2 naming the option.
+void RefuseNotANumber(CLI::App& app) {
+  const CLI::Validator not_nan(
+      [](std::string& v) -> std::string {
+        double d = 0;
+        return CLI::detail::lexical_cast(v, d) && std::isnan(d) ? StrCat(v, " is not a number") : std::string();
+      },
+      "");
+  for (CLI::App* sub : app.get_subcommands([](CLI::App*) { return true; })) {
+    for (CLI::Option* option : sub->get_options()) {
+      if (option->get_type_name().rfind("FLOAT", 0) == 0) option->check(not_nan);
+    }
+  }
+}
+
 }  // namespace
 
 int RunCommandLine(CLI::App& app, int argc, char** argv) {
@@ -48,6 +65,7 @@ int RunCommandLine(CLI::App& app, int argc, char** argv) {
   // A file size limit (ulimit -f) makes a too-large write fail (EFBIG, exit 3 naming the file)
   // instead of killing perf without a word.
   std::signal(SIGXFSZ, SIG_IGN);
+  RefuseNotANumber(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

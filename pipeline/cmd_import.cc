@@ -81,16 +81,8 @@ void AddImportCommand(CLI::App& app) {
     Progress progress("import", args->quiet);
     o.progress = [&progress](int done, int total) { progress.Update(done, total, "images"); };
     ImportResult r;
-    try {
-      r = RunImport(o);
-    } catch (...) {
-      // A failed import into a new folder leaves no half-filled workspace behind.
-      if (lock->created_workspace()) {
-        std::error_code ec;
-        std::filesystem::remove_all(o.workspace, ec);
-      }
-      throw;
-    }
+    // A failed import into a new folder leaves no half-filled workspace behind.
+    RemoveNewWorkspaceOnFailure(lock.get(), o.workspace, true, [&] { r = RunImport(o); });
     progress.Finish();
     if (!args->quiet) std::cout << ImportSummary(r) << "workspace: " << o.workspace.string() << "\n";
     if (args->preview_box) {

@@ -31,7 +31,8 @@ void AddSolverOptions(CLI::App* cmd, recon::SolverOptions* solver) {
       ->capture_default_str();
   cmd->add_option("--smooth-grid", solver->smooth_grid,
                   "Smoothness between neighbouring grid cells, relative to the photos (1: a pair as stiff as the mean "
-                  "cell's data; 0: off; default: 0.3 where the background is learned, 0 where it is fixed)");
+                  "cell's data; 0: off; default: 0.3 where the background is learned, 0 where it is fixed)")
+      ->check(CLI::NonNegativeNumber);
   cmd->add_option("--smooth-shells", solver->smooth_shells,
                   "Smoothness between neighbouring shell texels, across cube-map seams too, relative to the photos (0: off)")
       ->capture_default_str();
@@ -256,7 +257,9 @@ void AddRenderCommand(CLI::App& app) {
                   "Which photos: test, train or all (all includes those left out for a wrong-looking pose)");
   cmd->add_option("--view", o.names, "Only this image (a scene.json name); repeatable");
   cmd->add_option("--checkpoint", args->checkpoint, "Checkpoint to render (default: the last level in WORKSPACE/recon)");
-  cmd->add_option("-o,--out", args->out, "Output folder (default: WORKSPACE/renders)");
+  cmd->add_option("-o,--out", args->out,
+                  "Output folder (default: WORKSPACE/renders); a file already there is replaced only if it is a render "
+                  "PERF wrote");
   AddMinBoxOpacityOption(cmd, &o.min_box_opacity, "Renders");
   cmd->add_flag("--opacity", o.write_opacity, "Also write <name>_opacity.png, the box opacity 1 - T (16-bit)");
   AddDeviceOptions(cmd, &o.device, &o.threads);
@@ -266,9 +269,9 @@ void AddRenderCommand(CLI::App& app) {
     o.workspace = args->workspace;
     o.checkpoint = args->checkpoint;
     o.out_dir = args->out;
-    // Renders into the workspace write it; into a folder of the user's (-o) they only read it.
-    std::unique_ptr<WorkspaceLock> lock;
-    if (o.out_dir.empty()) lock = LockWorkspace(o.workspace, "render");
+    // Renders into a folder of the user's (-o) are recorded in the workspace too, as PERF's: a
+    // second render may replace them, and nothing else there.
+    const std::unique_ptr<WorkspaceLock> lock = LockWorkspace(o.workspace, "render");
     Progress progress("render", args->quiet);
     o.progress = [&](int done, int total) { progress.Update(done, total, "views"); };
     const recon::RenderViewsResult r = recon::RenderViews(o);

@@ -57,7 +57,7 @@ void AddRunCommand(CLI::App& app) {
                      "it stays up after the run until Ctrl-C");
   cmd->add_option("--log-level", args->log_level, "info (progress and summary) or quiet (errors only)")
       ->capture_default_str();
-  cmd->add_option("--log-json", args->log_json, "Append JSON lines of stage events to this file (for scripts)");
+  cmd->add_option("--log-json", args->log_json, "Append JSON lines of stage events to this file (for scripts): a new file, or one PERF started");
   cmd->callback([args]() {
     RunOptions& o = args->o;
     o.images = args->images;
@@ -82,7 +82,7 @@ void AddRunCommand(CLI::App& app) {
     o.live = live.get();
     RunResult r;
     try {
-      r = RunPipeline(o);
+      RemoveNewWorkspaceOnFailure(lock.get(), o.workspace, false, [&] { r = RunPipeline(o); });
     } catch (const Interrupted&) {
       if (live) {  // the page polls every 2 s: it says the run stopped before the server goes
         live->End("stopped");
@@ -93,7 +93,8 @@ void AddRunCommand(CLI::App& app) {
     if (!o.quiet) std::cout << RunSummary(o, r);  // rank 0's (the others are quiet)
     if (live) {
       live->End("finished");
-      std::cout << "perf run: done; the page stays at " << live->Url() << " until Ctrl-C\n" << std::flush;
+      lock.reset();  // the page only reads: other commands may write the workspace now
+      std::cout << "perf run: done; the page stays at " << live->Url() << " (read-only) until Ctrl-C\n" << std::flush;
       while (!StopRequested().load()) std::this_thread::sleep_for(std::chrono::milliseconds(100));
     }
   });

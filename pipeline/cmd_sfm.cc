@@ -1,6 +1,7 @@
 #include <CLI/CLI.hpp>
 #include <iostream>
 
+#include "common/errors.h"
 #include "pipeline/commands.h"
 #include "pipeline/progress.h"
 #include "sfm_import/colmap_runner.h"
@@ -47,7 +48,13 @@ void AddSfmCommand(CLI::App& app) {
     const auto lock = LockWorkspace(o->workspace, "sfm", true);
     Progress progress("sfm", *quiet);
     o->progress = [&progress](const std::string& line) { progress.Message(line); };
-    const SfmResult r = RunSfm(*o);
+    // COLMAP runs in a process group of its own (common/subprocess.h): Ctrl-C reaches it through us.
+    const StopOnCtrlC ctrl_c;
+    o->check_stop = [] {
+      if (StopRequested().load()) throw Interrupted("COLMAP was stopped; run the same command again to start over");
+    };
+    SfmResult r;
+    RemoveNewWorkspaceOnFailure(lock.get(), o->workspace, false, [&] { r = RunSfm(*o); });
     if (!*quiet) {
       std::cout << "registered " << r.num_registered_images << " of " << r.num_input_images << " images, "
                 << r.num_points << " points in " << r.seconds << " s\nmodel: " << r.sparse_dir.string() << "\n";

@@ -6,6 +6,8 @@
 #include <iostream>
 #include "common/errors.h"
 #include "common/inputs.h"
+#include "common/owned_files.h"
+#include "export/export_set.h"
 #include "common/system_memory.h"
 #include "pipeline/cli_choice.h"
 #include "recon_cuda/core/render_rule.h"
@@ -33,9 +35,30 @@ std::unique_ptr<WorkspaceLock> LockWorkspace(const std::filesystem::path& worksp
   std::error_code ec;
   if (!create && !std::filesystem::is_directory(workspace, ec)) return nullptr;
   auto lock = std::make_unique<WorkspaceLock>(workspace, command);
-  ProtectRecordedInputs(workspace);  // before anything is swept, written, moved or removed
-  SweepStaleTemporaries(workspace);
+  // Before anything is swept, written, moved or removed: what PERF made here, and the inputs.
+  UseOwnershipRecord(workspace);
+  ProtectRecordedInputs(workspace);
+  SweepOwnedTemporaries();
+  exporter::FinishStagedExport(workspace);
   return lock;
+}
+
+void RemoveNewWorkspaceOnFailure(const WorkspaceLock* lock, const std::filesystem::path& workspace,
+                                 bool any_failure, const std::function<void()>& body) {
+  const auto remove = [&] {
+    if (lock == nullptr || !lock->created_workspace()) return;
+    std::error_code ec;
+    std::filesystem::remove_all(workspace, ec);  // made by this command, under its lock: all of it is ours
+  };
+  try {
+    body();
+  } catch (const InputError&) {
+    remove();
+    throw;
+  } catch (...) {
+    if (any_failure) remove();
+    throw;
+  }
 }
 
 namespace {
@@ -75,7 +98,8 @@ void AddShDegreeOption(CLI::App* cmd, int* sh_degree, const std::string& default
   CLI::Option* option = cmd->add_option(
       "--sh-degree", *sh_degree,
       "View-dependent colour: spherical harmonics of degree 1 (3 more values per channel and cell) or 2 (8 more) "
-      "beyond each cell's colour; 0: none");
+      "beyond each cell's colour; 0: none")
+      ->check(CLI::Range(0, 2));
   if (default_text.empty()) {
     option->capture_default_str();
   } else {

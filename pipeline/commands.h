@@ -4,6 +4,7 @@
 
 #include <atomic>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -35,12 +36,20 @@ void AddViewCommand(CLI::App& app);
 // -j,--threads: `all_cores` (0, or -1 for colmap) or 1 to 8x the cores; anything else is exit 2.
 void AddThreadsOption(CLI::App* cmd, int* threads, int all_cores);
 
-// Takes the workspace's writer lock (common/workspace_lock.h) for the command's life and sweeps
-// what killed runs left behind. Throws InputError when another perf command holds it. Commands
-// that need an existing workspace pass create = false: a missing folder gets no lock (nullptr)
-// and the stage's own message ("no scene.json here").
+// Takes the workspace's writer lock (common/workspace_lock.h) for the command's life, installs the
+// workspace's record of what PERF wrote (common/owned_files.h) and the recorded inputs, removes the
+// temporaries killed runs left and finishes or drops an export a kill interrupted
+// (export/export_set.h). Throws InputError when another perf command holds the lock. Commands that
+// need an existing workspace pass create = false: a missing folder gets no lock (nullptr) and the
+// stage's own message ("no scene.json here").
 std::unique_ptr<WorkspaceLock> LockWorkspace(const std::filesystem::path& workspace, std::string_view command,
                                              bool create = false);
+
+// Runs `body` with `lock` held (may be null: another rank's). When it throws and the lock made the
+// workspace folder, the folder goes with it: after any failure (`any_failure`), or only when the
+// command refused its input (InputError: nothing of use was made; a failed COLMAP step keeps its log).
+void RemoveNewWorkspaceOnFailure(const WorkspaceLock* lock, const std::filesystem::path& workspace,
+                                 bool any_failure, const std::function<void()>& body);
 
 // Ctrl-C while one lives: the first sets StopRequested() (the command stops at its next safe
 // point and says how to resume, exit 130); the second kills as usual.

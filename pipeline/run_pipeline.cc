@@ -12,6 +12,7 @@
 #include "common/atomic_file.h"
 #include "common/errors.h"
 #include "common/json_log.h"
+#include "common/owned_files.h"
 #include "common/stopwatch.h"
 #include "export/evaluate.h"
 #include "export/export.h"
@@ -117,6 +118,7 @@ class Runner {
     so.images = o_.images;
     so.workspace = o_.workspace;
     so.force = o_.force;
+    so.check_stop = [&] { CheckStop(); };
     so.progress = [&](const std::string& line) {
       CheckStop();
       Say(line.rfind("sfm: ", 0) == 0 ? line : "sfm: " + line);  // RunSfm's own lines already say so
@@ -143,7 +145,8 @@ class Runner {
       }
       Say("import: " + changed + ": importing again");
     }
-    const std::vector<std::string> by_hand = ExcludedByHand(scene);
+    RefuseReplacingAnEditedScene(scene);
+    const std::vector<std::string> by_hand = ExcludedByHand(scene);  // in a scene.json a reconstruct wrote back
     ImportOptions io;
     if (o_.nerf.empty()) {
       io.colmap_dir = model;
@@ -174,6 +177,20 @@ class Runner {
           "set their \"split\" to \"excluded\" again to leave them out");
     }
     s->reason = StrCat(r.scene.images.size(), " images");
+  }
+
+  // A scene.json changed since PERF wrote it (photos left out by hand, say) is the user's: a new
+  // import would replace it, so it is refused by name, with the photos its edit leaves out.
+  static void RefuseReplacingAnEditedScene(const fs::path& scene) {
+    std::error_code ec;
+    if (!fs::exists(scene, ec) || IsOwned(scene)) return;
+    std::string by_hand;
+    for (const std::string& name : ExcludedByHand(scene)) by_hand += (by_hand.empty() ? "" : ", ") + name;
+    throw InputError(scene.string(), "", "",
+                     StrCat("changed since PERF wrote it", by_hand.empty() ? "" : " (it leaves out " + by_hand + " by hand)",
+                            ", and importing again would replace it"),
+                     "move it away (e.g. to scene.hand.json) and run again; then set the \"split\" of the photos it "
+                     "left out to \"excluded\" in the new scene.json");
   }
 
   void Reconstruct(StageReport* s) {
@@ -325,6 +342,7 @@ void RunOptions::Check() const {
   for (const fs::path* p : {&images, &colmap, &nerf}) {
     if (!p->empty() && !fs::exists(*p)) throw IoError(p->string(), "does not exist", "check the path");
   }
+  if (!nerf.empty()) CheckRegularFile(nerf);  // a FIFO or a device: named before a workspace is made
 }
 
 namespace {

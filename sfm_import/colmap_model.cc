@@ -169,12 +169,13 @@ namespace {
 constexpr const char* kBinaryFiles[] = {"cameras.bin", "images.bin", "points3D.bin"};
 constexpr const char* kTextFiles[] = {"cameras.txt", "images.txt", "points3D.txt"};
 
-// The files of `files` that are not in `dir`, comma separated.
+// The files of `files` that are not in `dir`, comma separated (one that is there but is not a
+// regular file, a FIFO say, is not missing: ReadFile names it).
 std::string Missing(const fs::path& dir, const char* const (&files)[3]) {
   std::string missing;
   for (const char* f : files) {
     std::error_code ec;
-    if (!fs::is_regular_file(dir / f, ec)) missing += StrCat(missing.empty() ? "" : ", ", f);
+    if (!fs::exists(dir / f, ec)) missing += StrCat(missing.empty() ? "" : ", ", f);
   }
   return missing;
 }
@@ -182,6 +183,7 @@ std::string Missing(const fs::path& dir, const char* const (&files)[3]) {
 void ReadFile(const fs::path& path,
               void (*read)(std::istream&, const std::string&, Reconstruction*),
               Reconstruction* rec) {
+  CheckRegularFile(path);  // a FIFO would block the open below for ever
   std::ifstream in(path, std::ios::binary);
   if (!in) throw IoError(path.string(), StrCat("cannot open for reading: ", std::strerror(errno)));
   read(in, path.string(), rec);

@@ -43,10 +43,10 @@ fs::path FindColmap(const std::string& binary) {
 
 StepResult RunColmapStep(const fs::path& colmap, const std::vector<std::string>& args,
                          const std::string& stage, const ProgressParser& parse,
-                         const SfmOptions& options, std::ofstream& log, const fs::path& log_path) {
+                         const SfmOptions& options, LogFile& log) {
   const std::string command_line = CommandLine(colmap, args);
   // A prefix of our own: COLMAP's headings are lines of '=' already.
-  log << "\n[perf " << Timestamp() << "] run: " << command_line << "\n" << std::flush;
+  log.Write(StrCat("\n[perf ", Timestamp(), "] run: ", command_line, "\n"));
 
   StepResult result;
   std::string partial;
@@ -66,9 +66,8 @@ StepResult RunColmapStep(const fs::path& colmap, const std::vector<std::string>&
   // COLMAP links Qt even for its CLI commands; without a display, Qt aborts unless told to use
   // the offscreen platform.
   const auto on_output = [&](std::string_view chunk) {
-    log.write(chunk.data(), static_cast<std::streamsize>(chunk.size()));
-    log.flush();  // so the log is useful while a long step runs
-    if (!log) throw IoError(log_path.string(), "cannot write the log (disk full?)");
+    if (options.check_stop) options.check_stop();
+    log.Write(chunk);  // as it comes, so the log is useful while a long step runs
     for (const char c : chunk) {
       // COLMAP rewrites some lines with '\r'; either ends a line for us.
       if (c == '\n' || c == '\r') {
@@ -88,12 +87,11 @@ StepResult RunColmapStep(const fs::path& colmap, const std::vector<std::string>&
   result.signal = process.signal;
   result.idle = process.idle;
   result.idle_timeout_seconds = options.idle_timeout_seconds;
-  log << "[perf " << Timestamp() << "] "
-      << (result.idle     ? StrCat("stopped: no output for ", options.idle_timeout_seconds, " s")
-          : result.signal ? StrCat("killed by signal ", result.signal)
-                          : StrCat("exit code ", result.exit_code))
-      << "\n"
-      << std::flush;
+  log.Write(StrCat("[perf ", Timestamp(), "] ",
+                   result.idle     ? StrCat("stopped: no output for ", options.idle_timeout_seconds, " s")
+                   : result.signal ? StrCat("killed by signal ", result.signal)
+                                   : StrCat("exit code ", result.exit_code),
+                   "\n"));
   return result;
 }
 

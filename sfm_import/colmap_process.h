@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "common/log_file.h"
 #include "sfm_import/colmap_runner.h"
 
 namespace perf::sfm_detail {
@@ -43,8 +44,7 @@ struct StepResult {
 // line is offered to `parse`, whose status is reported at most once a second.
 StepResult RunColmapStep(const std::filesystem::path& colmap, const std::vector<std::string>& args,
                          const std::string& stage, const ProgressParser& parse,
-                         const SfmOptions& options, std::ofstream& log,
-                         const std::filesystem::path& log_path);
+                         const SfmOptions& options, LogFile& log);
 
 // Throws IoError for a failed `step`: its exit code or signal and the tail of its log.
 [[noreturn]] void ThrowStepFailed(const std::string& step, const StepResult& r,

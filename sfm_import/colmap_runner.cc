@@ -16,6 +16,7 @@
 #include "common/atomic_file.h"
 #include "common/errors.h"
 #include "common/inputs.h"
+#include "common/owned_files.h"
 #include "sfm_import/camera_groups.h"
 #include "sfm_import/capture_order.h"
 #include "sfm_import/colmap_process.h"
@@ -61,7 +62,7 @@ struct SfmRun {
 
   // Runs one COLMAP step with this run's log and progress.
   StepResult Step(const std::vector<std::string>& args, const std::string& stage, const ProgressParser& parse) {
-    return RunColmapStep(colmap, args, stage, parse, options, log, log_path);
+    return RunColmapStep(colmap, args, stage, parse, options, log);
   }
 
   const SfmOptions& options;
@@ -70,7 +71,7 @@ struct SfmRun {
   fs::path colmap;                          // the binary
   fs::path colmap_dir;                      // WORKSPACE/colmap
   fs::path log_path, database, models_dir;  // in colmap_dir
-  std::ofstream log;
+  LogFile log;
   std::string threads;  // every step's number of threads
 };
 
@@ -147,7 +148,7 @@ SfmRun StartRun(const SfmOptions& options, const std::vector<std::string>& input
   SfmRun run(options, inputs);
   run.colmap = FindColmap(options.colmap_binary);
   run.colmap_dir = options.workspace / "colmap";
-  EnsureWritableDirectory(run.colmap_dir);
+  EnsureWorkFolder(run.colmap_dir);  // COLMAP's: PERF removes its database and models between runs
   run.log_path = run.colmap_dir / "colmap.log";
   run.database = run.colmap_dir / "database.db";
   run.models_dir = run.colmap_dir / "sparse";
@@ -155,17 +156,10 @@ SfmRun StartRun(const SfmOptions& options, const std::vector<std::string>& input
   // Start from scratch: COLMAP silently keeps the cameras and features already in a database
   // (so a changed --camera-model or --max-image-size would not take effect), and model folders
   // from an earlier run would compete with the new ones.
-  std::error_code ec;
-  for (const char* suffix : {"", "-shm", "-wal"}) fs::remove(run.database.string() + suffix, ec);
-  fs::remove_all(run.models_dir, ec);
+  for (const char* suffix : {"", "-shm", "-wal"}) RemoveOwned(run.database.string() + suffix);
+  RemoveOwned(run.models_dir);
   EnsureWritableDirectory(run.models_dir);
-
-  run.log.open(run.log_path, std::ios::app | std::ios::binary);
-  if (!run.log) {
-    throw IoError(run.log_path.string(),
-                  StrCat("cannot open the log for writing: ", std::strerror(errno)),
-                  "check that the workspace is writable");
-  }
+  run.log = LogFile(run.log_path, true, "COLMAP log");
   run.threads = std::to_string(options.num_threads);
   return run;
 }
@@ -265,8 +259,7 @@ void Match(SfmRun& run, bool exhaustive) {
 // (c) Incremental mapping into a fresh colmap/sparse; reads the sizes of the models it made.
 Mapping Map(SfmRun& run) {
   Report(run.options, "sfm: mapping (incremental reconstruction)");
-  std::error_code ec;
-  fs::remove_all(run.models_dir, ec);
+  RemoveOwned(run.models_dir);
   EnsureWritableDirectory(run.models_dir);
   Mapping m;
   const StepResult r = run.Step(
@@ -277,6 +270,7 @@ Mapping Map(SfmRun& run) {
   // not a failure of the tool.
   m.no_initial_pair = !r.idle && !r.signal && r.exit_code != 0 && r.saw("failed to create sparse model");
   if (r.failed() && !m.no_initial_pair) ThrowStepFailed("mapper", r, run.log_path);
+  std::error_code ec;
   for (const auto& entry : fs::directory_iterator(run.models_dir, ec)) {
     const std::string name = entry.path().filename().string();
     if (!entry.is_directory() || name.empty() || name.find_first_not_of("0123456789") != std::string::npos) continue;

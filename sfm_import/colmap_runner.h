@@ -37,6 +37,9 @@ struct SfmOptions {
   double idle_timeout_seconds = 1800;
   // Called with one line of progress per step (stage name and a short status).
   std::function<void(const std::string&)> progress;
+  // Called while a COLMAP step runs, at least every quarter second (common/subprocess.h); throwing
+  // (Ctrl-C: Interrupted) ends the step with its process group. Empty: nothing.
+  std::function<void()> check_stop;
 
   // Throws InputError naming the bad option.
   void Check() const;

@@ -10,6 +10,7 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
+#include "common/owned_files.h"
 #include "common/system_memory.h"
 #include "workspace/scene.h"
 
@@ -45,10 +46,12 @@ void ProcessImage(const ImageJob& job, const ImportOptions& o, const fs::path& w
 
 // Decoding, undistorting and resizing hold about three float copies of a photo at once; the
 // number of photos in flight is bounded so that they fit in the available memory.
-int Concurrency(const ImportOptions& o, int64_t largest_decode) {
+int Concurrency(const ImportOptions& o, const LargestPhoto& largest) {
   const int threads = o.num_threads > 0 ? o.num_threads : tbb::info::default_concurrency();
-  const int64_t per_job = 3 * largest_decode;
-  CheckFitsInMemory(per_job, "importing one photo", "downscale the photos first (e.g. with oiiotool --resize)");
+  const int64_t per_job = 3 * largest.bytes;
+  // Before any photo is decoded: a small file may decode to gigabytes (a PNG of 20000 x 20000).
+  CheckFitsInMemory(per_job, StrCat("importing ", largest.path.string()),
+                    "downscale the photos first (e.g. with oiiotool --resize)");
   const int64_t available = AvailableMemory();
   return available > 0 && per_job > 0 ? static_cast<int>(std::clamp<int64_t>(available / per_job, 1, threads))
                                       : threads;
@@ -58,16 +61,28 @@ int Concurrency(const ImportOptions& o, int64_t largest_decode) {
 
 std::string OutputExtension(PixelFormat f) { return f == PixelFormat::kHalf || f == PixelFormat::kFloat ? ".exr" : ".png"; }
 
-void RunJobs(const std::vector<ImageJob>& jobs, const ImportOptions& o, int64_t largest_decode) {
-  // Nothing may land on an input, whatever the folders' names: checked before the first write.
+void LargestPhoto::Consider(const fs::path& photo, const ImageInfo& info) {
+  if (DecodedBytes(info) <= bytes) return;
+  bytes = DecodedBytes(info);
+  path = photo;
+}
+
+void RunJobs(const std::vector<ImageJob>& jobs, const ImportOptions& o, const LargestPhoto& largest) {
+  // Nothing may land on an input, or on any file PERF did not write, whatever the folders' names:
+  // checked before the first write.
   for (const ImageJob& job : jobs) {
-    CheckNotInput(o.workspace / job.out_rel, "the workspace image of " + job.source.string());
-    if (!job.alpha_rel.empty()) CheckNotInput(o.workspace / job.alpha_rel, "the alpha image of " + job.source.string());
+    for (const std::string& rel : {job.out_rel, job.alpha_rel}) {
+      if (rel.empty()) continue;
+      const std::string what = StrCat(rel == job.out_rel ? "the workspace image" : "the alpha image", " of ", job.source.string());
+      CheckNotInput(o.workspace / rel, what);
+      CheckReplaceable(o.workspace / rel, what);
+    }
   }
   CheckNotInput(o.workspace / "scene.json", "scene.json");
+  CheckReplaceable(o.workspace / "scene.json", "scene.json");
   std::atomic<int> done{0};
   const int total = static_cast<int>(jobs.size());
-  tbb::task_arena arena(Concurrency(o, largest_decode));
+  tbb::task_arena arena(Concurrency(o, largest));
   arena.execute([&] {
     tbb::parallel_for(0, total, [&](int i) {
       ProcessImage(jobs[i], o, o.workspace);

@@ -39,6 +39,13 @@ void CheckOneSize(const std::vector<std::pair<std::filesystem::path, ImageInfo>>
 
 // Writes every job's images. Nothing may land on an input (checked before the first write);
 // photos are processed in parallel, as many at once as fit in the available memory.
-void RunJobs(const std::vector<ImageJob>& jobs, const ImportOptions& o, int64_t largest_decode);
+// The photo that takes the most memory decoded (image_io.h DecodedBytes), named in the memory check.
+struct LargestPhoto {
+  int64_t bytes = 0;
+  std::filesystem::path path;
+  void Consider(const std::filesystem::path& photo, const ImageInfo& info);
+};
+
+void RunJobs(const std::vector<ImageJob>& jobs, const ImportOptions& o, const LargestPhoto& largest);
 
 }  // namespace perf::import_detail

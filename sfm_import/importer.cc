@@ -124,7 +124,7 @@ struct ColmapPhotos {
   std::set<std::string> on_disk;  // image files under `dir` (ListImages)
   std::map<uint32_t, std::vector<std::pair<fs::path, ImageInfo>>> by_camera;
   PixelFormat format = PixelFormat::kUInt8;  // the photos' pixel format (the last one read)
-  int64_t largest_decode = 0;                // bytes of the largest photo decoded
+  LargestPhoto largest;                      // the largest photo decoded
 };
 
 // The model's photos whose pose looks wrong (bad_poses.h): name -> why, each with a warning.
@@ -199,7 +199,7 @@ void ReadPhotoHeaders(const colmap::Reconstruction& rec, ColmapPhotos* photos) {
     ProtectInput(p);
     const ImageInfo info = ReadImageInfo(p);
     photos->format = info.format;
-    photos->largest_decode = std::max(photos->largest_decode, DecodedBytes(info));
+    photos->largest.Consider(p, info);
     photos->by_camera[im.camera_id].emplace_back(p, info);
   }
 }
@@ -327,7 +327,7 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
   PlaceBoundsAndShells(o, points, model_dir.string(), r);
   for (std::string& w : MarkGhostGroups(rec, bad_poses, &r->scene)) r->warnings.push_back(std::move(w));
   EnsureWritableDirectory(o.workspace / "images");
-  RunJobs(jobs, o, photos.largest_decode);
+  RunJobs(jobs, o, photos.largest);
 }
 
 // ---- NeRF json ----
@@ -339,14 +339,14 @@ void ImportNerf(const ImportOptions& o, ImportResult* r) {
   std::vector<std::pair<fs::path, ImageInfo>> infos;
   PixelFormat fmt = PixelFormat::kUInt8;
   bool any_alpha = false;
-  int64_t largest_decode = 0;
+  LargestPhoto largest;
   ProtectInput(o.nerf_json);
   for (const auto& frame : t.frames) {
     ProtectInput(frame.image_path);
     const ImageInfo info = ReadImageInfo(frame.image_path);
     fmt = info.format;
     any_alpha = any_alpha || info.channels == 2 || info.channels == 4;
-    largest_decode = std::max(largest_decode, DecodedBytes(info));
+    largest.Consider(frame.image_path, info);
     infos.emplace_back(frame.image_path, info);
   }
   PERF_CHECK(!infos.empty());  // ReadNerfTransforms refuses a json without frames
@@ -392,7 +392,7 @@ void ImportNerf(const ImportOptions& o, ImportResult* r) {
   PlaceBoundsAndShells(no, {}, source, r);
   EnsureWritableDirectory(o.workspace / "images");
   if (any_alpha) EnsureWritableDirectory(o.workspace / "alpha");
-  RunJobs(jobs, o, largest_decode);
+  RunJobs(jobs, o, largest);
 }
 
 }  // namespace

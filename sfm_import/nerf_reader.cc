@@ -3,9 +3,11 @@
 #include <Eigen/Dense>
 #include <cmath>
 #include <fstream>
+#include <sstream>
 #include <nlohmann/json.hpp>
 #include <utility>
 
+#include "common/atomic_file.h"
 #include "common/errors.h"
 #include "workspace/image_io.h"
 
@@ -201,12 +203,11 @@ NerfTransforms ReadNerfTransforms(std::istream& in, const fs::path& json_path) {
 }
 
 NerfTransforms ReadNerfTransforms(const fs::path& json_path) {
-  const std::string source = json_path.string();
-  if (!fs::is_regular_file(json_path)) {
-    throw IoError(source, "file not found", "pass the path of a NeRF transforms.json with --nerf");
+  if (std::error_code ec; !fs::exists(json_path, ec)) {
+    throw IoError(json_path.string(), "file not found", "pass the path of a NeRF transforms.json with --nerf");
   }
-  std::ifstream in(json_path, std::ios::binary);
-  if (!in) throw IoError(source, "cannot open the file", "check that it is readable");
+  // Never blocks on a FIFO nor reads a device without end: "not a regular file" (InputError).
+  std::istringstream in(ReadFileToString(json_path));
   return ReadNerfTransforms(in, json_path);
 }
 

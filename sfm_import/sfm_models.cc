@@ -7,6 +7,7 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
+#include "common/owned_files.h"
 #include "sfm_import/colmap_model.h"
 
 namespace fs = std::filesystem;
@@ -60,10 +61,15 @@ std::optional<std::vector<std::string>> LeftOut(const std::vector<std::string>& 
 
 void ReplaceDirectory(const fs::path& src, const fs::path& dst) {
   EnsureWritableDirectory(dst.parent_path());
+  CheckReplaceable(dst, "replacing the sparse model");  // before any copying
   const fs::path tmp = TempPathFor(dst);
   const fs::path old = TempPathFor(dst.string() + ".old");
   std::error_code ec;
-  fs::remove_all(tmp, ec);
+  if (!fs::create_directory(tmp, ec)) {
+    throw IoError(dst.string(), "cannot create a folder beside it: " + (ec ? ec.message() : "it exists"),
+                  "check that the workspace is writable");
+  }
+  RecordTemporary(tmp);  // the sweep removes it if this process is killed
   fs::copy(src, tmp, fs::copy_options::recursive, ec);
   if (ec) {
     fs::remove_all(tmp, ec);
@@ -80,16 +86,16 @@ void ReplaceDirectory(const fs::path& src, const fs::path& dst) {
       throw IoError(dst.string(), "cannot replace the existing model: " + why,
                     "remove it by hand and run again");
     }
+    RecordTemporary(old);
   }
-  fs::rename(tmp, dst, ec);
-  if (ec) {
-    const std::string why = ec.message();
+  try {
+    MoveOwned(tmp, dst);
+  } catch (const Error&) {
     if (had_old) fs::rename(old, dst, ec);  // put the old model back
     fs::remove_all(tmp, ec);
-    throw IoError(dst.string(), "cannot move the new model into place: " + why,
-                  "check that the workspace is writable");
+    throw;
   }
-  if (had_old) fs::remove_all(old, ec);
+  if (had_old) RemoveOwned(old);
 }
 
 }  // namespace perf::sfm_detail

@@ -10,7 +10,11 @@
 #include <array>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <map>
 #include <random>
 #include <string>
 #include <thread>
@@ -67,7 +71,23 @@ inline CommandResult RunCommand(const std::string& cmd) {
   return r;
 }
 
-inline std::string PerfBinary() { return std::string(PERF_BINARY_DIR) + "/perf"; }
+// Every regular file under `dir` (recursively) with its bytes: a snapshot to compare after a command.
+inline std::map<std::filesystem::path, std::string> FilesUnder(const std::filesystem::path& dir) {
+  std::map<std::filesystem::path, std::string> files;
+  for (const auto& e : std::filesystem::recursive_directory_iterator(dir)) {
+    if (!e.is_regular_file()) continue;
+    std::ifstream in(e.path(), std::ios::binary);
+    files[e.path()] = std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  return files;
+}
+
+// The perf binary under test: this build's, or PERF_TEST_BINARY's (e.g. an older build, to check
+// that a new test fails there).
+inline std::string PerfBinary() {
+  const char* other = std::getenv("PERF_TEST_BINARY");
+  return other != nullptr && *other != 0 ? std::string(other) : std::string(PERF_BINARY_DIR) + "/perf";
+}
 
 // Starts `command` (a shell command line, its output discarded) in the background; stops it with
 // `sig` `delay_ms` after `sign` exists (or after 5 minutes without it), and returns its wait status.

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
+#include <functional>
 #include <fstream>
 #include <mutex>
 #include <thread>
@@ -68,6 +70,38 @@ nlohmann::json SparsePoints(const fs::path& workspace) {
   }
   return out;
 }
+
+// Each connection on a thread of its own, at most kMaxConnections at once (the next waits, in the
+// listen backlog, for one to end). httplib's default is a fixed pool of about one thread per core,
+// which as many clients sending a byte a second hold for as long as they keep sending.
+class ConnectionThreads : public httplib::TaskQueue {
+ public:
+  static constexpr int kMaxConnections = 64;
+  void enqueue(std::function<void()> fn) override {
+    std::unique_lock lock(mutex_);
+    idle_.wait(lock, [&] { return running_ < kMaxConnections; });
+    ++running_;
+    std::thread([this, task = std::move(fn)]() mutable {
+      {
+        const std::function<void()> run = std::move(task);
+        run();
+      }
+      const std::lock_guard done(mutex_);
+      --running_;
+      idle_.notify_all();
+    }).detach();
+  }
+  // Returns once every connection has ended (httplib deletes the queue next).
+  void shutdown() override {
+    std::unique_lock lock(mutex_);
+    idle_.wait(lock, [&] { return running_ == 0; });
+  }
+
+ private:
+  std::mutex mutex_;
+  std::condition_variable idle_;
+  int running_ = 0;
+};
 
 }  // namespace
 
@@ -243,6 +277,7 @@ ViewServer::ViewServer(ViewOptions options) : impl_(std::make_unique<Impl>()) {
     int yes = 1;
     setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof(yes));
   });
+  impl_->server.new_task_queue = [] { return new ConnectionThreads; };
   impl_->server.set_payload_max_length(kMaxPayload);
   impl_->server.set_read_timeout(5, 0);
   impl_->server.set_write_timeout(5, 0);

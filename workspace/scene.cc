@@ -7,6 +7,7 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
+#include "common/world_range.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -203,13 +204,21 @@ Scene SceneFromJson(const std::string& text, const std::string& name) {
   s.box.size = r.Vec3(r.Get(box, "size", "box"), "box.size");
   s.box.rotation = r.Mat<3, 3>(r.Get(box, "rotation", "box"), "box.rotation");
   s.box.method = box.value("method", "");
-  if ((s.box.size.array() <= 0).any()) r.Fail("box.size", box["size"], "box sides must be positive");
+  if (!(s.box.size.array() >= kMinBoxSide).all() || !(s.box.size.array() <= kMaxWorldSpan).all()) {
+    r.Fail("box.size", box["size"], StrCat("box sides must be ", kMinBoxSide, " to ", kMaxWorldSpan, " world units"));
+  }
+  if (!(s.box.center.array().abs() <= kMaxWorldSpan).all()) {
+    r.Fail("box.center", box["center"], StrCat("must be within ", kMaxWorldSpan, " world units of the origin"));
+  }
   if (!(s.box.rotation.transpose() * s.box.rotation).isIdentity(1e-6)) {
     r.Fail("box.rotation", box["rotation"], "not a rotation matrix");
   }
 
   const json& shells = r.Get(j, "shells", "");
   s.shells.center = r.Vec3(r.Get(shells, "center", "shells"), "shells.center");
+  if (!(s.shells.center.array().abs() <= kMaxWorldSpan).all()) {
+    r.Fail("shells.center", shells["center"], StrCat("must be within ", kMaxWorldSpan, " world units of the origin"));
+  }
   const json& radii = r.Get(shells, "radii", "shells");
   if (!radii.is_array() || radii.empty() || radii.size() > kMaxSceneShells) {
     r.Fail("shells.radii", radii, StrCat("expected an array of 1 to ", kMaxSceneShells, " radii"));
@@ -219,6 +228,7 @@ Scene SceneFromJson(const std::string& text, const std::string& name) {
     if (v <= 0 || (!s.shells.radii.empty() && v <= s.shells.radii.back())) {
       r.Fail(StrCat("shells.radii[", i, "]"), radii[i], "radii must be positive and strictly increasing");
     }
+    if (v > kMaxWorldSpan) r.Fail(StrCat("shells.radii[", i, "]"), radii[i], StrCat("must be at most ", kMaxWorldSpan));
     s.shells.radii.push_back(v);
   }
 

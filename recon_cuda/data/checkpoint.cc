@@ -10,6 +10,7 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
+#include "common/world_range.h"
 
 namespace perf::recon {
 namespace {
@@ -23,9 +24,6 @@ constexpr uint32_t kHeaderBytesV2 = kHeaderBytesV1 + 8;  // + the brick count
 constexpr uint32_t kHeaderBytesV3 = kHeaderBytesV2 + 8;  // + the exposure count and SH degree
 constexpr uint32_t kHeaderBytes = kHeaderBytesV3 + 8;    // + the refined poses' count and 4 zero bytes (version 4)
 constexpr int64_t kMaxExposures = 1 << 20;
-// The placement's sane range: a box side from a micrometre in metres to a million km, the shells
-// within it; beyond it the exports' transforms overflow or vanish.
-constexpr double kMinBoxSide = 1e-6, kMaxWorldSpan = 1e9;
 
 // Whether the row-major 3x3 `r` is a rotation: R^T R = I and det R = 1, within float rounding.
 bool IsRotation(const double (&r)[9]) {
@@ -215,8 +213,14 @@ Checkpoint ReadCheckpoint(std::istream& in, const std::string& name) {
     if (!std::isfinite(v)) r.Bad(field, StrCat(v), "not finite");
     return v;
   };
+  // A centre (or a shell centre) beyond the world span is as unplaceable as a box that large.
+  auto get_position = [&](const char* field) {
+    const double v = get_finite(field);
+    if (!(std::abs(v) <= kMaxWorldSpan)) r.Bad(field, StrCat(v), StrCat("must be within ", kMaxWorldSpan, " world units of the origin"));
+    return v;
+  };
   VolumePlacement& p = c.placement;
-  for (double& v : p.box_center) v = get_finite("box.center");
+  for (double& v : p.box_center) v = get_position("box.center");
   for (double& v : p.box_rotation) v = get_finite("box.rotation");
   if (!IsRotation(p.box_rotation)) r.Bad("box.rotation", "", "not a rotation (orthonormal, determinant 1)");
   for (double& v : p.box_size) {
@@ -225,7 +229,7 @@ Checkpoint ReadCheckpoint(std::istream& in, const std::string& name) {
       r.Bad("box.size", StrCat(v), StrCat("must be ", kMinBoxSide, " to ", kMaxWorldSpan, " world units"));
     }
   }
-  for (double& v : p.shell_center) v = get_finite("shells.center");
+  for (double& v : p.shell_center) v = get_position("shells.center");
   for (int k = 0; k < kMaxShells; ++k) {
     const double radius = get_finite("shells.radii");
     if (k < c.shape.num_shells && !(radius <= kMaxWorldSpan)) {
@@ -277,6 +281,10 @@ Checkpoint ReadCheckpoint(std::istream& in, const std::string& name) {
     r.Bad("checksum", "", "the parameters do not match the checksum");
   }
   if (in.peek() != std::char_traits<char>::eof()) r.Bad("size", "", "trailing bytes after the parameters");
+  // Values, not only the header: a NaN scores as a perfect or a meaningless PSNR and spreads
+  // through a resumed solve.
+  const int64_t not_finite = std::count_if(c.params.begin(), c.params.end(), [](float v) { return !std::isfinite(v); });
+  if (not_finite > 0) r.Bad("parameters", StrCat(not_finite, " of ", count), "not finite (NaN or infinite)");
   return c;
 }
 

@@ -5,6 +5,7 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
+#include "common/owned_files.h"
 #include "recon_cuda/data/checkpoint.h"
 
 namespace fs = std::filesystem;
@@ -36,39 +37,32 @@ bool HasCheckpoint(const fs::path& dir) {
   return false;
 }
 
-// Throws InputError if a run file of `dir` is a user's input (inputs.h): it is neither moved nor
-// removed (e.g. a NeRF json that lies at recon/recon.json).
-void CheckNoInputs(const fs::path& dir) {
-  for (const fs::path& p : RunFiles(dir)) CheckNotInput(p, "moving the previous run's files aside");
+// Throws InputError if a run file of `dir` is a user's input (inputs.h) or any file PERF did not
+// write (owned_files.h): it is neither moved nor removed (e.g. a NeRF json that lies at
+// recon/recon.json, or a run of an older PERF that kept no record).
+void CheckOurs(const fs::path& dir) {
+  for (const fs::path& p : RunFiles(dir)) {
+    CheckNotInput(p, "moving the previous run's files aside");
+    CheckReplaceable(p, "moving the previous run's files aside");
+  }
 }
 
 // Moves every run file of `from` into `to`, replacing what is there.
 void MoveRunFiles(const fs::path& from, const fs::path& to) {
-  for (const fs::path& p : RunFiles(from)) {
-    std::error_code ec;
-    fs::rename(p, to / p.filename(), ec);
-    if (ec) {
-      throw IoError(p.string(), "cannot move the previous run's file: " + ec.message(),
-                    "check that the workspace is writable");
-    }
-  }
+  for (const fs::path& p : RunFiles(from)) MoveOwned(p, to / p.filename());
 }
 
 // This run's own files, before the previous run's come back.
 void RemoveRunFiles(const fs::path& dir) {
-  for (const fs::path& p : RunFiles(dir)) {
-    std::error_code ec;
-    fs::remove(p, ec);
-  }
+  for (const fs::path& p : RunFiles(dir)) RemoveOwned(p);
 }
 
 }  // namespace
 
 PreviousRun::PreviousRun(const fs::path& workspace) : recon_(workspace / "recon"), aside_(recon_ / "previous") {
   if (RunFiles(recon_).empty()) return;
-  CheckNoInputs(recon_);
-  std::error_code ec;
-  fs::remove_all(aside_, ec);
+  CheckOurs(recon_);
+  RemoveOwnedTree(aside_);
   EnsureWritableDirectory(aside_);
   MoveRunFiles(recon_, aside_);
   active_ = true;
@@ -79,8 +73,7 @@ PreviousRun::~PreviousRun() {
   try {
     RemoveRunFiles(recon_);
     MoveRunFiles(aside_, recon_);
-    std::error_code ec;
-    fs::remove_all(aside_, ec);
+    RemoveOwnedTree(aside_);
   } catch (const Error&) {
     // Left in recon/previous/: the next reconstruct puts them back (RecoverPreviousRun).
   }
@@ -89,21 +82,20 @@ PreviousRun::~PreviousRun() {
 void PreviousRun::Discard() {
   if (!active_) return;
   active_ = false;
-  std::error_code ec;
-  fs::remove_all(aside_, ec);
+  RemoveOwnedTree(aside_);
 }
 
 void RecoverPreviousRun(const fs::path& workspace) {
   const fs::path recon = workspace / "recon", aside = recon / "previous";
   std::error_code ec;
   if (!fs::is_directory(aside, ec)) return;
-  CheckNoInputs(recon);
-  CheckNoInputs(aside);
+  CheckOurs(recon);
+  CheckOurs(aside);
   if (!HasCheckpoint(recon)) {
     RemoveRunFiles(recon);
     MoveRunFiles(aside, recon);
   }
-  fs::remove_all(aside, ec);
+  RemoveOwnedTree(aside);
 }
 
 }  // namespace perf::recon

@@ -7,6 +7,7 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
+#include "common/owned_files.h"
 #include "common/system_memory.h"
 #include "recon_cuda/data/checkpoint.h"
 #include "recon_cuda/run/level_monitor.h"
@@ -106,7 +107,8 @@ class Reconstruction {
   // scene.json, the same on every rank, and the volume's placement from it.
   void ReadScene() {
     run_.scene_path = o_.workspace / "scene.json";
-    run_.scene = perf::ReadScene(run_.scene_path);
+    // Written back with the box grown or the cameras refined, keeping what a user edited in it.
+    ReadBackAsOwned(run_.scene_path, [&] { run_.scene = perf::ReadScene(run_.scene_path); });
     CheckSameScene(run_.comm, run_.scene_path);
     run_.geometry = VolumeGeometry::FromScene(run_.scene);
   }

@@ -2,7 +2,9 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
+#include "common/owned_files.h"
 #include "recon_cuda/data/checkpoint.h"
+#include "recon_cuda/run/previous_run.h"
 #include "recon_cuda/run/refined_poses.h"
 #include "workspace/image_io.h"
 
@@ -15,6 +17,7 @@ LoadedCheckpoint LoadForRendering(const fs::path& workspace, const fs::path& che
   LoadedCheckpoint l;
   l.path = checkpoint;
   if (l.path.empty()) {
+    RecoverPreviousRun(workspace);  // a reconstruct killed before its first level: the run before it
     const int last = LastCheckpointLevel(workspace);
     if (last < 0) {
       throw IoError((workspace / "recon").string(), "no checkpoint found", "run perf reconstruct on this workspace first");
@@ -78,11 +81,15 @@ RenderViewsResult RenderViews(const RenderViewsOptions& o) {
   const auto file_of = [&](const PosedImage& v, const char* suffix) {
     return out_dir / (fs::path(v.name).filename().replace_extension().string() + suffix + ".png");
   };
-  // The workspace's inputs (its record) are never written over: refused before the first render.
+  // The workspace's inputs (its record), and any file PERF did not write, are never written over:
+  // refused before the first render.
   ProtectRecordedInputs(o.workspace);
   for (const PosedImage& v : views) {
-    CheckNotInput(file_of(v, ""), "a render");
-    if (o.write_opacity) CheckNotInput(file_of(v, "_opacity"), "a render");
+    for (const char* suffix : {"", "_opacity"}) {
+      if (*suffix != 0 && !o.write_opacity) continue;
+      CheckNotInput(file_of(v, suffix), "a render");
+      CheckReplaceable(file_of(v, suffix), "a render");
+    }
   }
   EnsureWritableDirectory(out_dir);
   int done = 0;

@@ -84,16 +84,17 @@ void SolverOptions::Check() const {
   if (jtj_ray_stride < 1 || jtj_ray_stride > 64) {
     Fail("jtj_ray_stride (--jtj-ray-stride)", std::to_string(jtj_ray_stride), "must be 1 to 64");
   }
-  if (!(pose_prior >= 0 && std::isfinite(pose_prior))) {
-    Fail("pose_prior (--pose-prior)", StrCat(pose_prior), "must be finite and >= 0");
-  }
-  if (!(exposure_prior >= 0 && std::isfinite(exposure_prior))) {
-    Fail("exposure_prior", StrCat(exposure_prior), "must be finite and >= 0");
-  }
-  if (!(smooth_grid >= 0 && std::isfinite(smooth_grid))) Fail("smooth_grid (--smooth-grid)", StrCat(smooth_grid), "must be finite and >= 0");
-  if (!(smooth_shells >= 0 && std::isfinite(smooth_shells))) {
-    Fail("smooth_shells (--smooth-shells)", StrCat(smooth_shells), "must be finite and >= 0");
-  }
+  // Weights relative to the photos: beyond kMaxRelativeWeight their squares swamp the photos'
+  // residuals and overflow float sums ("cost is not finite" later, naming nothing).
+  const auto check_weight = [](const char* name, double w) {
+    if (!(w >= 0 && w <= kMaxRelativeWeight)) {
+      Fail(name, StrCat(w), StrCat("must be a number from 0 to ", kMaxRelativeWeight, " (relative to the photos)"));
+    }
+  };
+  check_weight("pose_prior (--pose-prior)", pose_prior);
+  check_weight("exposure_prior (--exposure-prior)", exposure_prior);
+  check_weight("smooth_grid (--smooth-grid)", smooth_grid);
+  check_weight("smooth_shells (--smooth-shells)", smooth_shells);
   if (!(cost_tolerance >= 0 && cost_tolerance < 1)) {
     Fail("cost_tolerance (--cost-tolerance)", StrCat(cost_tolerance), "must be in [0, 1) (0: off)");
   }

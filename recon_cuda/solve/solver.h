@@ -31,6 +31,9 @@ namespace perf::recon {
 enum class SolverType { kGaussNewton, kAdam };
 const char* SolverName(SolverType t);
 
+// The largest prior or smoothness weight SolverOptions::Check accepts (relative to the photos).
+inline constexpr double kMaxRelativeWeight = 1e6;
+
 struct SolverOptions {
   SolverType type = SolverType::kGaussNewton;
   // Gauss-Newton iterations, or Adam steps, at this level (paper: 30 per level).

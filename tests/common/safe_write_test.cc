@@ -1,7 +1,7 @@
 // The write layer every output goes through (common/atomic_file.h, common/workspace_lock.h): a
 // failed write (a full disk, simulated with RLIMIT_FSIZE in a child process) leaves the old file
 // and no temporary, and its error names the final path; inputs cannot be replaced whatever path
-// names them; one writer per workspace; temporaries of dead processes are swept.
+// names them; one writer per workspace. (What PERF may replace: owned_files_test.cc.)
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 #include <sys/resource.h>
@@ -122,35 +122,7 @@ TEST(WorkspaceLock, OneWriterAtATime) {
   EXPECT_FALSE(again.created_workspace());
 }
 
-TEST(WorkspaceLock, SweepsOnlyDeadProcessesTemporaries) {
-  test::TempDir dir;
-  const fs::path ws = dir.path();
-  fs::create_directories(ws / "masks" / "soft");
-  fs::create_directories(ws / "sparse" / "0.tmp999999999-3");  // a folder from perf sfm
-  const fs::path dead = ws / "masks" / "soft" / "a.tmp999999999-7.png";  // no such pid
-  const fs::path live = ws / "masks" / "soft" / StrCat("b.tmp", ::getpid(), "-1.png");
-  const fs::path mine = ws / "notes.tmp.txt";  // not a temporary's name
-  const fs::path user = ws / "photos" / "c.tmp999999999-1.png";  // not a folder PERF owns
-  // The workspace laid over the photos: a photo in its top level named like a temporary is not
-  // one of PERF's outputs; a registered input in a folder PERF owns is never removed either.
-  const fs::path laid_over = ws / "X.tmp999999999-1.JPG";
-  const fs::path stale_scene = ws / "scene.tmp999999999-2.json";
-  const fs::path input = ws / "masks" / "soft" / "d.tmp999999999-4.png";
-  fs::create_directories(user.parent_path());
-  for (const fs::path& p : {dead, live, mine, user, laid_over, stale_scene, input}) std::ofstream(p) << "x";
-  ProtectInput(input);
-  EXPECT_EQ(SweepStaleTemporaries(ws), 3);
-  EXPECT_FALSE(fs::exists(dead));
-  EXPECT_FALSE(fs::exists(ws / "sparse" / "0.tmp999999999-3"));
-  EXPECT_FALSE(fs::exists(stale_scene));
-  EXPECT_TRUE(fs::exists(live));
-  EXPECT_TRUE(fs::exists(mine));
-  EXPECT_TRUE(fs::exists(user));
-  EXPECT_TRUE(fs::exists(laid_over));
-  EXPECT_TRUE(fs::exists(input));
-}
-
-// The lock is on the folder: deleting .perf.lock lets no second writer in, and the note goes
+// The lock is on the folder: deleting its note (.perf/lock) lets no second writer in, and the note goes
 // with the lock (a refused command leaves nothing in the folder it was given).
 TEST(WorkspaceLock, HoldsWithoutItsNoteAndLeavesNothing) {
   test::TempDir dir;

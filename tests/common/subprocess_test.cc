@@ -6,7 +6,10 @@
 
 #include <chrono>
 #include <csignal>
+#include <cstdio>
+#include <fstream>
 #include <string>
+#include <thread>
 
 namespace perf {
 namespace {
@@ -45,6 +48,31 @@ TEST(Subprocess, AQuietChildIsStoppedAfterTheIdleLimit) {
 }
 
 // The shell ignores TERM and waits on a child that would outlive the test.
+// Whether process `pid` still runs (a zombie waiting for its reaper does not).
+bool Running(pid_t pid) {
+  std::ifstream stat("/proc/" + std::to_string(pid) + "/stat");
+  std::string line;
+  if (!std::getline(stat, line)) return false;
+  const size_t paren = line.rfind(')');
+  return paren != std::string::npos && paren + 2 < line.size() && line[paren + 2] != 'Z';
+}
+
+// A stuck child is ended with everything it started (its process group): a grandchild that
+// holds the output pipe or keeps working would otherwise outlive perf.
+TEST(Subprocess, AStuckChildIsEndedWithItsProcessGroup) {
+  const std::string pid_file = ::testing::TempDir() + "/perf_grandchild_" + std::to_string(::getpid());
+  const Ran ran = RunShell("sleep 60 & echo $! > " + pid_file + "; echo started; sleep 60", 0.5);
+  EXPECT_TRUE(ran.result.idle);
+  EXPECT_LT(ran.seconds, 10);
+  std::ifstream in(pid_file);
+  pid_t grandchild = 0;
+  ASSERT_TRUE(in >> grandchild) << ran.out;
+  for (int i = 0; i < 100 && Running(grandchild); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  EXPECT_FALSE(Running(grandchild)) << "the grandchild " << grandchild << " still runs";
+  if (Running(grandchild)) ::kill(grandchild, SIGKILL);
+  std::remove(pid_file.c_str());
+}
+
 TEST(Subprocess, AChildThatIgnoresSigtermIsKilled) {
   const Ran ran = RunShell("trap '' TERM; echo started; sleep 30; echo survived", 0.5);
   EXPECT_TRUE(ran.result.idle);

@@ -48,6 +48,27 @@ TEST(Cli, BadInputGivesExitCode2AndNamesTheFile) {
   EXPECT_NE(r.output.find("--background = pink"), std::string::npos) << r.output;
 }
 
+// A value that is not a number, a negative one that once meant "the default", or a weight too
+// large to square is refused by every command that takes it, naming the option, before any work
+// (so a workspace that does not exist does not matter).
+TEST(Cli, BadOptionValuesAreNamedOnEveryCommand) {
+  test::TempDir dir;
+  const std::string ws = (dir / "ws").string();
+  for (const std::string command : {"reconstruct " + ws, "render " + ws, "export " + ws, "eval " + ws,
+                                    "run --nerf x.json -w " + ws}) {
+    const auto help = RunCommand(test::PerfBinary() + " " + command.substr(0, command.find(' ')) + " --help");
+    for (const std::string option : {"--min-box-opacity nan", "--sh-degree -1", "--sparse-min-opacity nan",
+                                     "--smooth-grid -7", "--pose-prior 1e308", "--exposure-prior 1e308",
+                                     "--cost-tolerance nan", "--mask-threshold nan", "--iso nan"}) {
+      if (help.output.find(option.substr(0, option.find(' ')) + " ") == std::string::npos) continue;  // not its option
+      const auto r = RunCommand(test::PerfBinary() + " " + command + " " + option);
+      EXPECT_EQ(r.exit_code, 2) << command << " " << option << ": " << r.output;
+      EXPECT_NE(r.output.find(option.substr(0, option.find(' '))), std::string::npos) << command << ": " << r.output;
+    }
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "ws"));
+}
+
 TEST(Cli, MissingFileGivesExitCode3) {
   test::TempDir dir;
   const auto r = RunCommand(test::PerfBinary() + " import --nerf " + (dir / "none.json").string() + " -w " +

@@ -28,13 +28,6 @@ using test::RunCommand;
 // A command that would hang is stopped after a minute (exit 124), so a hang fails the test.
 std::string Perf(const std::string& args) { return "timeout 60 " + test::PerfBinary() + " " + args; }
 
-std::map<fs::path, std::string> Snapshot(const fs::path& dir) {
-  std::map<fs::path, std::string> files;
-  for (const auto& e : fs::recursive_directory_iterator(dir)) {
-    if (e.is_regular_file()) files[e.path()] = ReadFileToString(e.path());
-  }
-  return files;
-}
 
 class InputsCli : public ::testing::Test {
  protected:
@@ -55,11 +48,11 @@ class InputsCli : public ::testing::Test {
 
 TEST_F(InputsCli, RenderIntoThePhotosFolderIsRefusedBeforeAnyRender) {
   Reconstruct(ws_);
-  const auto photos = Snapshot(dir_ / "images");
+  const auto photos = test::FilesUnder(dir_ / "images");
   const auto r = RunCommand(Perf("render -q " + ws_.string() + " --split all -o " + (dir_ / "images").string()));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("input"), std::string::npos) << r.output;
-  EXPECT_EQ(Snapshot(dir_ / "images"), photos) << "a photo was written over";
+  EXPECT_EQ(test::FilesUnder(dir_ / "images"), photos) << "a photo was written over";
 }
 
 // import, then each later command alone: the json at WORKSPACE/report.json stays as it was.

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <streambuf>
 
@@ -344,6 +345,29 @@ TEST(CheckpointTest, PlacementsOutOfRangeAreNamed) {
   Checkpoint far = Sample();
   far.placement.shell_radii.back() = 1e300;
   EXPECT_EQ(FieldOfError(Bytes(far)), "shells.radii");
+  Checkpoint away = Sample();
+  away.placement.box_center[2] = 1e300;
+  EXPECT_EQ(FieldOfError(Bytes(away)), "box.center");
+}
+
+// Parameters that are NaN or infinite (with a valid checksum) are refused, naming the file and
+// how many: a renderer would otherwise score them as a perfect or a meaningless PSNR.
+TEST(CheckpointTest, NonFiniteParametersAreRefusedWithTheirCount) {
+  for (const float bad : {std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity()}) {
+    Checkpoint c = Sample();
+    c.params[3] = bad;
+    c.params[c.params.size() - 1] = -bad;
+    std::istringstream in(Bytes(c));
+    try {
+      ReadCheckpoint(in, "level_7.perfvol");
+      ADD_FAILURE() << "read a checkpoint with " << bad;
+    } catch (const InputError& e) {
+      EXPECT_EQ(e.field(), "parameters");
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find("level_7.perfvol"), std::string::npos) << msg;
+      EXPECT_NE(msg.find(StrCat("2 of ", c.params.size())), std::string::npos) << msg;
+    }
+  }
 }
 
 // A FIFO in the checkpoint's place is refused at once instead of blocking the reader.

@@ -67,7 +67,9 @@ void ExpectTheCheckpoint(const Checkpoint& c, const std::string& b) {
   EXPECT_EQ(At<int32_t>(b, 36), s.sh_degree);
   EXPECT_EQ(At<int32_t>(b, 40), s.sparse() ? s.bricks->ActiveBricks() : -1);
   const int atlas = At<int32_t>(b, 44) * At<int32_t>(b, 48) * At<int32_t>(b, 52);
-  if (s.sparse()) EXPECT_GE(atlas, s.bricks->ActiveBricks());
+  if (s.sparse()) {
+    EXPECT_GE(atlas, s.bricks->ActiveBricks());
+  }
   const recon::VolumeGeometry g = recon::GeometryOf(c);
   EXPECT_EQ(At<float>(b, 56), g.box.center.x);
   EXPECT_EQ(At<float>(b, 56 + 4 * 4), g.box.world_from_box.m[1]);

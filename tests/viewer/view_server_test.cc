@@ -10,8 +10,10 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <fstream>
 #include <thread>
+#include <vector>
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
@@ -190,6 +192,33 @@ TEST(ViewServer, TwoClientsAtOnce) {
   }
   for (auto& t : clients) t.join();
   EXPECT_EQ(ok.load(), 50);
+}
+
+// Clients that send a request a byte at a time, more of them than a pool has threads, do not
+// starve the others: a normal request is still answered within 2 s.
+TEST(ViewServer, SlowClientsDoNotStarveTheOthers) {
+  Served s;
+  std::vector<int> slow;
+  for (int k = 0; k < 24; ++k) {
+    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in addr{};
+    addr.sin_family = AF_INET;
+    addr.sin_port = htons(static_cast<uint16_t>(s.port));
+    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    ASSERT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)), 0);
+    ASSERT_EQ(::send(fd, "G", 1, MSG_NOSIGNAL), 1);  // the start of a request line, and no more for now
+    slow.push_back(fd);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // all of them accepted and read from
+  auto c = s.Client();
+  c.set_read_timeout(3, 0);
+  const auto start = std::chrono::steady_clock::now();
+  const auto r = c.Get("/api/scene");
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  ASSERT_TRUE(r) << "no answer";
+  EXPECT_EQ(r->status, 200);
+  EXPECT_LT(seconds, 2.0);
+  for (int fd : slow) ::close(fd);
 }
 
 TEST(ViewServer, ReadsTheLogLineByLineAsItGrows) {

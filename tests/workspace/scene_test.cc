@@ -135,6 +135,11 @@ INSTANTIATE_TEST_SUITE_P(
         Corruption{"version", [](nlohmann::json& j) { j["version"] = 99; }},
         Corruption{"format", [](nlohmann::json& j) { j["format"] = "other"; }},
         Corruption{"box.size", [](nlohmann::json& j) { j["box"]["size"][1] = -1.0; }},
+        // Placements no export can hold (the checkpoint's own range): refused when read.
+        Corruption{"box.center", [](nlohmann::json& j) { j["box"]["center"][0] = 1e300; }},
+        Corruption{"box.size", [](nlohmann::json& j) { j["box"]["size"][2] = 1e300; }},
+        Corruption{"shells.center", [](nlohmann::json& j) { j["shells"]["center"][1] = -1e300; }},
+        Corruption{"shells.radii", [](nlohmann::json& j) { j["shells"]["radii"].back() = 1e300; }},
         Corruption{"box.rotation", [](nlohmann::json& j) { j["box"]["rotation"][0][0] = 2.0; }},
         Corruption{"shells.radii", [](nlohmann::json& j) { j["shells"]["radii"] = {3.0, 2.0}; }},
         Corruption{"cameras[0].fx", [](nlohmann::json& j) { j["cameras"][0]["fx"] = "abc"; }},
