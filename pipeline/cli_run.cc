@@ -9,6 +9,8 @@
 #include <string_view>
 
 #include "common/comm.h"
+#include "common/commit.h"
+#include "common/version.h"
 #include "common/errors.h"
 
 namespace perf {
@@ -51,8 +53,14 @@ void RefuseNotANumber(CLI::App& app) {
 
 }  // namespace
 
+void AddVersionAndGuide(CLI::App& app, const char* program) {
+  app.set_version_flag("--version", StrCat(program, " ", PERF_VERSION_STRING, " (commit ", PERF_COMMIT, ")"));
+  app.footer("The guide: docs/ in PERF's source tree (docs/commands/ has a page per command; "
+             "docs/troubleshooting.md explains every warning and error).");
+}
+
 int RunCommandLine(CLI::App& app, int argc, char** argv) {
-  // Exit codes (README "Safety"): 0 ok, 1 internal error (a bug), 2 bad input (a file, field or
+  // Exit codes (docs/workspace.md "Exit codes"): 0 ok, 1 internal error (a bug), 2 bad input (a file, field or
   // option named in the message; also a workspace another perf command holds), 3 file system
   // (cannot read or write, disk full), 4 the work itself failed (e.g. the solver diverged),
   // 5 not enough memory, 130 stopped by Ctrl-C (resumable).
@@ -66,6 +74,10 @@ int RunCommandLine(CLI::App& app, int argc, char** argv) {
   // instead of killing perf without a word.
   std::signal(SIGXFSZ, SIG_IGN);
   RefuseNotANumber(app);
+  for (CLI::App* sub : app.get_subcommands([](CLI::App*) { return true; })) {
+    sub->footer(StrCat("Every option explained: docs/commands/", sub->get_name(),
+                       ".md in PERF's source tree; warnings and errors: docs/troubleshooting.md"));
+  }
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

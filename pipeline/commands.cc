@@ -33,7 +33,9 @@ void AddThreadsOption(CLI::App* cmd, int* threads, int all_cores) {
 std::unique_ptr<WorkspaceLock> LockWorkspace(const std::filesystem::path& workspace, std::string_view command,
                                              bool create) {
   std::error_code ec;
-  if (!create && !std::filesystem::is_directory(workspace, ec)) return nullptr;
+  // A folder that is not a workspace (no scene.json) gets nothing written into it, not even the
+  // lock: the stage then names what is missing.
+  if (!create && !std::filesystem::is_regular_file(workspace / "scene.json", ec)) return nullptr;
   auto lock = std::make_unique<WorkspaceLock>(workspace, command);
   // Before anything is swept, written, moved or removed: what PERF made here, and the inputs.
   UseOwnershipRecord(workspace);

@@ -40,8 +40,8 @@ void AddThreadsOption(CLI::App* cmd, int* threads, int all_cores);
 // workspace's record of what PERF wrote (common/owned_files.h) and the recorded inputs, removes the
 // temporaries killed runs left and finishes or drops an export a kill interrupted
 // (export/export_set.h). Throws InputError when another perf command holds the lock. Commands that
-// need an existing workspace pass create = false: a missing folder gets no lock (nullptr) and the
-// stage's own message ("no scene.json here").
+// need an existing workspace pass create = false: a folder without scene.json gets no lock (nullptr,
+// nothing written into it) and the stage's own message ("no scene.json here").
 std::unique_ptr<WorkspaceLock> LockWorkspace(const std::filesystem::path& workspace, std::string_view command,
                                              bool create = false);
 

@@ -7,7 +7,6 @@
 #include <CLI/CLI.hpp>
 #include <string>
 
-#include "common/version.h"
 #include "pipeline/cli_run.h"
 #include "pipeline/commands.h"
 
@@ -16,7 +15,7 @@ int main(int argc, char** argv) {
       "perf_gpu: perf reconstruct and perf render for a machine with a GPU and none of perf's libraries. Import "
       "with perf first; export, eval and view the workspace with perf.",
       "perf_gpu"};
-  app.set_version_flag("--version", std::string("perf_gpu ") + PERF_VERSION_STRING);
+  perf::AddVersionAndGuide(app, "perf_gpu");
   app.require_subcommand(1);
   perf::AddReconstructCommand(app);
   perf::AddRenderCommand(app);

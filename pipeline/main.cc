@@ -2,7 +2,6 @@
 #include <CLI/CLI.hpp>
 #include <string>
 
-#include "common/version.h"
 #include "pipeline/cli_run.h"
 #include "pipeline/commands.h"
 
@@ -11,7 +10,7 @@ int main(int argc, char** argv) {
       "PERF: Performant, Explicit Radiance Fields. Photos or a COLMAP model in; a radiance field, "
       "foreground masks and DCC assets out.",
       "perf"};
-  app.set_version_flag("--version", std::string("perf ") + PERF_VERSION_STRING);
+  perf::AddVersionAndGuide(app, "perf");
   app.require_subcommand(1);
   perf::AddSfmCommand(app);
   perf::AddImportCommand(app);

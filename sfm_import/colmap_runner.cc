@@ -397,7 +397,7 @@ void ReportModel(const SfmRun& run, const Mapping& mapping, bool exhaustive, con
   if (best.num_images < 0.9 * n) {
     Report(run.options, StrCat("sfm: warning: only ", best.num_images, " of ", n, " photos (",
                                static_cast<int>(100.0 * best.num_images / n), " %) are in the model; ",
-                               exhaustive ? "try more features (--max-num-features) or larger images (--max-image-size)"
+                               exhaustive ? "try more features (--max-features) or larger images (--max-image-size)"
                                           : "try --matcher exhaustive (slower, order-free)",
                                ", or add photos that overlap those left out"));
   }

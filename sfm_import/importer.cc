@@ -107,9 +107,9 @@ void PlaceBoundsAndShells(const ImportOptions& o, const std::vector<BoundsPoint>
   }
   const double half_diag = 0.5 * box.size.norm();
   if (r->bounds.shells.radii.front() <= half_diag) {
-    r->warnings.push_back(StrCat("the innermost shell (radius ", r->bounds.shells.radii.front(),
-                                 ") cuts the box (half diagonal ", half_diag,
-                                 "); rays leaving the box may miss it"));
+    r->warnings.push_back(StrCat("the innermost shell (radius ", r->bounds.shells.radii.front(), ") cuts the box (half diagonal ",
+                                 half_diag, "): a ray leaving the box through a corner can pass beyond the shell and see "
+                                 "no background; give --shell-radii a first radius above ", half_diag));
   }
   r->scene.box = box;
   r->scene.shells = r->bounds.shells;
@@ -186,8 +186,8 @@ void CheckModelAgainstDisk(const ImportOptions& o, const colmap::Reconstruction&
     if (!in_model.count(n)) extra.push_back(n);
   }
   if (!extra.empty()) {
-    r->warnings.push_back(StrCat(extra.size(), " images in ", photos.dir.string(),
-                                 " are not in the model (not registered by COLMAP?) and are ignored, e.g. ", extra.front()));
+    r->warnings.push_back(StrCat(extra.size(), " images in ", photos.dir.string(), " are not in the model (not registered by "
+                                 "COLMAP?) and are ignored, e.g. ", extra.front(), "; perf sfm --force maps every photo again"));
   }
 }
 

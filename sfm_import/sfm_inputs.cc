@@ -107,10 +107,13 @@ void SfmOptions::Check() const {
     throw InputError(kCommandLine, "--colmap-binary", "", "empty",
                      "pass `colmap` (looked up on PATH) or the path of the binary");
   }
-  if (!colmap::FindCameraModel(camera_model)) {
-    throw InputError(kCommandLine, "--camera-model", camera_model, "not a COLMAP camera model",
-                     "use one of SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, "
-                     "OPENCV_FISHEYE, FULL_OPENCV (upper case)");
+  // Only the models perf import can undistort: a model of another one could not be imported.
+  const colmap::CameraModelInfo* model = colmap::FindCameraModel(camera_model);
+  if (model == nullptr || !model->supported) {
+    throw InputError(kCommandLine, "--camera-model", camera_model,
+                     model == nullptr ? "not a COLMAP camera model" : "a camera model perf import cannot undistort",
+                     "use one of SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV, "
+                     "OPENCV_FISHEYE, SIMPLE_RADIAL_FISHEYE, RADIAL_FISHEYE (upper case)");
   }
   if (matcher != "auto" && matcher != "exhaustive" && matcher != "sequential") {
     throw InputError(kCommandLine, "--matcher", matcher, "unknown matcher",
@@ -122,20 +125,20 @@ void SfmOptions::Check() const {
                        hint);
     }
   };
-  check_at_least("--exhaustive-max-images", exhaustive_max_images, 0,
+  check_at_least("--exhaustive-max", exhaustive_max_images, 0,
                  "0 always uses the sequential matcher in auto mode");
-  check_at_least("--sequential-overlap", sequential_overlap, 1,
+  check_at_least("--overlap", sequential_overlap, 1,
                  "how many following photos each photo is matched with, e.g. 10");
   check_at_least("--max-image-size", max_image_size, 1, "longest side in pixels, e.g. 1600");
-  check_at_least("--max-num-features", max_num_features, 1, "features per image, e.g. 8192");
+  check_at_least("--max-features", max_num_features, 1, "features per image, e.g. 8192");
   if (!(idle_timeout_seconds > 0) || !std::isfinite(idle_timeout_seconds)) {
     throw InputError(kCommandLine, "--colmap-idle-timeout", StrCat(idle_timeout_seconds),
                      "must be a positive number of seconds", "e.g. 1800 (30 minutes)");
   }
-  check_at_least("--min-registered-images", min_registered_images, 2,
+  check_at_least("--min-registered", min_registered_images, 2,
                  "a model needs at least two images");
   if (num_threads != -1 && num_threads < 1) {
-    throw InputError(kCommandLine, "--num-threads", std::to_string(num_threads),
+    throw InputError(kCommandLine, "-j", std::to_string(num_threads),
                      "must be -1 (all cores) or at least 1");
   }
 }

@@ -1,7 +1,9 @@
 // The `perf` executable as a user runs it: help, version, exit codes and messages.
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <fstream>
+#include <regex>
 
 #include "tests/test_util.h"
 
@@ -14,13 +16,29 @@ TEST(Cli, VersionAndHelp) {
   auto r = RunCommand(test::PerfBinary() + " --version");
   EXPECT_EQ(r.exit_code, 0);
   EXPECT_NE(r.output.find("perf 0."), std::string::npos) << r.output;
+  // The commit it was built from: 12 hex digits (maybe "-modified"), or "unknown" without git.
+  EXPECT_TRUE(std::regex_search(r.output, std::regex(R"(\(commit ([0-9a-f]{12}(-modified)?|unknown)\))")))
+      << r.output;
   r = RunCommand(test::PerfBinary() + " --help");
   EXPECT_EQ(r.exit_code, 0);
   for (const char* sub : {"import", "sfm"}) EXPECT_NE(r.output.find(sub), std::string::npos) << r.output;
-  for (const char* sub : {"import", "sfm"}) {
+  for (const char* sub : {"import", "sfm", "reconstruct", "render", "export", "eval", "run", "view"}) {
     r = RunCommand(test::PerfBinary() + " " + sub + " --help");
     EXPECT_EQ(r.exit_code, 0) << sub;
-    EXPECT_NE(r.output.find("--workspace"), std::string::npos) << r.output;
+    // Every command's help ends with the page of the guide that explains its options.
+    const std::string page = std::string("docs/commands/") + sub + ".md";
+    EXPECT_NE(r.output.find(page), std::string::npos) << r.output;
+    EXPECT_TRUE(std::filesystem::exists(std::filesystem::path(PERF_SOURCE_DIR) / page)) << page;
+  }
+}
+
+TEST(Cli, AFolderThatIsNoWorkspaceGetsNothingWritten) {
+  test::TempDir dir;
+  for (const char* command : {"reconstruct", "render", "export", "eval"}) {
+    const auto r = RunCommand(test::PerfBinary() + " " + command + " " + dir.path().string());
+    EXPECT_EQ(r.exit_code, 3) << command << ": " << r.output;
+    EXPECT_NE(r.output.find("scene.json"), std::string::npos) << command << ": " << r.output;
+    EXPECT_TRUE(std::filesystem::is_empty(dir.path())) << command << " wrote into a folder that is no workspace";
   }
 }
 
@@ -54,7 +72,7 @@ TEST(Cli, BadInputGivesExitCode2AndNamesTheFile) {
 TEST(Cli, BadOptionValuesAreNamedOnEveryCommand) {
   test::TempDir dir;
   const std::string ws = (dir / "ws").string();
-  for (const std::string command : {"reconstruct " + ws, "render " + ws, "export " + ws, "eval " + ws,
+  for (const std::string& command : {"reconstruct " + ws, "render " + ws, "export " + ws, "eval " + ws,
                                     "run --nerf x.json -w " + ws}) {
     const auto help = RunCommand(test::PerfBinary() + " " + command.substr(0, command.find(' ')) + " --help");
     for (const std::string option : {"--min-box-opacity nan", "--sh-degree -1", "--sparse-min-opacity nan",
