@@ -22,6 +22,7 @@ PACKAGES=(
   clang                                  # libFuzzer target for the binary readers (optional)
   libcpp-httplib-dev libjs-three         # perf view: its HTTP server and the page's three.js
   chromium                               # perf view's page tests (headless)
+  nodejs                                 # the page's scripts tested alone (field_parse_test, fly_test)
   python3-numpy python3-pil              # the GPU run scripts' dry runs (bench/masks_from_opacity.py)
 )
 

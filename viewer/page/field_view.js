@@ -1,5 +1,5 @@
 // perf view's field panel (field.js draws): the fitted volume behind the 3-D view, seen through the
-// orbit camera or snapped to any photo's camera with its intrinsics; the level to show (or the
+// orbit camera (flown with W A S D Q E, view.js) or snapped to any photo's camera with its intrinsics; the level to show (or the
 // running solve's newest volume, polled every 3 s); the render rule; a slider from the render to
 // the photo with their PSNR; the frame time. A coarse frame (a quarter of the pixels) while the
 // view moves, the full one once it rests. URL options: ?field=<photo name> snaps to that photo,
@@ -32,6 +32,16 @@ const PerfFieldView = (() => {
     const fy = 0.5 * height / Math.tan(camera3.fov * Math.PI / 360);
     return { fx: fy, fy, cx: 0.5 * width, cy: 0.5 * height, width, height,
              rotation: [0, 1, 2].map((i) => [e[i], -e[4 + i], -e[8 + i]]), position: [e[12], e[13], e[14]] };
+  }
+
+  // Fly controls: the move of one key press in world units, along the camera's own axes (right,
+  // up, back: three.js's columns of its world matrix) by `step`: W / S forward and back, A / D
+  // left and right, E / Q up and down; null for any other key. The orbit target moves with the
+  // camera (view.js), so the mouse then turns around the point as far ahead as before.
+  function flyMove(key, right, up, back, step) {
+    const axes = { w: [back, -1], s: [back, 1], a: [right, -1], d: [right, 1], e: [up, 1], q: [up, -1] };
+    const a = axes[String(key).toLowerCase()];
+    return a ? a[0].map((v) => v * a[1] * step) : null;
   }
 
   function psnr(a, b) {  // RGBA bytes of two images of one size, over RGB
@@ -223,5 +233,5 @@ const PerfFieldView = (() => {
     setInterval(() => poll(false), 3000);
   }
 
-  return { start, photoView, orbitView };
+  return { start, photoView, orbitView, flyMove };
 })();

@@ -178,6 +178,23 @@ function startViewer(sc, points, onMesh) {
   };
   window.addEventListener('resize', resize);
   resize();
+  // Fly: W A S D Q E move the camera and its orbit target together by a twentieth of the orbit's
+  // distance (Shift: four times that); a moved camera leaves a photo's view as a drag does.
+  window.addEventListener('keydown', (ev) => {
+    if (typeof PerfFieldView === 'undefined' || /^(INPUT|SELECT|TEXTAREA)$/.test(ev.target.tagName || '')) return;
+    camera.updateMatrixWorld();
+    const e = camera.matrixWorld.elements;
+    const step = 0.05 * camera.position.distanceTo(controls.target) * (ev.shiftKey ? 4 : 1);
+    const move = PerfFieldView.flyMove(ev.key, [e[0], e[1], e[2]], [e[4], e[5], e[6]], [e[8], e[9], e[10]], step);
+    if (!move) return;
+    ev.preventDefault();
+    controls.dispatchEvent({ type: 'start' });
+    const d = new THREE.Vector3(move[0], move[1], move[2]);
+    camera.position.add(d);
+    controls.target.add(d);
+    controls.update();
+    controls.dispatchEvent({ type: 'end' });
+  });
   for (const box of document.querySelectorAll('#legend input[data-layer]')) {
     const name = box.dataset.layer;
     box.checked = !only || only.split(',').includes(name);
