@@ -139,6 +139,7 @@ void WriteAtomically(const fs::path& target, const std::function<void(const fs::
 }
 
 void EnsureWritableDirectory(const fs::path& dir) {
+  CheckNoLinkOnTheWay(dir / "_");  // no folder made outside the workspace through a link in it
   std::error_code ec;
   // Made one level at a time, each journalled (owned_files.h): PERF may remove it again once empty.
   std::vector<fs::path> missing;

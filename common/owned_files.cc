@@ -121,6 +121,22 @@ class Record {
     return std::nullopt;
   }
 
+  // The first folder between the workspace and `p` (a path inside it) that is a symbolic link:
+  // writing through it would put a file outside the workspace. Empty when there is none or `p`
+  // is not inside the workspace.
+  fs::path LinkOnTheWay(const fs::path& p) const {
+    const fs::path rel = fs::absolute(p).lexically_normal().lexically_relative(root_);
+    if (rel.empty() || *rel.begin() == "..") return {};
+    fs::path dir = root_;
+    for (const fs::path& part : rel.parent_path()) {
+      dir /= part;
+      const auto st = Lstat(dir);
+      if (!st) return {};
+      if (S_ISLNK(st->st_mode)) return dir;
+    }
+    return {};
+  }
+
   // Whether a folder above `p`, inside the workspace, is a work folder of PERF's.
   bool InWorkFolder(const fs::path& p) {
     fs::path a = fs::absolute(p).lexically_normal();
@@ -260,7 +276,21 @@ bool IsOwned(const fs::path& path) {
   return !S_ISLNK(st->st_mode) && r->InWorkFolder(path);
 }
 
+void CheckNoLinkOnTheWay(const fs::path& path) {
+  Record* r = Installed().get();
+  if (r == nullptr) return;
+  const fs::path link = r->LinkOnTheWay(path);
+  if (link.empty()) return;
+  std::error_code ec;
+  throw InputError(link.string(), "", "",
+                   StrCat("this folder of the workspace is a symbolic link (to ", fs::read_symlink(link, ec).string(),
+                          "), so what PERF writes there would land outside the workspace"),
+                   "PERF writes only into the workspace's own folders: remove the link (PERF makes the folder again), "
+                   "or choose another workspace");
+}
+
 void CheckReplaceable(const fs::path& target, std::string_view what) {
+  CheckNoLinkOnTheWay(target);
   if (!Lstat(target) || IsOwned(target)) return;
   const auto st = Lstat(target);
   const char* kind = st && S_ISLNK(st->st_mode) ? "a symbolic link" : st && S_ISDIR(st->st_mode) ? "a folder" : "a file";

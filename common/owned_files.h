@@ -39,7 +39,12 @@ void DropOwnershipRecord();
 // True for everything without a record (there is nothing to check against).
 bool IsOwned(const std::filesystem::path& path);
 
-// Throws InputError (exit 2) naming `target` unless nothing is there or IsOwned(target). `what`
+// Throws InputError (exit 2) naming the folder when `path` lies in the workspace below a folder
+// that is a symbolic link (a write would land outside the workspace); nothing without a record.
+void CheckNoLinkOnTheWay(const std::filesystem::path& path);
+
+// Throws InputError (exit 2) naming `target` unless nothing is there or IsOwned(target), or when
+// it lies below a linked folder of the workspace (CheckNoLinkOnTheWay). `what`
 // names the output ("a render", "the --log-json log"); the hint says to choose another path.
 void CheckReplaceable(const std::filesystem::path& target, std::string_view what = "an output");
 

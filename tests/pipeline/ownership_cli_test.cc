@@ -129,5 +129,20 @@ TEST_F(OwnershipCli, AnOutputPerfCannotShowItWroteIsRefused) {
   EXPECT_EQ(ReadFileToString(report), "a user's notes\n");
 }
 
+// A folder of the workspace replaced by a link to a folder elsewhere (a user's photos, another
+// disk): nothing is written through it. Before, a re-import wrote its PNGs into the user's folder.
+TEST_F(OwnershipCli, NothingIsWrittenThroughALinkedFolder) {
+  const fs::path elsewhere = dir_ / "elsewhere";
+  fs::create_directories(elsewhere);
+  std::ofstream(elsewhere / "notes.txt") << "a user's notes\n";
+  fs::create_symlink(elsewhere, ws_ / "recon");
+  const auto r = Reconstruct();
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("recon"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("symbolic link"), std::string::npos) << r.output;
+  EXPECT_EQ(test::FilesUnder(elsewhere).size(), 1u) << "files were written outside the workspace";
+  EXPECT_EQ(ReadFileToString(elsewhere / "notes.txt"), "a user's notes\n");
+}
+
 }  // namespace
 }  // namespace perf
