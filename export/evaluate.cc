@@ -235,9 +235,11 @@ EvalResult RunEval(const EvalOptions& o) {
     const Image image = recon::ToImage(render);
     Image mask = Binarize(recon::OpacityImage(render), o.mask_threshold);
     const ImageScores s = ScoreImage(image, v.image, mask);
-    r.views.push_back({v.name, s});
+    ViewReport& view = r.views.emplace_back();
+    view.name = v.name;
+    view.scores = s;
     for (const SceneImage& im : scene.images) {
-      if (im.name == v.name) r.views.back().pose_doubt = im.pose_doubt;
+      if (im.name == v.name) view.pose_doubt = im.pose_doubt;
     }
     r.mean.psnr += s.psnr;
     r.mean.ssim += s.ssim;

@@ -202,7 +202,9 @@ Checkpoint ReadCheckpoint(std::istream& in, const std::string& name) {
   c.iterations = r.Get<int32_t>("iterations");
   c.solver = r.Get<int32_t>("solver");
   if (c.level < 0 || c.level > 16) r.Bad("level", std::to_string(c.level), "out of range");
-  if (c.shape.n < 1 || c.shape.n > 4096) r.Bad("n", std::to_string(c.shape.n), "grid size out of range");
+  if (c.shape.n < 1 || c.shape.n > kMaxGridSize) {
+    r.Bad("n", std::to_string(c.shape.n), StrCat("grid size out of range (1 to ", kMaxGridSize, ")"));
+  }
   if (c.shape.m < 1 || c.shape.m > 16384) r.Bad("m", std::to_string(c.shape.m), "face size out of range");
   if (c.shape.num_shells < 1 || c.shape.num_shells > kMaxShells) {
     r.Bad("num_shells", std::to_string(c.shape.num_shells), StrCat("must be 1 to ", kMaxShells));

@@ -33,6 +33,12 @@
 
 namespace perf::recon {
 
+// The finest grid PERF fits (reconstruct_options.cc; the GPU's default and the high preset's
+// finest) and reads: 1024 cells across. A sparse level's tables follow from n alone (the march's
+// skip table and its distances, 2 (n/2)^3 bytes: 256 MiB at 1024), so a header claiming more is
+// refused before anything is allocated from it.
+inline constexpr int kMaxGridSize = 1024;
+
 inline constexpr uint32_t kCheckpointVersion = 4;
 
 struct Checkpoint {

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "common/errors.h"
+#include "recon_cuda/data/checkpoint.h"
 #include "workspace/scene.h"
 
 namespace perf::recon {
@@ -34,6 +35,15 @@ void ReconstructOptions::Check() const {
   }
   if (start_resolution < 2 || start_resolution > 1024) {
     Fail("--start-resolution", std::to_string(start_resolution), "must be 2 to 1024");
+  }
+  if (max_resolution > kMaxGridSize) {
+    Fail("--max-resolution", std::to_string(max_resolution), StrCat("must be at most ", kMaxGridSize));
+  }
+  if (levels > 0 && (int64_t{start_resolution} << (levels - 1)) > kMaxGridSize) {
+    Fail("--levels", std::to_string(levels),
+         StrCat("the finest level would be ", int64_t{start_resolution} << (levels - 1), "^3, more than ", kMaxGridSize,
+                "^3"),
+         "use fewer levels or a smaller --start-resolution");
   }
   if (iterations < 0) Fail("--iterations", std::to_string(iterations), "must be >= 0");
   for (int i : level_iterations) {
