@@ -30,7 +30,7 @@ data=${PERF_SHARED_DATA_DIR:-$root/../shared/data}
 declare -A srcs=(
   [colmap_bin]="sfm_import/colmap_model.cc sfm_import/colmap_model_binary.cc sfm_import/colmap_model_text.cc sfm_import/camera_models.cc common/errors.cc common/atomic_file.cc common/inputs.cc common/owned_files.cc"
   [checkpoint]="recon_cuda/data/checkpoint.cc recon_cuda/data/brick_grid.cc common/errors.cc common/atomic_file.cc common/inputs.cc common/owned_files.cc"
-  [nerf_json]="sfm_import/nerf_reader.cc workspace/image_io.cc common/errors.cc common/atomic_file.cc common/inputs.cc common/owned_files.cc common/system_memory.cc"
+  [nerf_json]="sfm_import/nerf_reader.cc workspace/image_io.cc workspace/image_ops.cc common/errors.cc common/atomic_file.cc common/inputs.cc common/owned_files.cc common/system_memory.cc"
 )
 declare -A flags=(
   [colmap_bin]=""
