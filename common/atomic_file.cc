@@ -54,8 +54,7 @@ void FailIfTestSaysSo(const fs::path& target) {
 // write (the one place every writer checks that), journalling it first, then syncs the folder.
 void Commit(const fs::path& tmp, const fs::path& target, Durability durability) {
   FailIfTestSaysSo(target);
-  CheckNotInput(target);
-  CheckReplaceable(target);
+  CheckMayReplace(target);
   RecordOutput(target, tmp);
   std::error_code ec;
   fs::rename(tmp, target, ec);
@@ -82,8 +81,7 @@ void RemovingOnFailure(const fs::path& tmp, Body&& body) {
 // that a sweep after a kill may remove it (owned_files.h). Checks first that the target may be
 // replaced, so that no work is done for an output that would be refused.
 UniqueFd CreateTemporary(const fs::path& target, fs::path* tmp) {
-  CheckNotInput(target);
-  CheckReplaceable(target);
+  CheckMayReplace(target);
   *tmp = TempPathFor(target);
   UniqueFd fd(::open(tmp->c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC | O_NOFOLLOW, 0644));
   if (fd.get() < 0) throw IoError(target.string(), "cannot create the file: " + Errno(), kDiskHint);
@@ -92,6 +90,11 @@ UniqueFd CreateTemporary(const fs::path& target, fs::path* tmp) {
 }
 
 }  // namespace
+
+void CheckMayReplace(const fs::path& target, std::string_view what) {
+  CheckNotInput(target, what);
+  CheckReplaceable(target, what);
+}
 
 fs::path TempPathFor(const fs::path& target) {
   static std::atomic<unsigned> counter{0};

@@ -28,6 +28,11 @@ enum class Durability { kAtomic, kDurable };
 // the workspace's journal lists it (owned_files.h), never because of its name.
 std::filesystem::path TempPathFor(const std::filesystem::path& target);
 
+// Throws InputError naming `target` when writing there would change a user's input (inputs.h) or
+// a file PERF did not write (owned_files.h); `what` names the output. Every atomic write checks
+// this; call it to refuse before any work is done.
+void CheckMayReplace(const std::filesystem::path& target, std::string_view what = "an output");
+
 // Writes `contents` to `target` atomically (see above).
 void WriteFileAtomically(const std::filesystem::path& target, std::string_view contents,
                          Durability durability = Durability::kAtomic);

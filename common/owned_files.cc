@@ -291,9 +291,9 @@ void CheckNoLinkOnTheWay(const fs::path& path) {
 
 void CheckReplaceable(const fs::path& target, std::string_view what) {
   CheckNoLinkOnTheWay(target);
-  if (!Lstat(target) || IsOwned(target)) return;
   const auto st = Lstat(target);
-  const char* kind = st && S_ISLNK(st->st_mode) ? "a symbolic link" : st && S_ISDIR(st->st_mode) ? "a folder" : "a file";
+  if (!st || IsOwned(target)) return;
+  const char* kind = S_ISLNK(st->st_mode) ? "a symbolic link" : S_ISDIR(st->st_mode) ? "a folder" : "a file";
   throw InputError(target.string(), "", "",
                    StrCat(what, " would change ", kind, " that PERF did not write (or that changed since)"),
                    kNotOursHint);

@@ -195,14 +195,10 @@ nlohmann::json Manifest(const ExportOptions& o, const ExportResult& r, const fs:
   nlohmann::json files = nlohmann::json::array();
   for (const fs::path& f : r.files) files.push_back(f.generic_string());
   const std::set<std::string> groups = GroupsWritten(o);
-  if (old.is_object() && old.contains("files") && old["files"].is_array()) {
-    for (const auto& f : old["files"]) {
-      std::error_code ec;
-      if (f.is_string() && !groups.count(ExportGroup(f.get<std::string>())) && !ExportGroup(f.get<std::string>()).empty() &&
-          fs::exists(workspace / f.get<std::string>(), ec)) {
-        files.push_back(f);
-      }
-    }
+  for (const fs::path& f : ManifestFiles(old)) {  // kept: an old group this export did not write
+    const std::string group = ExportGroup(f);
+    std::error_code ec;
+    if (!group.empty() && !groups.count(group) && fs::exists(workspace / f, ec)) files.push_back(f.generic_string());
   }
   nlohmann::json j;
   j["format"] = "perf-export";

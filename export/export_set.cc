@@ -74,6 +74,18 @@ json ReadOldManifest(const fs::path& workspace) {
   }
 }
 
+std::vector<fs::path> ManifestFiles(const json& manifest) {
+  std::vector<fs::path> files;
+  if (!manifest.is_object() || !manifest.contains("files") || !manifest["files"].is_array()) return files;
+  for (const auto& f : manifest["files"]) {
+    if (!f.is_string()) continue;
+    const fs::path rel = fs::path(f.get<std::string>()).lexically_normal();
+    if (rel.is_absolute() || rel.empty() || *rel.begin() == "..") continue;  // a garbled manifest's
+    files.push_back(rel);
+  }
+  return files;
+}
+
 void CommitStagedExport(const fs::path& workspace, const std::vector<fs::path>& files,
                         const std::set<std::string>& groups, const json& old_manifest) {
   std::set<std::string> written;
@@ -83,15 +95,8 @@ void CommitStagedExport(const fs::path& workspace, const std::vector<fs::path>& 
     written.insert(f.generic_string());
     plan["files"].push_back(f.generic_string());
   }
-  if (old_manifest.is_object() && old_manifest.contains("files") && old_manifest["files"].is_array()) {
-    for (const auto& f : old_manifest["files"]) {
-      if (!f.is_string()) continue;
-      const fs::path rel = fs::path(f.get<std::string>()).lexically_normal();
-      if (rel.is_absolute() || rel.empty() || *rel.begin() == "..") continue;  // a garbled manifest's
-      if (groups.count(ExportGroup(rel)) && !written.count(rel.generic_string())) {
-        plan["remove"].push_back(rel.generic_string());
-      }
-    }
+  for (const fs::path& rel : ManifestFiles(old_manifest)) {
+    if (groups.count(ExportGroup(rel)) && !written.count(rel.generic_string())) plan["remove"].push_back(rel.generic_string());
   }
   WriteFileAtomically(CommitPlan(workspace), plan.dump(1) + "\n", Durability::kDurable);
   ApplyPlan(workspace, plan);

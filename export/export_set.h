@@ -25,6 +25,10 @@ std::string ExportGroup(const std::filesystem::path& relative);
 // The workspace's export.json, or null when there is none, it is not PERF's or it cannot be read.
 nlohmann::json ReadOldManifest(const std::filesystem::path& workspace);
 
+// The files a manifest (export.json, or null) lists, relative to the workspace and inside it;
+// entries that are not such paths are skipped.
+std::vector<std::filesystem::path> ManifestFiles(const nlohmann::json& manifest);
+
 // `files` (relative, staged, export.json among them) replace the old set's files of the `groups`
 // written this time; the old manifest's other files of those groups are removed if PERF wrote
 // them. Throws InputError naming a destination that PERF did not write, before anything moves.

@@ -10,7 +10,6 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
-#include "common/owned_files.h"
 #include "common/system_memory.h"
 #include "workspace/scene.h"
 
@@ -74,12 +73,10 @@ void RunJobs(const std::vector<ImageJob>& jobs, const ImportOptions& o, const La
     for (const std::string& rel : {job.out_rel, job.alpha_rel}) {
       if (rel.empty()) continue;
       const std::string what = StrCat(rel == job.out_rel ? "the workspace image" : "the alpha image", " of ", job.source.string());
-      CheckNotInput(o.workspace / rel, what);
-      CheckReplaceable(o.workspace / rel, what);
+      CheckMayReplace(o.workspace / rel, what);
     }
   }
-  CheckNotInput(o.workspace / "scene.json", "scene.json");
-  CheckReplaceable(o.workspace / "scene.json", "scene.json");
+  CheckMayReplace(o.workspace / "scene.json", "scene.json");
   std::atomic<int> done{0};
   const int total = static_cast<int>(jobs.size());
   tbb::task_arena arena(Concurrency(o, largest));

@@ -41,10 +41,7 @@ bool HasCheckpoint(const fs::path& dir) {
 // write (owned_files.h): it is neither moved nor removed (e.g. a NeRF json that lies at
 // recon/recon.json, or a run of an older PERF that kept no record).
 void CheckOurs(const fs::path& dir) {
-  for (const fs::path& p : RunFiles(dir)) {
-    CheckNotInput(p, "moving the previous run's files aside");
-    CheckReplaceable(p, "moving the previous run's files aside");
-  }
+  for (const fs::path& p : RunFiles(dir)) CheckMayReplace(p, "moving the previous run's files aside");
 }
 
 // Moves every run file of `from` into `to`, replacing what is there.

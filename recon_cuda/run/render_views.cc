@@ -2,7 +2,6 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
-#include "common/owned_files.h"
 #include "recon_cuda/data/checkpoint.h"
 #include "recon_cuda/run/previous_run.h"
 #include "recon_cuda/run/refined_poses.h"
@@ -87,8 +86,7 @@ RenderViewsResult RenderViews(const RenderViewsOptions& o) {
   for (const PosedImage& v : views) {
     for (const char* suffix : {"", "_opacity"}) {
       if (*suffix != 0 && !o.write_opacity) continue;
-      CheckNotInput(file_of(v, suffix), "a render");
-      CheckReplaceable(file_of(v, suffix), "a render");
+      CheckMayReplace(file_of(v, suffix), "a render");
     }
   }
   EnsureWritableDirectory(out_dir);

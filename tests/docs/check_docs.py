@@ -16,8 +16,10 @@ Each prints what it checked and exits 1 naming every failure.
 import pathlib
 import re
 import shlex
-import subprocess
 import sys
+
+# The CLI's help as check_option_pages.py reads it (one parser for both checks).
+from check_option_pages import option_names, run_help, subcommands
 
 LINK = re.compile(r"(?<!\!)\[[^\]]*\]\(([^)\s]+)\)|\!\[[^\]]*\]\(([^)\s]+)\)")
 FENCE = re.compile(r"^```(\w*)\s*$")
@@ -81,30 +83,9 @@ def check_links(root):
     return failures, f"{count} relative links in {len(files)} files"
 
 
-def help_of(perf, args):
-    r = subprocess.run([perf] + args + ["--help"], capture_output=True, text=True, timeout=60)
-    if r.returncode != 0:
-        return None
-    return r.stdout
-
-
-def subcommands(perf):
-    text = help_of(perf, [])
-    names = re.findall(r"^\s{2}([a-z][a-z-]*)\s{2,}", text.split("Subcommands:")[-1], re.M)
-    return set(names)
-
-
-def options_of(help_text):
-    found = set()
-    for m in re.finditer(r"^\s+((?:-\w,)?--?[\w-]+(?:,--[\w-]+)*)", help_text, re.M):
-        for name in m.group(1).split(","):
-            found.add(name)
-    return found
-
-
 def check_tutorial(perf, tutorial):
     text = pathlib.Path(tutorial).read_text(encoding="utf-8")
-    commands, failures = subcommands(perf), []
+    commands, failures = set(subcommands(run_help(perf, []))), []
     blocks = re.findall(r"^```sh\n(.*?)^```", text, re.M | re.S)
     checked = 0
     for block in blocks:
@@ -119,7 +100,7 @@ def check_tutorial(perf, tutorial):
             if len(words) < 2 or words[1] not in commands:
                 failures.append(f"{line}: '{words[1] if len(words) > 1 else ''}' is not a perf subcommand")
                 continue
-            listed = options_of(help_of(perf, [words[1]]) or "")
+            listed = set(option_names(words[1], run_help(perf, [words[1]])))
             for w in words[2:]:
                 name = w.split("=", 1)[0]
                 if name.startswith("-") and name not in listed:
