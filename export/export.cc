@@ -2,6 +2,7 @@
 
 #include <nlohmann/json.hpp>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cstdio>
@@ -11,6 +12,7 @@
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
+#include "common/owned_files.h"
 #include "common/stopwatch.h"
 #include "export/export_set.h"
 #include "export/mesh_simplify.h"
@@ -379,6 +381,53 @@ ExportResult RunExport(const ExportOptions& o) {
     throw;
   }
   return r;
+}
+
+double EstimateExportAndEvalSeconds(recon::Backend* backend, recon::VecId params, const Scene& scene,
+                                    const ExportOptions& o, bool pose_fit) {
+  const SceneImage* photo = nullptr;
+  int photos = 0, cameras = 0;
+  double test_pixels = 0;
+  std::set<int> seen;
+  for (const SceneImage& im : scene.images) {
+    if (im.split == Split::kExcluded) continue;
+    ++photos;
+    if (photo == nullptr) photo = &im;
+    if (seen.insert(im.camera_id).second) ++cameras;
+    const SceneCamera& cam = scene.camera(im.camera_id);
+    if (im.split == Split::kTest) test_pixels += static_cast<double>(cam.width) * cam.height;
+  }
+  if (photo == nullptr) return 0;
+  const SceneCamera& cam = scene.camera(photo->camera_id);
+  // The photo's mask (and its camera's frame, made once per camera).
+  auto t0 = WallClock::now();
+  const PhotoFrame frame = PhotoFrame::Create(cam);
+  const double frame_seconds = SecondsSince(t0);
+  t0 = WallClock::now();
+  const Image soft = RenderPhotoMask(backend, params, cam, *photo, frame, o.mask);
+  const double mask_seconds = SecondsSince(t0);
+  // Its files, written where nothing of the user's is, then removed.
+  const fs::path probe = PrivateFolder(o.workspace) / "probe";
+  EnsureWritableDirectory(probe);
+  t0 = WallClock::now();
+  WriteMaskFiles(o, scene, *photo, soft, {probe / "soft.png", probe / "binary.png", probe / "foreground.png"});
+  const double files_seconds = SecondsSince(t0);
+  RemoveOwnedTree(probe);
+  // Its render at the workspace's size, for the other renders and eval's scores.
+  t0 = WallClock::now();
+  backend->Render(params, recon::ToPinhole(cam, photo->world_from_cam), cam.width, cam.height, o.min_box_opacity);
+  const double per_pixel = SecondsSince(t0) / std::max(1.0, static_cast<double>(cam.width) * cam.height);
+  double orbit_pixels = 0;
+  if (o.renders && o.orbit.frames > 0) {
+    for (const OrbitView& v : OrbitCameras(scene, o.orbit)) orbit_pixels += static_cast<double>(v.width) * v.height;
+  }
+  // Masks are rendered one photo at a time and written in parallel batches of 8 (ExportMasks).
+  const double writers = std::clamp<double>(tbb::this_task_arena::max_concurrency(), 1, 8);
+  const double masks = cameras * frame_seconds + photos * (mask_seconds + files_seconds / writers);
+  const double renders = (o.renders ? test_pixels + orbit_pixels : 0) * per_pixel;
+  // eval: each held-out view rendered and scored (about twice its render), the masks' agreement.
+  const double eval = 2 * test_pixels * per_pixel;
+  return masks + renders + eval;
 }
 
 }  // namespace perf::exporter

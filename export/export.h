@@ -74,6 +74,15 @@ struct ExportResult {
 
 ExportResult RunExport(const ExportOptions& options);
 
+// Seconds RunExport with `options` and then RunEval will take for `scene` (its cameras as the
+// volume has them) from the volume `backend` holds at `params`, measured by doing one photo's
+// work: its mask rendered and its mask files and cut-out written (to WORKSPACE/.perf/probe,
+// removed after), times the photos; the held-out and orbit renders and eval's scores from that
+// photo's render at the workspace's size, by their pixels. For perf run --time-budget.
+// pose_fit: eval fits the held-out cameras too (the volume refines poses).
+double EstimateExportAndEvalSeconds(recon::Backend* backend, recon::VecId params, const Scene& scene,
+                                    const ExportOptions& options, bool pose_fit);
+
 // The <name> above for a scene image.
 std::filesystem::path OutputName(const SceneImage& image);
 

@@ -18,7 +18,7 @@ namespace perf {
 void AddRunCommand(CLI::App& app) {
   struct Args {
     RunOptions o;
-    std::string images, colmap, nerf, workspace, log_json, log_level = "info";
+    std::string images, colmap, nerf, workspace, log_json, log_level = "info", time_budget;
     bool view = false;
     viewer::ViewOptions view_options;
   };
@@ -41,6 +41,10 @@ void AddRunCommand(CLI::App& app) {
                   "Override the preset: levels from the photos, the finest grid at most this many cells across");
   cmd->add_option("--iterations", o.iterations,
                   "Override the preset: Gauss-Newton iterations per level (at most: see --cost-tolerance)");
+  cmd->add_option("--time-budget", args->time_budget,
+                  "The whole run's time, e.g. 90s, 10m, 1h30m: the reconstruction plans its levels and iterations to "
+                  "end within it, export and eval included (default: the preset's for the device, 10m/60m/4h on a CPU "
+                  "and 2m/15m/1h on a GPU for preview/default/high; none: no budget)");
   AddDeviceOptions(cmd, &o.device, &o.threads);
   cmd->add_flag("--force", o.force, "Re-run every stage even when its outputs are up to date");
   using recon::ExposureChoice;
@@ -65,6 +69,7 @@ void AddRunCommand(CLI::App& app) {
     o.nerf = args->nerf;
     o.workspace = args->workspace;
     o.log_json = args->log_json;
+    if (!args->time_budget.empty()) o.time_budget = ParseDuration(args->time_budget, "--time-budget");
     if (args->log_level != "info" && args->log_level != "quiet") {
       throw InputError("command line", "--log-level", args->log_level, "unknown level", "use info or quiet");
     }

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <fstream>
 #include <iomanip>
 #include <iostream>
@@ -16,6 +17,7 @@
 #include "common/stopwatch.h"
 #include "export/evaluate.h"
 #include "export/export.h"
+#include "recon_cuda/run/time_plan.h"
 #include "pipeline/stage_freshness.h"
 #include "pipeline/stage_progress.h"
 #include "recon_cuda/data/checkpoint.h"
@@ -60,10 +62,19 @@ void RunAsRank(const RunOptions& o) {
 
 class Runner {
  public:
-  Runner(const RunOptions& o, RunResult* r) : o_(o), r_(r), log_(o.log_json), preset_(PresetFor(o)) {}
+  Runner(const RunOptions& o, RunResult* r, WallClock::time_point start)
+      : o_(o), r_(r), log_(o.log_json), preset_(PresetFor(o)), start_(start) {}
 
   void Run() {
     Say("preset " + o_.preset + ": " + preset_.Describe());
+    const bool gpu = o_.device == recon::DeviceChoice::kCuda ||
+                     (o_.device == recon::DeviceChoice::kAuto && recon::CudaDeviceAvailable(nullptr));
+    r_->time_budget = o_.time_budget ? *o_.time_budget : DefaultTimeBudget(o_.preset, gpu);
+    r_->time_budget_from = o_.time_budget ? "--time-budget" : StrCat("the ", o_.preset, " preset's on a ", gpu ? "GPU" : "CPU");
+    if (r_->time_budget > 0) {
+      Say(StrCat("time budget: ", r_->time_budget, " s for the whole run (", r_->time_budget_from,
+                 "); the reconstruction plans its levels and iterations to fit"));
+    }
     fs::path model = o_.colmap;
     if (o_.nerf.empty() && model.empty()) {
       Stage("sfm", [&](StageReport* s) { model = Sfm(s); });
@@ -195,6 +206,7 @@ class Runner {
 
   void Reconstruct(StageReport* s) {
     recon::ReconstructOptions ro = o_.ReconstructStage(preset_);
+    if (r_->time_budget > 0) ro.time_budget = Budget();
     if (o_.comm != nullptr) o_.comm->Barrier();  // the other ranks start from this workspace (RunAsRank)
     Progress progress("reconstruct", o_.quiet);
     ro.on_event = [&](const recon::ReconstructOptions::Event& e) {
@@ -208,6 +220,7 @@ class Runner {
     const recon::ReconstructResult r = recon::Reconstruct(ro);
     progress.Finish();
     r_->final_checkpoint = r.final_checkpoint;
+    r_->time_plan = r.time_plan;
     if (r.already_complete) {
       s->skipped = true;
       s->reason = "every level is checkpointed";
@@ -276,10 +289,26 @@ class Runner {
     }
   }
 
+  // The budget from the run's start, with export and eval measured as this run will do them.
+  recon::TimeBudget Budget() const {
+    recon::TimeBudget b;
+    b.seconds = r_->time_budget;
+    b.start = start_;
+    b.after_solve = [this](recon::Backend* backend, recon::VecId params, const Scene& scene) {
+      exporter::ExportOptions eo;
+      eo.workspace = o_.workspace;
+      eo.orbit.frames = preset_.orbit_frames;
+      const bool pose_fit = recon::RefinesPoses(o_.poses, scene, recon::SolverType::kGaussNewton);
+      return exporter::EstimateExportAndEvalSeconds(backend, params, scene, eo, pose_fit);
+    };
+    return b;
+  }
+
   const RunOptions& o_;
   RunResult* r_;
   StageLog log_;
   PresetSettings preset_;
+  WallClock::time_point start_;
 };
 
 }  // namespace
@@ -371,6 +400,45 @@ std::string PresetSettings::Describe() const {
   return s.str();
 }
 
+double DefaultTimeBudget(const std::string& preset, bool gpu) {
+  if (preset == "preview") return gpu ? 120 : 600;
+  if (preset == "high") return gpu ? 3600 : 14400;
+  return gpu ? 900 : 3600;
+}
+
+double ParseDuration(const std::string& text, const std::string& option) {
+  const auto bad = [&](const std::string& why) {
+    return InputError(kCommandLine, option, text, why, "write e.g. 90s, 10m, 1.5h or 1h30m (none: no budget)");
+  };
+  if (text == "none") return 0;
+  double total = 0;
+  size_t at = 0;
+  while (at < text.size()) {
+    size_t used = 0;
+    double v = 0;
+    try {
+      v = std::stod(text.substr(at), &used);
+    } catch (const std::exception&) {
+      throw bad("not a duration");
+    }
+    if (!std::isfinite(v) || v < 0) throw bad("must be a finite duration of at least 0");
+    at += used;
+    const char unit = at < text.size() ? text[at] : 's';
+    if (at < text.size()) ++at;
+    if (unit == 'h') {
+      v *= 3600;
+    } else if (unit == 'm') {
+      v *= 60;
+    } else if (unit != 's') {
+      throw bad(StrCat("unknown unit '", unit, "'"));
+    }
+    total += v;
+  }
+  if (text.empty()) throw bad("empty");
+  if (total > 0 && total < 1) throw bad("shorter than a second");
+  return total;
+}
+
 PresetSettings PresetFor(const RunOptions& o) {
   // preview: a first look in a minute or two on a laptop CPU (the README's example), with
   // view-dependent colour (degree 1 at the last level: +0.26 dB held-out on the example at 1.3x
@@ -416,7 +484,7 @@ RunResult RunPipeline(const RunOptions& o) {
   EnsureWritableDirectory(o.workspace);
   const auto start = WallClock::now();
   RunResult r;
-  Runner(o, &r).Run();
+  Runner(o, &r, start).Run();
   r.seconds = SecondsSince(start);
   nlohmann::json stages = nlohmann::json::array();
   for (const StageReport& s : r.stages) {
@@ -429,7 +497,12 @@ RunResult RunPipeline(const RunOptions& o) {
                                   {"test_psnr", r.test_psnr},
                                   {"test_ssim", r.test_ssim},
                                   {"mask_coverage", r.mask_coverage},
-                                  {"seconds", r.seconds}};
+                                  {"seconds", r.seconds},
+                                  {"time_budget",
+                                   {{"seconds", r.time_budget},
+                                    {"from", r.time_budget_from},
+                                    {"within", r.time_budget <= 0 || r.seconds <= r.time_budget},
+                                    {"plan", r.time_plan}}}};
   WriteFileAtomically(o.workspace / "run.json", summary.dump(2) + "\n");
   return r;
 }

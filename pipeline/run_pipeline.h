@@ -11,6 +11,7 @@
 #pragma once
 
 #include <atomic>
+#include <nlohmann/json.hpp>
 #include <filesystem>
 #include <functional>
 #include <optional>
@@ -41,6 +42,9 @@ struct RunOptions {
   double cost_tolerance = recon::kDefaultCostTolerance;  // reconstruct: a level ends once its cost flattens
   // Overrides of the preset (0: the preset's).
   int max_size = 0, levels = 0, iterations = 0, max_resolution = 0;
+  // --time-budget: the whole run's seconds (levels and iterations are planned to fit them,
+  // recon_cuda/run/time_plan.h); unset: the preset's for the device (DefaultTimeBudget); 0: none.
+  std::optional<double> time_budget;
   int sh_degree = -1;  // reconstruct: view-dependent colour (-1: the preset's)
   std::optional<int> sh_from_level;  // reconstruct: the level its bands join (unset: the preset's)
   bool quiet = false;
@@ -82,12 +86,24 @@ struct StageReport {
   double seconds = 0;
 };
 
+// --time-budget's default: preview 10 min on a CPU and 2 on a GPU, default 60 and 15, high 240
+// and 60 (each well above what the preset takes on the examples and bonsai, so that it binds
+// only on captures that would run for longer).
+double DefaultTimeBudget(const std::string& preset, bool gpu);
+
+// A duration as a user writes it: "90" or "90s", "10m", "1.5h", "1h30m", "none" (0). Throws
+// InputError naming `option` and the value otherwise.
+double ParseDuration(const std::string& text, const std::string& option);
+
 struct RunResult {
   std::vector<StageReport> stages;
   double test_psnr = 0, test_ssim = 0, mask_coverage = 0;
   double mask_iou = -1;  // against the true masks when there are any
   std::filesystem::path final_checkpoint;
   double seconds = 0;
+  double time_budget = 0;         // the budget kept (0: none)
+  std::string time_budget_from;   // "--time-budget" or the preset's default for the device
+  nlohmann::json time_plan;       // the reconstruction's plan (ReconstructResult::time_plan)
 };
 
 RunResult RunPipeline(const RunOptions& options);

@@ -31,7 +31,27 @@ Checkpoint MakeCheckpoint(const Scene& scene, int level, const VolumeShape& shap
 
 }  // namespace
 
-LevelMonitor::LevelMonitor(ReconstructRun& run) : run_(run), o_(run.options) {}
+LevelMonitor::LevelMonitor(ReconstructRun& run) : run_(run), o_(run.options) {
+  if (!o_.time_budget) return;
+  if (run_.comm.size() > 1) {
+    run_.Say("the time budget is not applied under mpirun: every level runs its iterations");
+    return;
+  }
+  // Each level's iteration cap and rays (its pyramid downscale of the training photos).
+  const HierarchyOptions& ho = run_.hierarchy;
+  std::vector<int> caps;
+  std::vector<int64_t> rays;
+  for (int level = 0; level < run_.levels; ++level) {
+    caps.push_back(ho.IterationsAt(level));
+    const int factor = ho.pyramid ? PyramidFactor(run_.train_views, run_.geometry, ho.start_resolution << level,
+                                                  1 << (run_.levels - 1 - level))
+                                  : 1;
+    int64_t n = 0;
+    for (const ViewFrustum& v : run_.train_views) n += static_cast<int64_t>(v.width / factor) * (v.height / factor);
+    rays.push_back(n);
+  }
+  plan_ = std::make_unique<TimePlanner>(*o_.time_budget, ho.start_resolution, std::move(caps), std::move(rays));
+}
 
 HierarchyCallbacks LevelMonitor::Callbacks() {
   HierarchyCallbacks cb;
@@ -40,13 +60,15 @@ HierarchyCallbacks LevelMonitor::Callbacks() {
   cb.level_done = [this](const HierarchyLevel& h, const SolverSummary& summary, const std::vector<float>& x) {
     LevelDone(h, summary, x);
   };
-  cb.before_level = [this](int) { return grow_faces_.empty(); };
+  cb.before_level = [this](int level) { return grow_faces_.empty() && PlanAllowsLevel(level); };
+  cb.end_level = [this](const HierarchyLevel&, const IterationSummary&) { return verdict_ == PlanVerdict::kEndLevel; };
   cb.out_of_memory = [this](const HierarchyLevel& h) { OutOfMemory(h); };
   return cb;
 }
 
 void LevelMonitor::LevelStarted(const HierarchyLevel& h) {
   Communicator& comm = run_.comm;
+  if (plan_) plan_->LevelStarted(h.level);
   lr_ = LevelReport{};
   lr_.level = h.level;
   lr_.shape = h.shape;
@@ -104,11 +126,37 @@ bool LevelMonitor::Iteration(const HierarchyLevel& h, const IterationSummary& s)
   e.cost = s.cost_after;
   e.train_psnr = s.train_psnr;
   run_.Emit(e);
-  return true;
+  FollowPlan(h, s.iteration + 1);
+  return verdict_ != PlanVerdict::kStop;
 }
 
-void LevelMonitor::LevelDone(const HierarchyLevel& h, const SolverSummary& summary, const std::vector<float>& x) {
+bool LevelMonitor::PlanAllowsLevel(int level) {
+  if (!plan_) return true;
+  const bool runs = plan_->BeforeLevel(level);
+  if (const std::string m = plan_->TakeMessage(); !m.empty()) run_.Say(m);
+  run_.result.time_plan = plan_->ToJson();
+  return runs;
+}
+
+void LevelMonitor::FollowPlan(const HierarchyLevel& h, int done) {
+  verdict_ = PlanVerdict::kGoOn;
+  if (!plan_) return;
+  const auto measure = [&] {
+    if (!o_.time_budget->after_solve) return 0.0;
+    const auto t0 = WallClock::now();
+    const double seconds = o_.time_budget->after_solve(run_.backend.get(), h.params, run_.scene);
+    eval_seconds_ += SecondsSince(t0);
+    return seconds;
+  };
+  verdict_ = plan_->AfterIteration(h.level, done, measure);
+  if (const std::string m = plan_->TakeMessage(); !m.empty()) run_.Say(m);
+  run_.result.time_plan = plan_->ToJson();
+}
+
+void LevelMonitor::LevelDone(const HierarchyLevel& h, const SolverSummary& solved, const std::vector<float>& x) {
   ReconstructResult& result = run_.result;
+  SolverSummary summary = solved;  // a level the time plan ended the run in says so
+  if (verdict_ == PlanVerdict::kStop && summary.status == SolverStatus::kUserAbort) summary.status = SolverStatus::kPlanned;
   if (run_.ranks != nullptr) run_.ranks->CheckInStep(h.params);
   if (h.level == 0) CheckBox(h, x);
   if (!grow_faces_.empty()) {  // this fit is discarded (before_level ends the hierarchy here)

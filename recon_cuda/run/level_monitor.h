@@ -4,12 +4,14 @@
 // Internal to run/.
 #pragma once
 
+#include <memory>
 #include <vector>
 
 #include "common/stopwatch.h"
 #include "recon_cuda/run/box_check.h"
 #include "recon_cuda/run/photo_corrections.h"
 #include "recon_cuda/run/reconstruct_run.h"
+#include "recon_cuda/run/time_plan.h"
 
 namespace perf::recon {
 
@@ -31,6 +33,10 @@ class LevelMonitor {
   bool Iteration(const HierarchyLevel& h, const IterationSummary& s);
   void LevelDone(const HierarchyLevel& h, const SolverSummary& summary, const std::vector<float>& x);
   void OutOfMemory(const HierarchyLevel& h);
+  // With a time budget: whether level `level` runs (TimePlanner::BeforeLevel), and after an
+  // iteration what the plan says (the stages after the solve measured at a level's first).
+  bool PlanAllowsLevel(int level);
+  void FollowPlan(const HierarchyLevel& h, int done);
 
   // The first level's box faces: the warning, and the faces to grow.
   void CheckBox(const HierarchyLevel& h, const std::vector<float>& x);
@@ -69,6 +75,8 @@ class LevelMonitor {
   double pass_at_level_ = 0, sum_at_level_ = 0;            // this rank's pass and sum seconds so far
   std::vector<BoxFace> box_faces_;
   std::vector<int> grow_faces_;
+  std::unique_ptr<TimePlanner> plan_;  // with ReconstructOptions::time_budget, in one process
+  PlanVerdict verdict_ = PlanVerdict::kGoOn;
 };
 
 }  // namespace perf::recon

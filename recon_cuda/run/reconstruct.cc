@@ -371,6 +371,7 @@ json ReconstructResult::ToJson(const ReconstructOptions& o) const {
               {"max_resolution", levels_choice.max_resolution},
               {"levels_note", levels_choice.Describe()},
               {"memory_stop", memory_stop},
+              {"time_plan", time_plan},
               {"iterations_per_level", o.iterations},
               {"level_iterations", o.level_iterations},
               {"excluded_views", excluded_views},

@@ -55,6 +55,8 @@ struct ReconstructResult {
   int exposures = 0;                // photos whose exposure was solved (0: none)
   float gain_range[2] = {1, 1};     // the least and greatest gain of any photo and channel
   std::string memory_stop;          // automatic levels: why the hierarchy ended early (empty: it did not)
+  // With a time budget: the plan, what each level ran and why the plan ended the run (TimePlanner::ToJson); null without.
+  nlohmann::json time_plan;
 
   // What recon.json records beyond the levels.
   HierarchyOptions hierarchy;               // as derived for the scene (ReconstructOptions::Hierarchy)

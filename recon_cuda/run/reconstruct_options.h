@@ -15,6 +15,7 @@
 #include "recon_cuda/data/checkpoint.h"
 #include "recon_cuda/run/level_choice.h"
 #include "recon_cuda/run/photo_fit.h"
+#include "recon_cuda/run/time_plan.h"
 #include "recon_cuda/solve/hierarchy.h"
 
 namespace perf {
@@ -126,6 +127,10 @@ struct ReconstructOptions {
   // never.
   std::function<void(Checkpoint volume, int iteration)> on_volume;
   double volume_every_seconds = 5;
+  // A time budget for the run this reconstruction is part of (perf run --time-budget,
+  // time_plan.h): levels and iterations are planned to end by its deadline less what follows the
+  // solve. Unset: none. Applied in a single process only (under mpirun it is said and ignored).
+  std::optional<TimeBudget> time_budget;
 
   // Throws InputError naming the bad option.
   void Check() const;

@@ -75,14 +75,16 @@ std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geomet
     h.params = VectorsOf(o.solver.type).params;
     if (cb.level_started) cb.level_started(h);
 
-    bool stopped = false;
+    bool stopped = false, ended = false;
     SolverSummary summary;
     Solve(h.solver, backend, &x,
           [&](const IterationSummary& s) {
             stopped = cb.iteration && !cb.iteration(h, s);
-            return !stopped;
+            ended = !stopped && cb.end_level && cb.end_level(h, s);
+            return !stopped && !ended;
           },
           &summary);
+    if (ended && summary.status == SolverStatus::kUserAbort) summary.status = SolverStatus::kPlanned;
     if (summary.status == SolverStatus::kFailure) {
       throw Error(StrCat("level ", level, ": the solver failed: ", summary.message,
                          "; check the workspace images, or try --damping 0.1"));

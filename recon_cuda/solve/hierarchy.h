@@ -98,6 +98,10 @@ struct HierarchyCallbacks {
   std::function<void(const HierarchyLevel&)> level_started;
   // After each iteration; false stops the level's solve there (and the hierarchy after it).
   std::function<bool(const HierarchyLevel&, const IterationSummary&)> iteration;
+  // After each iteration the callback above goes on from: true ends the level's solve there and
+  // the hierarchy goes on to the next level (e.g. a time plan); the level's status says
+  // kPlanned.
+  std::function<bool(const HierarchyLevel&, const IterationSummary&)> end_level;
   // After the level's solve; the backend still holds the level. `x` is its solution.
   std::function<void(const HierarchyLevel&, const SolverSummary&, const std::vector<float>& x)> level_done;
   // With stop_when_out_of_memory: the level that did not fit (h.memory says what it needed) and

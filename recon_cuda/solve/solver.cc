@@ -48,6 +48,7 @@ const char* StatusName(SolverStatus s) {
     case SolverStatus::kConverged: return "converged";
     case SolverStatus::kNoProgress: return "no progress";
     case SolverStatus::kUserAbort: return "stopped by the caller";
+    case SolverStatus::kPlanned: return "ended by the time plan";
     case SolverStatus::kFailure: return "failure";
   }
   return "?";

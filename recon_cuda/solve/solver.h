@@ -109,6 +109,7 @@ enum class SolverStatus {
   kConverged,       // the cost fell by less than cost_tolerance over cost_tolerance_window iterations
   kNoProgress,      // 3 consecutive Gauss-Newton steps were rejected by the line search
   kUserAbort,       // the iteration callback asked to stop
+  kPlanned,         // the hierarchy's time plan ended the level (HierarchyCallbacks::end_level)
   kFailure,         // the cost became non-finite (diverged or bad input values)
 };
 const char* StatusName(SolverStatus s);
