@@ -173,12 +173,16 @@ PlanVerdict TimePlanner::AfterIteration(int level, int done, const std::function
   if (done >= caps_[level]) return PlanVerdict::kGoOn;  // the level ends by itself
   // An iteration more would pass the budget's end: the run ends here, whatever the plan said.
   if (l.last + l.iteration + ReserveAt(level) > budget_.seconds) {
-    stopped_ = StrCat("the budget's end is near at level ", level + 1, " iteration ", done);
+    stopped_ = StrCat("the budget's end is near at level ", level + 1, " iteration ", done, " (", Sec(l.last),
+                      " s spent, about ", Sec(l.iteration), " s an iteration, export and eval ~", Sec(ReserveAt(level)),
+                      " s): the run ends at this level");
+    message_ = "time plan: " + stopped_;
     return PlanVerdict::kStop;
   }
   if (l.planned < 0 || done < l.planned) return PlanVerdict::kGoOn;
   if (later_planned_) return PlanVerdict::kEndLevel;
   stopped_ = StrCat("level ", level + 1, " ran its ", l.planned, " planned iterations");
+  message_ = "time plan: " + stopped_ + "; the run ends here";
   return PlanVerdict::kStop;
 }
 
