@@ -2,11 +2,14 @@
 
 #include <Eigen/Core>
 #include <algorithm>
+#include <cstdio>
+#include <cstdlib>
 #include <map>
 #include <nlohmann/json.hpp>
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
+#include "common/stopwatch.h"
 #include "export/export.h"
 #include "export/masks.h"
 #include "export/report_html.h"
@@ -113,18 +116,26 @@ nlohmann::json AgreementJson(const MaskAgreement& m) {
 void ScoreAfterPoseFit(const EvalOptions& o, LoadedCheckpoint& l, const std::vector<recon::PosedImage>& test,
                        const recon::PhotoCorrections& corrections, EvalResult* r) {
   Progress(o, "pose fit", 0, 1);
+  const auto t0 = WallClock::now();
   const recon::Checkpoint& c = l.checkpoint;
   const recon::VolumeGeometry geometry = recon::GeometryOf(c);
   std::vector<recon::ColourTransform<float>> transforms;
   std::vector<recon::PoseValues> start;
+  std::vector<recon::PosedImage> small;  // the photos the fit sees (EvalOptions::pose_fit_side)
   for (const recon::PosedImage& v : test) {
     transforms.push_back(corrections.TransformFor(v.camera));
     start.push_back(corrections.PoseFor(v.camera));
+    const int side = std::max(v.image.width, v.image.height);
+    const int factor = o.pose_fit_side > 0 ? (side + o.pose_fit_side - 1) / o.pose_fit_side : 1;
+    small.push_back(factor > 1 ? recon::Downscaled(v, factor) : v);
   }
+  recon::PoseFitOptions fit;
+  fit.iterations = o.pose_fit_iterations;
+  if (const char* e = std::getenv("PERF_EXP_PF")) { int a, b; std::sscanf(e, "%d,%d", &a, &b); fit.iterations = a; small.clear(); for (const auto& v : test) { int side = std::max(v.image.width, v.image.height); int f = b > 0 ? (side + b - 1) / b : 1; small.push_back(f > 1 ? recon::Downscaled(v, f) : v);} }
   // Its own backend: the loaded one keeps the render-only level the renders below use.
   const std::unique_ptr<recon::Backend> fit_backend = recon::MakeBackend(o.device, o.threads);
   const std::vector<recon::PoseValues> fitted =
-      recon::FitViewPoses(fit_backend.get(), c.shape, c.params, geometry, test, transforms, start, {});
+      recon::FitViewPoses(fit_backend.get(), c.shape, c.params, geometry, small, transforms, start, fit);
   double sum = 0;
   for (size_t k = 0; k < test.size(); ++k) {
     recon::PosedImage moved = test[k];
@@ -145,6 +156,7 @@ void ScoreAfterPoseFit(const EvalOptions& o, LoadedCheckpoint& l, const std::vec
   }
   r->pose_fit = true;
   r->mean_psnr_pose_fit = sum / static_cast<double>(test.size());
+  r->pose_fit_seconds = SecondsSince(t0);
   Progress(o, "pose fit", 1, 1);
 }
 
@@ -179,9 +191,14 @@ nlohmann::json ReportJson(const EvalOptions& o, const EvalResult& r, const Loade
       {"pose_fit", r.pose_fit ? nlohmann::json{{"mean_psnr", r.mean_psnr_pose_fit},
                                                {"protocol", StrCat("each view's camera fitted alone to its photo "
                                                                    "against the frozen volume (Gauss-Newton, ",
-                                                                   recon::PoseFitOptions{}.iterations,
-                                                                   " iterations), then scored; uses the photo being "
-                                                                   "scored, so it is not the headline")}}
+                                                                   o.pose_fit_iterations, " iterations",
+                                                                   o.pose_fit_side > 0
+                                                                       ? StrCat(", the photo at most ", o.pose_fit_side,
+                                                                                " px across")
+                                                                       : std::string(),
+                                                                   "), then scored; uses the photo being "
+                                                                   "scored, so it is not the headline")},
+                                               {"seconds", r.pose_fit_seconds}}
                               : nlohmann::json(nullptr)}};
   if (!r.mask_truth.empty()) {
     nlohmann::json per = nlohmann::json::array();

@@ -25,6 +25,12 @@ struct EvalOptions {
   double mask_threshold = 0.7;
   float min_box_opacity = recon::kDefaultMinBoxOpacity;  // renders: the render rule (render_rule.h)
   bool html = true;
+  // The test-time pose fit of the held-out views (EvalResult::pose_fit, where the volume refines
+  // poses): its Gauss-Newton iterations, and the photos downscaled (area) by the least integer
+  // factor that brings their longer side to at most pose_fit_side pixels (0: as they are).
+  // docs/tuning.md "The eval's pose fit".
+  int pose_fit_iterations = 12;
+  int pose_fit_side = 0;
   recon::DeviceChoice device = recon::DeviceChoice::kAuto;
   int threads = 0;
   std::function<void(const std::string& step, int done, int total)> progress;
@@ -47,6 +53,7 @@ struct MaskReport {
 struct EvalResult {
   std::filesystem::path checkpoint;
   std::vector<ViewReport> views;
+  double pose_fit_seconds = 0;      // the test-time pose fit's (with pose_fit)
   ImageScores mean;                 // means over views (masked ones over views with a mask)
   std::string mask_truth;           // "alpha", "gt-masks" or "" (none)
   std::vector<MaskReport> masks;

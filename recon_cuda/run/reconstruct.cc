@@ -11,6 +11,7 @@
 #include "common/system_memory.h"
 #include "recon_cuda/data/checkpoint.h"
 #include "recon_cuda/run/level_monitor.h"
+#include "recon_cuda/run/render_views.h"
 #include "recon_cuda/run/reconstruct_run.h"
 #include "recon_cuda/run/run_settings.h"
 
@@ -96,6 +97,7 @@ class Reconstruction {
     Describe();
     if (start.level == 0 && o_.init_shells_from_photos) MeanColour(run_.train, run_.comm, run_.hierarchy.init.shell_colour);
     Fit(std::move(start));
+    ChooseFinalLevel();
     run_.result.hierarchy = run_.hierarchy;
     if (!run_.result.already_complete && run_.root) {
       WriteFileAtomically(o_.workspace / "recon" / "recon.json", run_.result.ToJson(o_).dump(2) + "\n");
@@ -174,7 +176,7 @@ class Reconstruction {
     }
     if (last + 1 >= run_.levels) {
       run_.result.already_complete = true;
-      run_.result.final_checkpoint = path;
+      run_.result.final_checkpoint = FinalCheckpointPath(o_.workspace);  // as the run that wrote them chose
       run_.Say(StrCat("all ", run_.levels, " levels are done (", path.string(), "); nothing to resume"));
       return false;
     }
@@ -306,11 +308,40 @@ class Reconstruction {
     }
   }
 
+  // A finer level that scored worse on the held-out views than a coarser one of this run is not
+  // what the outputs come from: the best one is final, and the run says so.
+  void ChooseFinalLevel() {
+    ReconstructResult& result = run_.result;
+    const int best = FinalLevelIndex(result.levels, run_.test_views > 0);
+    if (best < 0 || best + 1 == static_cast<int>(result.levels.size())) return;
+    const LevelReport& chosen = result.levels[best];
+    const LevelReport& finest = result.levels.back();
+    result.final_checkpoint = CheckpointPath(o_.workspace, chosen.level);
+    result.test_psnr = chosen.test_psnr;
+    result.final_choice = StrCat("level ", finest.level + 1, " (", finest.shape.n, "^3) scored ", finest.test_psnr,
+                                 " dB on the held-out views, below level ", chosen.level + 1, "'s ", chosen.test_psnr,
+                                 " dB: export and eval use level ", chosen.level + 1, " (",
+                                 fs::relative(result.final_checkpoint, o_.workspace).string(),
+                                 "); fewer --levels or a smaller --max-resolution skips the finer one next time");
+    run_.log.Write({{"event", "final_level"}, {"level", chosen.level}, {"why", result.final_choice}});
+    run_.Say("warning: " + result.final_choice);
+  }
+
   ReconstructRun run_;
   const ReconstructOptions& o_;
 };
 
 }  // namespace
+
+int FinalLevelIndex(const std::vector<LevelReport>& levels, bool scored) {
+  const int n = static_cast<int>(levels.size());
+  if (n == 0 || !scored) return n - 1;
+  int best = n - 1;
+  for (int k = n - 2; k >= 0; --k) {
+    if (levels[k].test_psnr > levels[best].test_psnr) best = k;
+  }
+  return best;
+}
 
 json LevelReport::ToJson(const fs::path& workspace) const {
   return {{"level", level},
@@ -380,6 +411,7 @@ json ReconstructResult::ToJson(const ReconstructOptions& o) const {
               {"box_warning", box_warning},
               {"box_growths", box_growths},
               {"final_checkpoint", fs::relative(final_checkpoint, o.workspace).string()},
+              {"final_choice", final_choice},
               {"test_psnr", test_psnr},
               {"solve_seconds", solve_seconds},
               {"levels_run", levels_json}};

@@ -45,6 +45,8 @@ struct ReconstructResult {
   double solve_seconds = 0;         // sum of the levels' solver time
   double test_psnr = 0;             // held-out PSNR of the final level (0: no held-out views)
   std::filesystem::path final_checkpoint;
+  // Why final_checkpoint is not the finest level's (FinalLevelIndex); empty when it is.
+  std::string final_choice;
   bool already_complete = false;    // --resume found every level done
   // Resume asked for, but the checkpoints' settings differ from this run's or are not recorded
   // (run_settings.h): why, and (restart_if_settings_changed) this run started over; empty: the
@@ -76,6 +78,11 @@ struct ReconstructResult {
 };
 
 ReconstructResult Reconstruct(const ReconstructOptions& options);
+
+// Which of `levels` (those one call ran, coarse to fine) is final: the one that scored best on
+// the held-out views, the finer of equals, so that a finer level that scores worse than the one
+// before it is not what the outputs come from; the last without held-out views. -1: none.
+int FinalLevelIndex(const std::vector<LevelReport>& levels, bool scored);
 
 // The hierarchy's view of training photos (each level's rays from the photos downscaled by its
 // pyramid factor); `train` must outlive it. all_views: every training view (SplitViews), when

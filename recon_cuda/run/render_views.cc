@@ -1,5 +1,7 @@
 #include "recon_cuda/run/render_views.h"
 
+#include <nlohmann/json.hpp>
+
 #include "common/atomic_file.h"
 #include "common/errors.h"
 #include "recon_cuda/data/checkpoint.h"
@@ -11,17 +13,36 @@ namespace perf::recon {
 
 namespace fs = std::filesystem;
 
+fs::path FinalCheckpointPath(const fs::path& workspace) {
+  const int last = LastCheckpointLevel(workspace);
+  if (last < 0) return {};
+  const fs::path newest = CheckpointPath(workspace, last);
+  const fs::path record = workspace / "recon" / "recon.json";
+  std::error_code ec;
+  const auto record_time = fs::last_write_time(record, ec);
+  if (ec || record_time < fs::last_write_time(newest, ec) || ec) return newest;
+  const nlohmann::json j = nlohmann::json::parse(ReadFileToString(record), nullptr, false);
+  if (!j.is_object() || !j.contains("final_checkpoint") || !j["final_checkpoint"].is_string()) return newest;
+  // Only a level file of this workspace's recon/ (a hand-edited record names nothing else).
+  const fs::path named = j["final_checkpoint"].get<std::string>();
+  for (int level = 0; level <= last; ++level) {
+    if (named == fs::relative(CheckpointPath(workspace, level), workspace) && fs::exists(workspace / named, ec)) {
+      return CheckpointPath(workspace, level);
+    }
+  }
+  return newest;
+}
+
 LoadedCheckpoint LoadForRendering(const fs::path& workspace, const fs::path& checkpoint, DeviceChoice device,
                                   int threads) {
   LoadedCheckpoint l;
   l.path = checkpoint;
   if (l.path.empty()) {
     RecoverPreviousRun(workspace);  // a reconstruct killed before its first level: the run before it
-    const int last = LastCheckpointLevel(workspace);
-    if (last < 0) {
+    l.path = FinalCheckpointPath(workspace);
+    if (l.path.empty()) {
       throw IoError((workspace / "recon").string(), "no checkpoint found", "run perf reconstruct on this workspace first");
     }
-    l.path = CheckpointPath(workspace, last);
   }
   l.checkpoint = ReadCheckpoint(l.path);
   l.backend = MakeBackend(device, threads);

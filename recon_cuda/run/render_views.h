@@ -24,7 +24,13 @@ struct LoadedCheckpoint {
   static constexpr VecId kParams = 0;
 };
 
-// `checkpoint`, or the highest level in WORKSPACE/recon when empty; IoError saying to run perf
+// The checkpoint a workspace's outputs come from: the one recon/recon.json names as final where
+// the run that wrote it also wrote the newest checkpoint (recon.json no older than it; a finer
+// level that scored worse held-out is not final: FinalLevel), else the highest level; empty
+// when there is none.
+std::filesystem::path FinalCheckpointPath(const std::filesystem::path& workspace);
+
+// `checkpoint`, or FinalCheckpointPath when empty; IoError saying to run perf
 // reconstruct when there is none, and the reader's errors for a missing or damaged file.
 LoadedCheckpoint LoadForRendering(const std::filesystem::path& workspace, const std::filesystem::path& checkpoint,
                                   DeviceChoice device, int threads);
