@@ -2,8 +2,6 @@
 
 #include <Eigen/Core>
 #include <algorithm>
-#include <cstdio>
-#include <cstdlib>
 #include <map>
 #include <nlohmann/json.hpp>
 
@@ -131,7 +129,6 @@ void ScoreAfterPoseFit(const EvalOptions& o, LoadedCheckpoint& l, const std::vec
   }
   recon::PoseFitOptions fit;
   fit.iterations = o.pose_fit_iterations;
-  if (const char* e = std::getenv("PERF_EXP_PF")) { int a, b; std::sscanf(e, "%d,%d", &a, &b); fit.iterations = a; small.clear(); for (const auto& v : test) { int side = std::max(v.image.width, v.image.height); int f = b > 0 ? (side + b - 1) / b : 1; small.push_back(f > 1 ? recon::Downscaled(v, f) : v);} }
   // Its own backend: the loaded one keeps the render-only level the renders below use.
   const std::unique_ptr<recon::Backend> fit_backend = recon::MakeBackend(o.device, o.threads);
   const std::vector<recon::PoseValues> fitted =

@@ -33,7 +33,7 @@ namespace perf::exporter {
 
 struct ExportOptions {
   std::filesystem::path workspace;
-  std::filesystem::path checkpoint;  // empty: the last level in WORKSPACE/recon
+  std::filesystem::path checkpoint;  // empty: the final one (recon::FinalCheckpointPath)
   // What to write.
   bool masks = true, foreground = true, volume = true, mesh = true, renders = true;
   double mask_threshold = 0.7;  // binary mask: soft >= threshold
