@@ -5,6 +5,7 @@
 #include "pipeline/commands.h"
 #include "pipeline/progress.h"
 #include "sfm_import/box_preview.h"
+#include "sfm_import/ghost_repair.h"
 #include "sfm_import/importer.h"
 
 namespace perf {
@@ -34,6 +35,7 @@ void AddImportCommand(CLI::App& app) {
     std::vector<double> box_center, box_size, shell_radii;
     bool quiet = false;
     bool preview_box = false;
+    bool no_repair = false;
   };
   auto args = std::make_shared<Args>();
   ImportOptions& o = args->o;
@@ -70,6 +72,10 @@ void AddImportCommand(CLI::App& app) {
   AddThreadsOption(cmd, &o.num_threads, 0);
   cmd->add_flag("--preview-box", args->preview_box,
                 "Also write WORKSPACE/preview/box_*.png: the box drawn over the held-out views");
+  cmd->add_flag("--no-repair", args->no_repair,
+                "Import a COLMAP model that holds a ghost group as given (default: make the model again from the photos "
+                "with perf sfm into WORKSPACE/repair/ and import that one, from WORKSPACE/sparse_repaired/, where it is "
+                "better)");
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
   cmd->callback([args]() {
     ImportOptions& o = args->o;
@@ -82,7 +88,23 @@ void AddImportCommand(CLI::App& app) {
     o.progress = [&progress](int done, int total) { progress.Update(done, total, "images"); };
     ImportResult r;
     // A failed import into a new folder leaves no half-filled workspace behind.
-    RemoveNewWorkspaceOnFailure(lock.get(), o.workspace, true, [&] { r = RunImport(o); });
+    RemoveNewWorkspaceOnFailure(lock.get(), o.workspace, true, [&] {
+      if (!o.colmap_dir.empty()) {
+        RepairOptions ro;
+        ro.model = o.colmap_dir;
+        ro.images = o.images_dir;
+        ro.workspace = o.workspace;
+        ro.repair = !args->no_repair;
+        ro.threads = o.num_threads;
+        ro.say = [&](const std::string& line) {
+          if (!args->quiet) std::cout << "import: " << line << "\n" << std::flush;
+        };
+        const RepairResult repaired = RepairModel(ro);
+        o.colmap_dir = repaired.model;
+        o.images_dir = repaired.images;
+      }
+      r = RunImport(o);
+    });
     progress.Finish();
     if (!args->quiet) std::cout << ImportSummary(r) << "workspace: " << o.workspace.string() << "\n";
     if (args->preview_box) {

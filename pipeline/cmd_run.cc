@@ -20,6 +20,7 @@ void AddRunCommand(CLI::App& app) {
     RunOptions o;
     std::string images, colmap, nerf, workspace, log_json, log_level = "info", time_budget;
     bool view = false;
+    bool no_repair = false;
     viewer::ViewOptions view_options;
   };
   auto args = std::make_shared<Args>();
@@ -55,6 +56,9 @@ void AddRunCommand(CLI::App& app) {
   AddShDegreeOption(cmd, &o.sh_degree, "the preset's: 1");
   AddShFromLevelOption(cmd, &o.sh_from_level, "the preset's: 2 for default (the last level when there are fewer), 0 for preview and high");
   AddCostToleranceOption(cmd, &o.cost_tolerance);
+  cmd->add_flag("--no-repair", args->no_repair,
+                "Import a --colmap model that holds a ghost group as given (default: make the model again from the "
+                "photos with perf sfm into WORKSPACE/repair/ and import that one where it is better)");
   cmd->add_flag("--keep-bad-poses", o.keep_bad_poses,
                 "Train and score on COLMAP photos whose pose looks wrong too (by default they are left out and named)");
   AddLiveViewOptions(cmd, &args->view, &args->view_options.port, &args->o.view_image,
@@ -69,6 +73,7 @@ void AddRunCommand(CLI::App& app) {
     o.nerf = args->nerf;
     o.workspace = args->workspace;
     o.log_json = args->log_json;
+    o.repair = !args->no_repair;
     if (!args->time_budget.empty()) o.time_budget = ParseDuration(args->time_budget, "--time-budget");
     if (args->log_level != "info" && args->log_level != "quiet") {
       throw InputError("command line", "--log-level", args->log_level, "unknown level", "use info or quiet");

@@ -24,6 +24,7 @@
 #include "recon_cuda/run/level_choice.h"
 #include "recon_cuda/run/reconstruct.h"
 #include "sfm_import/colmap_runner.h"
+#include "sfm_import/ghost_repair.h"
 #include "sfm_import/importer.h"
 #include "viewer/live_view.h"
 
@@ -141,13 +142,28 @@ class Runner {
     return r.sparse_dir;
   }
 
-  void Import(const fs::path& model, StageReport* s) {
+  void Import(fs::path model, StageReport* s) {
+    fs::path images = o_.images;
+    if (!o_.colmap.empty()) {  // the user's model (perf sfm's own is not made again)
+      RepairOptions ro;
+      ro.model = model;
+      ro.images = o_.images;
+      ro.workspace = o_.workspace;
+      ro.repair = o_.repair;
+      ro.threads = o_.threads;
+      ro.say = [&](const std::string& line) { Say("import: " + line); };
+      ro.check_stop = [&] { CheckStop(); };
+      const RepairResult repaired = RepairModel(ro);
+      r_->repair = repaired.ToJson();
+      model = repaired.model;
+      if (repaired.used) images = repaired.images;
+    }
     const fs::path input = o_.nerf.empty() ? model : o_.nerf;
     const fs::path scene = o_.workspace / "scene.json";
     // A photo replaced or edited since the import counts as a newer input too.
-    const auto newest = o_.nerf.empty() ? std::max(NewestInput(input), NewestUnder(o_.images)) : NewestInput(input);
+    const auto newest = o_.nerf.empty() ? std::max(NewestInput(input), NewestUnder(images)) : NewestInput(input);
     if (!o_.force && NewerThan(scene, newest)) {
-      const std::string changed = ImportChanges(scene, {o_.nerf.empty(), input, o_.images, preset_.max_size,
+      const std::string changed = ImportChanges(scene, {o_.nerf.empty(), input, images, preset_.max_size,
                                                         o_.keep_bad_poses});
       if (changed.empty()) {
         s->skipped = true;
@@ -161,7 +177,7 @@ class Runner {
     ImportOptions io;
     if (o_.nerf.empty()) {
       io.colmap_dir = model;
-      io.images_dir = o_.images;
+      io.images_dir = images;
     } else {
       io.nerf_json = o_.nerf;
     }
@@ -498,6 +514,7 @@ RunResult RunPipeline(const RunOptions& o) {
                                   {"test_ssim", r.test_ssim},
                                   {"mask_coverage", r.mask_coverage},
                                   {"seconds", r.seconds},
+                                  {"repair", r.repair},
                                   {"time_budget",
                                    {{"seconds", r.time_budget},
                                     {"from", r.time_budget_from},

@@ -36,6 +36,9 @@ struct RunOptions {
   int threads = 0;
   bool force = false;
   bool keep_bad_poses = false;  // import: train and score on photos whose pose looks wrong too
+  // import: a --colmap model that holds a ghost group is made again from the photos and the new
+  // one imported where it is better (sfm_import/ghost_repair.h); false (--no-repair): as given.
+  bool repair = true;
   recon::ExposureChoice exposure = recon::ExposureChoice::kAuto;  // reconstruct: per-photo exposure
   recon::PoseChoice poses = recon::PoseChoice::kAuto;             // reconstruct: camera refinement
   bool refine_focal = false;                                       // reconstruct: and the focal lengths
@@ -104,6 +107,7 @@ struct RunResult {
   double time_budget = 0;         // the budget kept (0: none)
   std::string time_budget_from;   // "--time-budget" or the preset's default for the device
   nlohmann::json time_plan;       // the reconstruction's plan (ReconstructResult::time_plan)
+  nlohmann::json repair;          // the model's check and repair (RepairResult::ToJson); null: none
 };
 
 RunResult RunPipeline(const RunOptions& options);

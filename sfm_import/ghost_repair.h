@@ -1,0 +1,47 @@
+// COLMAP's mistakes repaired, not only named: where a user's model (perf import / perf run
+// --colmap) holds a ghost group (ghost_groups.h) and its photos are at hand, the model is made
+// again from the photos (perf sfm into WORKSPACE/repair/) and both are checked (model_check.h).
+// The new one goes to WORKSPACE/sparse_repaired/ and is imported instead only where it is better
+// (no ghost, as many photos placed well, points that fit as well), saying why either way; the
+// user's model is only read. WORKSPACE/repair/repair.json records the decision for that model (its
+// path and time), so that a run again does not repeat it. A new model of bonsai's photos had no
+// ghost and scored the ghost's views 3-4 dB higher (docs/tuning.md "A ghost object in COLMAP's
+// model"); the example's 200 px photos are too small for COLMAP to register (0 of 42), and its
+// model is kept.
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "sfm_import/model_check.h"
+
+namespace perf {
+
+struct RepairOptions {
+  std::filesystem::path model;      // the user's COLMAP model folder
+  std::filesystem::path images;     // its photos (empty: <model>/../../images, as perf import)
+  std::filesystem::path workspace;
+  bool repair = true;               // false (--no-repair): the model as given
+  int threads = 0;                  // COLMAP's (0: all cores)
+  std::function<void(const std::string&)> say;  // lines for the terminal
+  std::function<void()> check_stop;             // throws to stop (Ctrl-C) while COLMAP runs
+};
+
+struct RepairResult {
+  std::filesystem::path model;   // what to import: options.model or WORKSPACE/sparse_repaired
+  std::filesystem::path images;  // the photos' folder, resolved
+  bool attempted = false;        // a ghost was found and a new model made (or recorded before)
+  bool used = false;             // the new model is imported
+  std::string why;               // the decision in words
+  ModelCheck before, after;
+  double seconds = 0;
+  nlohmann::json ToJson() const;
+};
+
+// Throws what reading the user's model throws, and Interrupted; a failed perf sfm is a decision
+// (the model kept), not an error.
+RepairResult RepairModel(const RepairOptions& options);
+
+}  // namespace perf

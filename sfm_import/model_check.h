@@ -1,0 +1,38 @@
+// What a COLMAP model gets right and wrong, as perf import would see it: the photos it registers,
+// its points' mean reprojection error, the poses that look wrong (bad_poses.h) and the ghost
+// groups (ghost_groups.h) inside the box import would place. Compares the user's model with one
+// made again from the photos (ghost_repair.h).
+#pragma once
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include "sfm_import/colmap_model.h"
+#include "sfm_import/ghost_groups.h"
+
+namespace perf {
+
+struct ModelCheck {
+  int registered = 0;         // images in the model
+  int points = 0;             // its 3-D points
+  double mean_error = 0;      // mean reprojection error of its points (px; 0: not recorded)
+  std::map<std::string, std::string> bad_poses;  // name -> why (FindBadPoses)
+  std::vector<GhostGroup> ghosts;
+  int ghost_photos = 0;       // photos in the ghost groups
+
+  // e.g. "84 photos, 52114 points at 0.47 px, no pose looks wrong, no ghost group".
+  std::string Describe() const;
+};
+
+// The check of `rec`: its box placed as perf import places it (EstimateBounds over the cameras
+// whose pose does not look wrong, the COLMAP intrinsics' focal lengths and centre).
+ModelCheck CheckModel(const colmap::Reconstruction& rec);
+
+// Whether `repaired` is better than `user` for the reconstruction: no ghost group, at least as many
+// photos whose pose looks right as the user's model less 5 % (at least one), and a mean
+// reprojection error within 1.5 times the user's (or 0.5 px above it). `why` says which held or
+// failed, in words.
+bool RepairIsBetter(const ModelCheck& repaired, const ModelCheck& user, std::string* why);
+
+}  // namespace perf
