@@ -1,0 +1,79 @@
+// The model check and the repair's decision (model_check.h, ghost_repair.h), quickly: the rule
+// that uses a new model only where it is better, and the example's model, whose 200 px photos
+// COLMAP cannot register: kept, said why, recorded, not tried again, the model untouched.
+#include <gtest/gtest.h>
+
+#include <chrono>
+
+#include "sfm_import/ghost_repair.h"
+#include "tests/test_util.h"
+
+namespace perf {
+namespace {
+
+namespace fs = std::filesystem;
+
+// The decision rule alone: a new model with a ghost, fewer photos, or worse points is not used.
+TEST(GhostRepair, ANewModelIsUsedOnlyWhereItIsBetter) {
+  ModelCheck user;
+  user.registered = 84;
+  user.mean_error = 0.6;
+  user.bad_poses = {{"a", "far"}, {"b", "far"}};
+  user.ghosts.resize(2);
+  ModelCheck good;
+  good.registered = 84;
+  good.mean_error = 0.47;
+  std::string why;
+  EXPECT_TRUE(RepairIsBetter(good, user, &why)) << why;
+  ModelCheck ghost = good;
+  ghost.ghosts.resize(1);
+  EXPECT_FALSE(RepairIsBetter(ghost, user, &why));
+  EXPECT_NE(why.find("ghost"), std::string::npos) << why;
+  ModelCheck fewer = good;
+  fewer.registered = 70;  // the user's 82 well-placed photos less 5 % is 77
+  EXPECT_FALSE(RepairIsBetter(fewer, user, &why));
+  EXPECT_NE(why.find("70 photos"), std::string::npos) << why;
+  ModelCheck worse = good;
+  worse.mean_error = 1.2;  // above 0.6 + 0.5
+  EXPECT_FALSE(RepairIsBetter(worse, user, &why));
+  EXPECT_NE(why.find("px"), std::string::npos) << why;
+}
+
+TEST(GhostRepair, TheExamplesModelIsKeptSayingWhyAndNotTriedAgain) {
+  const fs::path example = fs::path(PERF_SOURCE_DIR) / "examples" / "bonsai_mini";
+  if (test::RunCommand("colmap -h").exit_code != 0) GTEST_SKIP() << "colmap not on PATH";
+  test::TempDir dir;
+  const auto model_before = test::FilesUnder(example / "sparse" / "0");
+  RepairOptions o;
+  o.model = example / "sparse" / "0";
+  o.images = example / "images";
+  o.workspace = dir / "ws";
+  std::vector<std::string> lines;
+  o.say = [&](const std::string& line) { lines.push_back(line); };
+  o.repair = false;
+  const RepairResult as_given = RepairModel(o);
+  EXPECT_FALSE(as_given.attempted);
+  EXPECT_EQ(as_given.before.ghost_photos, 5) << as_given.before.Describe();
+  EXPECT_FALSE(fs::exists(dir / "ws" / "repair"));
+
+  o.repair = true;
+  const RepairResult r = RepairModel(o);
+  EXPECT_TRUE(r.attempted);
+  EXPECT_FALSE(r.used);
+  EXPECT_EQ(r.model, o.model);
+  EXPECT_NE(r.why.find("could not make a model"), std::string::npos) << r.why;
+  EXPECT_TRUE(fs::exists(dir / "ws" / "repair" / "repair.json"));
+  EXPECT_FALSE(fs::exists(dir / "ws" / "sparse_repaired"));
+  // Again: the recorded decision, without COLMAP.
+  lines.clear();
+  const auto t0 = std::chrono::steady_clock::now();
+  const RepairResult again = RepairModel(o);
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0);
+  EXPECT_FALSE(again.used);
+  ASSERT_FALSE(lines.empty());
+  EXPECT_NE(lines.back().find("as decided before"), std::string::npos) << lines.back();
+  EXPECT_EQ(test::FilesUnder(example / "sparse" / "0"), model_before);
+}
+
+}  // namespace
+}  // namespace perf
