@@ -196,6 +196,7 @@ void ExtractFeatures(SfmRun& run, const PhotoTags& tags) {
                                      "--SiftExtraction.use_gpu", "0", "--SiftExtraction.max_image_size",
                                      std::to_string(options.max_image_size), "--SiftExtraction.max_num_features",
                                      std::to_string(options.max_num_features), "--SiftExtraction.num_threads", run.threads};
+    if (!options.camera_params.empty()) args.insert(args.end(), {"--ImageReader.camera_params", options.camera_params});
     args.insert(args.end(), list_args.begin(), list_args.end());
     const StepResult r = run.Step(args, "features", ExtractionParser());
     if (r.failed()) ThrowStepFailed("feature_extractor", r, run.log_path);

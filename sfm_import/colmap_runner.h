@@ -16,6 +16,10 @@ struct SfmOptions {
   std::filesystem::path workspace;  // gets colmap/ (database, log, all models) and sparse/0
   std::string colmap_binary = "colmap";  // name on PATH or a path
   std::string camera_model = "OPENCV";   // COLMAP camera model for extraction
+  // Known intrinsics of every photo, in camera_model's parameter order, comma-separated
+  // (ImageReader.camera_params; COLMAP starts from them and refines them); empty: from EXIF or a
+  // guess. The repair (ghost_repair.h) passes the given model's.
+  std::string camera_params;
   // One camera per group of photos that agree on size and EXIF camera (camera_groups.h; one
   // for all when they all agree); false: one per image.
   bool single_camera = true;

@@ -1,10 +1,12 @@
 #include "sfm_import/ghost_repair.h"
 
 #include <algorithm>
+#include <cstdio>
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
 #include "common/stopwatch.h"
+#include "sfm_import/camera_models.h"
 #include "sfm_import/colmap_runner.h"
 
 namespace perf {
@@ -77,6 +79,19 @@ RepairResult RepairModel(const RepairOptions& o) {
                 "into ", dir.string(), "; --no-repair imports it as given)"));
   SfmOptions so;
   so.images = r.images;
+  const colmap::Reconstruction given = colmap::ReadReconstruction(o.model);
+  if (given.cameras.size() == 1) {  // COLMAP starts from the given camera (one for all photos)
+    const colmap::Camera& cam = given.cameras.begin()->second;
+    if (const colmap::CameraModelInfo* info = colmap::FindCameraModel(cam.model_id)) {
+      so.camera_model = std::string(info->name);
+      for (double p : cam.params) {
+        char buf[32];
+        std::snprintf(buf, sizeof buf, "%.10g", p);
+        if (!so.camera_params.empty()) so.camera_params += ',';
+        so.camera_params += buf;
+      }
+    }
+  }
   so.workspace = dir;
   so.num_threads = o.threads > 0 ? o.threads : -1;
   so.check_stop = o.check_stop;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 #include "common/errors.h"
 #include "sfm_import/bad_poses.h"
@@ -11,10 +12,16 @@
 
 namespace perf {
 
+namespace {
+std::string Px(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.2f px", v);
+  return buf;
+}
+}  // namespace
+
 std::string ModelCheck::Describe() const {
-  char error[32];
-  std::snprintf(error, sizeof error, "%.2f", mean_error);
-  return StrCat(registered, " photos, ", points, " points at ", error, " px, ",
+  return StrCat(registered, " photos, ", points, " points at ", Px(mean_error), ", ",
                 bad_poses.empty() ? std::string("no pose looks wrong") : StrCat(bad_poses.size(), " poses look wrong"), ", ",
                 ghosts.empty() ? std::string("no ghost group")
                                : StrCat(ghosts.size(), ghosts.size() == 1 ? " ghost group (" : " ghost groups (",
@@ -36,6 +43,11 @@ ModelCheck CheckModel(const colmap::Reconstruction& rec) {
     points.push_back({Eigen::Vector3d(p.xyz[0], p.xyz[1], p.xyz[2]), static_cast<int>(p.track.size()), p.error});
   }
   c.mean_error = n > 0 ? sum / n : 0;
+  for (const auto& [id, cam] : rec.cameras) {
+    const colmap::FocalAndCentre f = colmap::GetFocalAndCentre(static_cast<colmap::CameraModelId>(cam.model_id),
+                                                               cam.params.data());
+    c.focals.push_back({cam.width, cam.height, f.fx, f.fy});
+  }
   for (const BadPose& b : FindBadPoses(rec)) c.bad_poses[b.name] = b.Why();
   std::vector<BoundsCamera> cameras;
   for (const auto& [id, im] : rec.images) {
@@ -46,6 +58,9 @@ ModelCheck CheckModel(const colmap::Reconstruction& rec) {
                        static_cast<int>(cam.height)});
   }
   if (cameras.empty()) return c;
+  if (Eigen::Vector3d p; ClosestPointToAxes(cameras, &p)) {
+    c.looked_at = static_cast<double>(CamerasLookingAt(cameras, p).size()) / static_cast<double>(cameras.size());
+  }
   const BoundsResult bounds = EstimateBounds(cameras, points, BoundsOptions{}, "model check");
   c.ghosts = FindGhostGroups(rec, bounds.box, c.bad_poses);
   for (const GhostGroup& g : c.ghosts) c.ghost_photos += static_cast<int>(g.names.size());
@@ -63,13 +78,29 @@ bool RepairIsBetter(const ModelCheck& repaired, const ModelCheck& user, std::str
     failed.push_back(StrCat("it places ", good_repaired, " photos well against the model's ", good_user));
   }
   if (user.mean_error > 0 && repaired.mean_error > error_limit) {
-    failed.push_back(StrCat("its points fit at ", repaired.mean_error, " px against the model's ", user.mean_error));
+    failed.push_back(StrCat("its points fit at ", Px(repaired.mean_error), " against the model's ", Px(user.mean_error)));
+  }
+  for (const ModelCheck::Focal& u : user.focals) {
+    for (const ModelCheck::Focal& f : repaired.focals) {
+      if (f.width != u.width || f.height != u.height || u.fx <= 0 || u.fy <= 0 || f.fy <= 0) continue;
+      const double focal = (f.fx + f.fy) / (u.fx + u.fy), ratio = (f.fx / f.fy) / (u.fx / u.fy);
+      if (std::abs(focal - 1) > 0.03 || std::abs(ratio - 1) > 0.015) {
+        char buf[160];
+        std::snprintf(buf, sizeof buf, "its camera differs (fx %.0f, fy %.0f against the model's %.0f, %.0f)", f.fx,
+                      f.fy, u.fx, u.fy);
+        failed.push_back(buf);
+      }
+    }
+  }
+  if (user.looked_at >= 0.6 && repaired.looked_at < user.looked_at - 0.1) {
+    failed.push_back(StrCat("fewer of its cameras look at a common point (", static_cast<int>(100 * repaired.looked_at),
+                            " % against the model's ", static_cast<int>(100 * user.looked_at), " %)"));
   }
   std::string list;
   for (const std::string& f : failed) list += (list.empty() ? "" : "; ") + f;
   if (why != nullptr) {
     *why = failed.empty() ? StrCat("no ghost group, ", good_repaired, " photos placed well (the model: ", good_user,
-                                   "), points at ", repaired.mean_error, " px (the model: ", user.mean_error, ")")
+                                   "), points at ", Px(repaired.mean_error), " (the model: ", Px(user.mean_error), ")")
                           : list;
   }
   return failed.empty();

@@ -20,6 +20,14 @@ struct ModelCheck {
   std::map<std::string, std::string> bad_poses;  // name -> why (FindBadPoses)
   std::vector<GhostGroup> ghosts;
   int ghost_photos = 0;       // photos in the ghost groups
+  // The fraction of the well-placed cameras that look at the point closest to all their optical
+  // axes (bounds.h CamerasLookingAt; 0: no such point): an object capture's cameras all do.
+  double looked_at = 0;
+  struct Focal {
+    uint64_t width = 0, height = 0;
+    double fx = 0, fy = 0;
+  };
+  std::vector<Focal> focals;  // each camera's
 
   // e.g. "84 photos, 52114 points at 0.47 px, no pose looks wrong, no ghost group".
   std::string Describe() const;
@@ -30,9 +38,11 @@ struct ModelCheck {
 ModelCheck CheckModel(const colmap::Reconstruction& rec);
 
 // Whether `repaired` is better than `user` for the reconstruction: no ghost group, at least as many
-// photos whose pose looks right as the user's model less 5 % (at least one), and a mean
-// reprojection error within 1.5 times the user's (or 0.5 px above it). `why` says which held or
-// failed, in words.
+// photos whose pose looks right as the user's model less 5 % (at least one), a mean reprojection
+// error within 1.5 times the user's (or 0.5 px above it), the same camera (each focal length of a
+// photo size the user's model has within 3 % of it, fx / fy within 1.5 % of its ratio: bonsai's
+// new model at 4 % apart put its box beside the object), and, where the user's cameras look at a
+// common point, as many of its own doing so (less 10 %). `why` says which held or failed.
 bool RepairIsBetter(const ModelCheck& repaired, const ModelCheck& user, std::string* why);
 
 }  // namespace perf

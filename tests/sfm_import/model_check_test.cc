@@ -37,6 +37,22 @@ TEST(GhostRepair, ANewModelIsUsedOnlyWhereItIsBetter) {
   worse.mean_error = 1.2;  // above 0.6 + 0.5
   EXPECT_FALSE(RepairIsBetter(worse, user, &why));
   EXPECT_NE(why.find("px"), std::string::npos) << why;
+  // bonsai: the given camera at fx 731, fy 722; a new model at 695, 669 (4 % apart) is not the same camera.
+  user.focals = {{800, 533, 731.4, 722.4}};
+  good.focals = {{800, 533, 729.0, 720.9}};
+  EXPECT_TRUE(RepairIsBetter(good, user, &why)) << why;
+  ModelCheck other_camera = good;
+  other_camera.focals = {{800, 533, 695.2, 669.6}};
+  EXPECT_FALSE(RepairIsBetter(other_camera, user, &why));
+  EXPECT_NE(why.find("camera differs"), std::string::npos) << why;
+  // The user's cameras look at a common point; the new model's mostly do not.
+  user.looked_at = 0.95;
+  ModelCheck scattered = good;
+  scattered.looked_at = 0.7;
+  EXPECT_FALSE(RepairIsBetter(scattered, user, &why));
+  EXPECT_NE(why.find("common point"), std::string::npos) << why;
+  good.looked_at = 0.9;
+  EXPECT_TRUE(RepairIsBetter(good, user, &why)) << why;
 }
 
 TEST(GhostRepair, TheExamplesModelIsKeptSayingWhyAndNotTriedAgain) {
