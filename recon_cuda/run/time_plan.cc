@@ -181,7 +181,19 @@ PlanVerdict TimePlanner::AfterIteration(int level, int done, const std::function
   }
   if (l.planned < 0 || done < l.planned) return PlanVerdict::kGoOn;
   if (later_planned_) return PlanVerdict::kEndLevel;
-  stopped_ = StrCat("level ", level + 1, " ran its ", l.planned, " planned iterations");
+  // The plan's finest level ran its iterations: where they went faster than planned, the time
+  // left goes to a finer level that now fits, or else to more of this one.
+  const std::vector<int> plan = PlanIterations(SecondsLeft(ReserveAt(last)), Estimates(level, done));
+  if (std::any_of(plan.begin() + 1, plan.end(), [](int n) { return n > 0; })) {
+    message_ = StrCat("time plan: level ", level + 1, " ran its ", l.planned, " planned iterations sooner than planned; ",
+                      "level ", level + 2, " fits in the time left");
+    return PlanVerdict::kEndLevel;
+  }
+  if (plan[0] > 0 && SecondsLeft(ReserveAt(level)) > l.iteration) {
+    l.planned = done + 1;  // one more, then look again
+    return PlanVerdict::kGoOn;
+  }
+  stopped_ = StrCat("level ", level + 1, " ran its ", done, " iterations in the budget");
   message_ = "time plan: " + stopped_ + "; the run ends here";
   return PlanVerdict::kStop;
 }
