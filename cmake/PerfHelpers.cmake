@@ -11,10 +11,11 @@ function(perf_add_library name)
   target_compile_options(${name} PRIVATE $<$<COMPILE_LANGUAGE:CXX>:${PERF_WARNINGS}>)
 endfunction()
 
-# perf_add_test(NAME SRCS a_test.cc DEPS lib LABELS unit [slow])
+# perf_add_test(NAME SRCS a_test.cc DEPS lib LABELS unit [slow] [SERIAL])
+# SERIAL: its cases run alone (CTest RUN_SERIAL), for those that measure the time they take.
 # Registers each GoogleTest case with CTest so labels and timeouts apply per case.
 function(perf_add_test name)
-  cmake_parse_arguments(ARG "" "TIMEOUT" "SRCS;DEPS;LABELS" ${ARGN})
+  cmake_parse_arguments(ARG "SERIAL" "TIMEOUT" "SRCS;DEPS;LABELS" ${ARGN})
   add_executable(${name} ${ARG_SRCS})
   target_link_libraries(${name} PRIVATE ${ARG_DEPS} GTest::gtest GTest::gtest_main)
   target_compile_options(${name} PRIVATE $<$<COMPILE_LANGUAGE:CXX>:${PERF_WARNINGS}>)
@@ -38,6 +39,9 @@ function(perf_add_test name)
     # Library leaks we cannot fix (tests/sanitizers/lsan.supp); UBSan findings abort already
     # (-fno-sanitize-recover).
     set(env " ENVIRONMENT \"LSAN_OPTIONS=suppressions=${PROJECT_SOURCE_DIR}/tests/sanitizers/lsan.supp\"")
+  endif()
+  if(ARG_SERIAL)
+    set(env "${env} RUN_SERIAL TRUE")
   endif()
   file(WRITE "${props_file}"
     "set_tests_properties(\${${name}_TESTS} PROPERTIES LABELS \"${ARG_LABELS}\" TIMEOUT ${ARG_TIMEOUT}${env})\n")

@@ -89,6 +89,7 @@ void AddImportCommand(CLI::App& app) {
     ImportResult r;
     // A failed import into a new folder leaves no half-filled workspace behind.
     RemoveNewWorkspaceOnFailure(lock.get(), o.workspace, true, [&] {
+      o.Check();  // the options before the model is read for its repair
       if (!o.colmap_dir.empty()) {
         RepairOptions ro;
         ro.model = o.colmap_dir;
