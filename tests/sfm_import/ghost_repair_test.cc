@@ -18,6 +18,7 @@
 #include "common/atomic_file.h"
 #include "sfm_import/colmap_pose.h"
 #include "sfm_import/ghost_repair.h"
+#include "tests/sfm_import/synthetic_ghost.h"
 #include "tests/test_util.h"
 
 namespace perf {
@@ -25,85 +26,24 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// world' = s R (X - c) + c + d about the object centre c.
-struct Similarity {
-  double s = 0.5;
-  Eigen::Matrix3d r = Eigen::AngleAxisd(0.35, Eigen::Vector3d(0.2, 1, 0.1).normalized()).toRotationMatrix();
-  Eigen::Vector3d c = Eigen::Vector3d::Zero(), d = Eigen::Vector3d::Zero();
-  Eigen::Vector3d operator()(const Eigen::Vector3d& x) const { return s * r * (x - c) + c + d; }
-};
-
-Eigen::Vector3d Centre(const colmap::Image& im) { return WorldFromCam(im).col(3); }
-
-// Moves `group`'s cameras by `sim`; every point they see is split into the original (for the other
-// photos) and its moved copy (for the group's), so that the group sees a second object.
-colmap::Reconstruction MoveGroup(colmap::Reconstruction rec, const std::set<std::string>& group, const Similarity& sim) {
-  std::set<uint32_t> ids;
-  for (auto& [id, im] : rec.images) {
-    if (!group.count(im.name)) continue;
-    ids.insert(id);
-    const Eigen::Matrix<double, 3, 4> w = WorldFromCam(im);
-    const Eigen::Matrix3d r_wc = sim.r * w.leftCols<3>();
-    const Eigen::Vector3d c = sim(w.col(3));
-    const Eigen::Quaterniond q(r_wc.transpose());
-    im.qvec = {q.w(), q.x(), q.y(), q.z()};
-    const Eigen::Vector3d t = -(r_wc.transpose() * c);
-    im.tvec = {t.x(), t.y(), t.z()};
-  }
-  uint64_t next = rec.points3D.empty() ? 1 : rec.points3D.rbegin()->first + 1;
-  std::map<uint64_t, colmap::Point3D> added;
-  for (auto& [pid, p] : rec.points3D) {
-    colmap::Point3D copy = p;
-    copy.point3D_id = next;
-    copy.track.clear();
-    std::vector<colmap::TrackElement> kept;
-    for (const colmap::TrackElement& t : p.track) (ids.count(t.image_id) ? copy.track : kept).push_back(t);
-    if (copy.track.empty()) continue;
-    const Eigen::Vector3d x = sim(Eigen::Vector3d(p.xyz[0], p.xyz[1], p.xyz[2]));
-    copy.xyz = {x.x(), x.y(), x.z()};
-    for (const colmap::TrackElement& t : copy.track) rec.images.at(t.image_id).points2D.at(t.point2D_idx).point3D_id = next;
-    p.track = kept;
-    added[next++] = copy;
-  }
-  for (auto it = rec.points3D.begin(); it != rec.points3D.end();) {
-    it = it->second.track.empty() ? rec.points3D.erase(it) : std::next(it);
-  }
-  rec.points3D.insert(added.begin(), added.end());
-  return rec;
-}
-
 TEST(GhostRepair, AGroupMovedByASimilarityIsPutBack) {
   PERF_REQUIRE_DATA(bonsai, "bonsai");
   test::TempDir dir;
   const colmap::Reconstruction original = colmap::ReadReconstruction(bonsai / "sparse" / "0");
-  // Eight consecutive photos of the main group (the capture's good part, DSCF5668 on).
-  std::vector<std::string> names;
-  for (const auto& [id, im] : original.images) names.push_back(im.name);
-  std::sort(names.begin(), names.end());
-  const auto first = std::find_if(names.begin(), names.end(), [](const std::string& n) { return n >= "DSCF5700"; });
-  ASSERT_GE(names.end() - first, 8);
-  const std::set<std::string> group(first, first + 8);
+  const test::SyntheticGhost ghost = test::MakeSyntheticGhost(original);
+  const std::set<std::string>& group = ghost.group;
+  ASSERT_EQ(group.size(), 8u);
   const ModelCheck before = CheckModel(original);
-  Similarity sim;
-  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-  int n = 0;
-  for (const auto& [id, p] : original.points3D) {
-    if (p.track.size() < 5) continue;
-    mean += Eigen::Vector3d(p.xyz[0], p.xyz[1], p.xyz[2]);
-    ++n;
-  }
-  sim.c = mean / n;
-  sim.d = Eigen::Vector3d(2.5, 0, 0.5);
   const fs::path model = dir / "project" / "sparse" / "0";
   fs::create_directories(model);
-  colmap::WriteReconstruction(model, MoveGroup(original, group, sim), colmap::ModelFormat::kBinary);
+  colmap::WriteReconstruction(model, ghost.model, colmap::ModelFormat::kBinary);
   const auto files_before = test::FilesUnder(model);
 
-  // The check names the moved photos as a ghost group.
+  // The check names the moved photos as a ghost group (model_check_test too, quickly).
   const ModelCheck ghosted = CheckModel(colmap::ReadReconstruction(model));
   std::set<std::string> named;
   for (const GhostGroup& g : ghosted.ghosts) named.insert(g.names.begin(), g.names.end());
-  for (const std::string& name : group) EXPECT_TRUE(named.count(name)) << name << ": " << ghosted.Describe();
+  for (const std::string& name : group) ASSERT_TRUE(named.count(name)) << name << ": " << ghosted.Describe();
 
   RepairOptions o;
   o.model = model;
@@ -131,8 +71,8 @@ TEST(GhostRepair, AGroupMovedByASimilarityIsPutBack) {
   for (const auto& [id, im] : original.images) {
     const bool doubtful = group.count(im.name) || named.count(im.name) || before.bad_poses.count(im.name);
     if (doubtful || !by_name.count(im.name)) continue;
-    from.push_back(Centre(*by_name[im.name]));
-    to.push_back(Centre(im));
+    from.push_back(test::Centre(*by_name[im.name]));
+    to.push_back(test::Centre(im));
   }
   ASSERT_GE(from.size(), 20u);
   Eigen::Matrix3Xd a(3, from.size()), b(3, to.size());
@@ -147,7 +87,7 @@ TEST(GhostRepair, AGroupMovedByASimilarityIsPutBack) {
     const Eigen::Vector3d centre = (align * got.col(3).homogeneous()).head<3>();
     const Eigen::Matrix3d r = rot * got.leftCols<3>();
     const double degrees = Eigen::AngleAxisd(r.transpose() * truth.leftCols<3>()).angle() * 180 / M_PI;
-    const double fraction = (centre - truth.col(3)).norm() / (truth.col(3) - sim.c).norm();
+    const double fraction = (centre - truth.col(3)).norm() / (truth.col(3) - ghost.object).norm();
     std::printf("%s: %.3f degrees, %.3f %% of its distance\n", im.name.c_str(), degrees, 100 * fraction);
     EXPECT_LT(degrees, 0.5) << im.name;
     EXPECT_LT(fraction, 0.01) << im.name;

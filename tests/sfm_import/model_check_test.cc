@@ -4,8 +4,10 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <set>
 
 #include "sfm_import/ghost_repair.h"
+#include "tests/sfm_import/synthetic_ghost.h"
 #include "tests/test_util.h"
 
 namespace perf {
@@ -53,6 +55,21 @@ TEST(GhostRepair, ANewModelIsUsedOnlyWhereItIsBetter) {
   EXPECT_NE(why.find("common point"), std::string::npos) << why;
   good.looked_at = 0.9;
   EXPECT_TRUE(RepairIsBetter(good, user, &why)) << why;
+}
+
+// Eight photos of bonsai's good part moved with what they see (synthetic_ghost.h): the check names
+// them as a ghost group, and no more poses look wrong than before.
+TEST(ModelCheck, ASyntheticGhostIsNamed) {
+  PERF_REQUIRE_DATA(bonsai, "bonsai");
+  const colmap::Reconstruction original = colmap::ReadReconstruction(bonsai / "sparse" / "0");
+  const ModelCheck before = CheckModel(original);
+  const test::SyntheticGhost ghost = test::MakeSyntheticGhost(original);
+  const ModelCheck after = CheckModel(ghost.model);
+  std::set<std::string> named;
+  for (const GhostGroup& g : after.ghosts) named.insert(g.names.begin(), g.names.end());
+  for (const std::string& name : ghost.group) EXPECT_TRUE(named.count(name)) << name << ": " << after.Describe();
+  EXPECT_EQ(after.bad_poses.size(), before.bad_poses.size()) << after.Describe();
+  EXPECT_EQ(after.ghosts.size(), before.ghosts.size() + 1) << after.Describe();
 }
 
 TEST(GhostRepair, TheExamplesModelIsKeptSayingWhyAndNotTriedAgain) {
