@@ -11,17 +11,6 @@
 namespace perf {
 namespace {
 
-// The pinhole part of an image's camera (distortion does not move the principal region much),
-// or nullopt for a model PERF does not know.
-std::optional<BoundsCamera> PinholeOf(const colmap::Reconstruction& rec, const colmap::Image& im) {
-  const auto cam = rec.cameras.find(im.camera_id);
-  if (cam == rec.cameras.end() || !colmap::FindCameraModel(cam->second.model_id)) return std::nullopt;
-  const colmap::FocalAndCentre f =
-      colmap::GetFocalAndCentre(static_cast<colmap::CameraModelId>(cam->second.model_id), cam->second.params.data());
-  return BoundsCamera{WorldFromCam(im), f.fx, f.fy, f.cx, f.cy, static_cast<int>(cam->second.width),
-                      static_cast<int>(cam->second.height)};
-}
-
 // The point the cameras look at: closest to the optical axes of the cameras that look towards
 // the first estimate (bounds.h CamerasLookingAt), so that a few turned-away poses do not pull it;
 // nullopt unless most cameras look at it (IsObjectCentric).

@@ -5,6 +5,8 @@
 #include <cmath>
 
 #include "common/errors.h"
+#include "sfm_import/camera_models.h"
+#include "sfm_import/colmap_pose.h"
 
 namespace perf {
 namespace {
@@ -76,6 +78,24 @@ double VisibleFraction(const std::vector<BoundsCamera>& cameras, const Eigen::Ve
 }  // namespace
 
 double Median(std::vector<double> v) { return Percentile(v, 50.0); }
+
+std::optional<BoundsCamera> PinholeOf(const colmap::Reconstruction& rec, const colmap::Image& im) {
+  const auto cam = rec.cameras.find(im.camera_id);
+  if (cam == rec.cameras.end() || !colmap::FindCameraModel(cam->second.model_id)) return std::nullopt;
+  const colmap::FocalAndCentre f =
+      colmap::GetFocalAndCentre(static_cast<colmap::CameraModelId>(cam->second.model_id), cam->second.params.data());
+  return BoundsCamera{WorldFromCam(im), f.fx, f.fy, f.cx, f.cy, static_cast<int>(cam->second.width),
+                      static_cast<int>(cam->second.height)};
+}
+
+std::vector<BoundsPoint> BoundsPoints(const colmap::Reconstruction& rec) {
+  std::vector<BoundsPoint> points;
+  points.reserve(rec.points3D.size());
+  for (const auto& [id, p] : rec.points3D) {
+    points.push_back({Eigen::Vector3d(p.xyz[0], p.xyz[1], p.xyz[2]), static_cast<int>(p.track.size()), p.error});
+  }
+  return points;
+}
 
 bool IsRobustPoint(const BoundsPoint& p, const BoundsOptions& o) {
   return p.track_length >= o.min_track_length && (p.error < 0 || p.error <= o.max_reproj_error);

@@ -16,9 +16,11 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "sfm_import/colmap_model.h"
 #include "workspace/scene.h"
 
 namespace perf {
@@ -61,6 +63,13 @@ struct BoundsResult {
   bool object_centric = false;     // cameras look at a common point (360 capture)
   int num_points_used = 0;         // ROI points that defined the box (0: camera-only)
 };
+
+// A COLMAP image's camera as the bounds see it: the pinhole part of its model (distortion does
+// not move the principal region much), or nullopt for a model PERF does not know.
+std::optional<BoundsCamera> PinholeOf(const colmap::Reconstruction& rec, const colmap::Image& im);
+
+// Every sparse point of `rec` with its track length and reprojection error.
+std::vector<BoundsPoint> BoundsPoints(const colmap::Reconstruction& rec);
 
 // A robust sparse point: seen by at least min_track_length images, with a reprojection error
 // of at most max_reproj_error (or unknown).

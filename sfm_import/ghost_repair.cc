@@ -8,6 +8,7 @@
 #include "common/stopwatch.h"
 #include "sfm_import/camera_models.h"
 #include "sfm_import/colmap_runner.h"
+#include "sfm_import/importer.h"
 
 namespace perf {
 namespace {
@@ -48,8 +49,9 @@ RepairResult RepairModel(const RepairOptions& o) {
   const auto start = WallClock::now();
   RepairResult r;
   r.model = o.model;
-  r.images = o.images.empty() ? o.model.parent_path().parent_path() / "images" : o.images;
-  r.before = CheckModel(colmap::ReadReconstruction(o.model));
+  r.images = o.images.empty() ? DefaultColmapImages(o.model) : o.images;
+  const colmap::Reconstruction given = colmap::ReadReconstruction(o.model);
+  r.before = CheckModel(given);
   if (r.before.ghosts.empty()) return r;
   const fs::path dir = o.workspace / "repair", record = dir / "repair.json", repaired = o.workspace / "sparse_repaired";
   if (!o.repair) {
@@ -59,10 +61,11 @@ RepairResult RepairModel(const RepairOptions& o) {
   }
   // A decision recorded for this model (same folder, files no newer) stands.
   const double model_time = ModelTime(o.model);
+  const std::string model_path = fs::absolute(o.model).lexically_normal().string();
   std::error_code ec;
   if (fs::exists(record, ec)) {
     const nlohmann::json j = nlohmann::json::parse(ReadFileToString(record), nullptr, false);
-    if (j.is_object() && j.value("user_model", "") == fs::absolute(o.model).lexically_normal().string() &&
+    if (j.is_object() && j.value("user_model", "") == model_path &&
         j.value("user_model_time", -1.0) == model_time &&
         (!j.value("used", false) || fs::exists(repaired / "images.bin", ec))) {
       r.attempted = true;
@@ -79,7 +82,6 @@ RepairResult RepairModel(const RepairOptions& o) {
                 "into ", dir.string(), "; --no-repair imports it as given)"));
   SfmOptions so;
   so.images = r.images;
-  const colmap::Reconstruction given = colmap::ReadReconstruction(o.model);
   if (given.cameras.size() == 1) {  // COLMAP starts from the given camera (one for all photos)
     const colmap::Camera& cam = given.cameras.begin()->second;
     if (const colmap::CameraModelInfo* info = colmap::FindCameraModel(cam.model_id)) {
@@ -98,12 +100,13 @@ RepairResult RepairModel(const RepairOptions& o) {
   so.progress = [&](const std::string& line) { Say(o, "repair: " + line); };
   try {
     const SfmResult sfm = RunSfm(so);
-    r.after = CheckModel(colmap::ReadReconstruction(sfm.sparse_dir));
+    const colmap::Reconstruction made = colmap::ReadReconstruction(sfm.sparse_dir);
+    r.after = CheckModel(made);
     std::string why;
     r.used = RepairIsBetter(r.after, r.before, &why);
     r.why = StrCat(r.used ? "the new model is used: " : "the model is kept: the new one is not better: ", why);
     if (r.used) {
-      colmap::WriteReconstruction(repaired, colmap::ReadReconstruction(sfm.sparse_dir), colmap::ModelFormat::kBinary);
+      colmap::WriteReconstruction(repaired, made, colmap::ModelFormat::kBinary);
       r.model = repaired;
     }
   } catch (const Interrupted&) {
@@ -116,7 +119,7 @@ RepairResult RepairModel(const RepairOptions& o) {
   r.seconds = SecondsSince(start);
   EnsureWritableDirectory(dir);
   nlohmann::json j = r.ToJson();
-  j["user_model"] = fs::absolute(o.model).lexically_normal().string();
+  j["user_model"] = model_path;
   j["user_model_time"] = model_time;
   WriteFileAtomically(record, j.dump(2) + "\n");
   Say(o, "repair: " + r.why);

@@ -144,8 +144,7 @@ std::map<std::string, std::string> WarnBadPoses(const ImportOptions& o, const co
 // The photos' folder and its image files; throws InputError when it is no folder or holds none.
 ColmapPhotos ListColmapPhotos(const ImportOptions& o, const fs::path& model_dir) {
   ColmapPhotos photos;
-  photos.dir = o.images_dir;
-  if (photos.dir.empty()) photos.dir = model_dir.parent_path().parent_path() / "images";
+  photos.dir = o.images_dir.empty() ? DefaultColmapImages(model_dir) : o.images_dir;
   if (!fs::is_directory(photos.dir)) {
     throw InputError(kCommandLine, "--images", photos.dir.string(), "not a folder",
                      "pass the folder of photos the COLMAP model was made from");
@@ -319,12 +318,7 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
             [](const SceneImage& a, const SceneImage& b) { return a.name < b.name; });
   r->scene.source = {"colmap", RecordedPath(model_dir), RecordedPath(photos.dir),
                      format == colmap::ModelFormat::kBinary ? "binary" : "text", o.downscale, o.max_size};
-  std::vector<BoundsPoint> points;
-  points.reserve(rec.points3D.size());
-  for (const auto& [id, p] : rec.points3D) {
-    points.push_back({Eigen::Vector3d(p.xyz[0], p.xyz[1], p.xyz[2]), static_cast<int>(p.track.size()), p.error});
-  }
-  PlaceBoundsAndShells(o, points, model_dir.string(), r);
+  PlaceBoundsAndShells(o, BoundsPoints(rec), model_dir.string(), r);
   for (std::string& w : MarkGhostGroups(rec, bad_poses, &r->scene)) r->warnings.push_back(std::move(w));
   EnsureWritableDirectory(o.workspace / "images");
   RunJobs(jobs, o, photos.largest);
@@ -396,6 +390,8 @@ void ImportNerf(const ImportOptions& o, ImportResult* r) {
 }
 
 }  // namespace
+
+fs::path DefaultColmapImages(const fs::path& model_dir) { return model_dir.parent_path().parent_path() / "images"; }
 
 void ImportOptions::Check() const {
   const bool colmap = !colmap_dir.empty(), nerf = !nerf_json.empty();

@@ -58,6 +58,10 @@ struct ImportResult {
 
 ImportResult RunImport(const ImportOptions& options);
 
+// The photos of a COLMAP model given without --images: <model>/../../images (a COLMAP project's
+// layout, project/sparse/0 beside project/images).
+std::filesystem::path DefaultColmapImages(const std::filesystem::path& model_dir);
+
 // A few lines for the terminal: images, cameras, box, shells.
 std::string ImportSummary(const ImportResult& result);
 

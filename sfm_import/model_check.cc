@@ -8,7 +8,6 @@
 #include "sfm_import/bad_poses.h"
 #include "sfm_import/bounds.h"
 #include "sfm_import/camera_models.h"
-#include "sfm_import/colmap_pose.h"
 
 namespace perf {
 
@@ -34,16 +33,15 @@ ModelCheck CheckModel(const colmap::Reconstruction& rec) {
   c.points = static_cast<int>(rec.points3D.size());
   double sum = 0;
   int n = 0;
-  std::vector<BoundsPoint> points;
   for (const auto& [id, p] : rec.points3D) {
     if (p.error >= 0) {
       sum += p.error;
       ++n;
     }
-    points.push_back({Eigen::Vector3d(p.xyz[0], p.xyz[1], p.xyz[2]), static_cast<int>(p.track.size()), p.error});
   }
   c.mean_error = n > 0 ? sum / n : 0;
   for (const auto& [id, cam] : rec.cameras) {
+    if (!colmap::FindCameraModel(cam.model_id)) continue;  // a model PERF does not know
     const colmap::FocalAndCentre f = colmap::GetFocalAndCentre(static_cast<colmap::CameraModelId>(cam.model_id),
                                                                cam.params.data());
     c.focals.push_back({cam.width, cam.height, f.fx, f.fy});
@@ -52,16 +50,13 @@ ModelCheck CheckModel(const colmap::Reconstruction& rec) {
   std::vector<BoundsCamera> cameras;
   for (const auto& [id, im] : rec.images) {
     if (c.bad_poses.count(im.name)) continue;
-    const colmap::Camera& cam = rec.cameras.at(im.camera_id);
-    const colmap::FocalAndCentre f = colmap::GetFocalAndCentre(static_cast<colmap::CameraModelId>(cam.model_id), cam.params.data());
-    cameras.push_back({WorldFromCam(im), f.fx, f.fy, f.cx, f.cy, static_cast<int>(cam.width),
-                       static_cast<int>(cam.height)});
+    if (const std::optional<BoundsCamera> cam = PinholeOf(rec, im)) cameras.push_back(*cam);
   }
   if (cameras.empty()) return c;
   if (Eigen::Vector3d p; ClosestPointToAxes(cameras, &p)) {
     c.looked_at = static_cast<double>(CamerasLookingAt(cameras, p).size()) / static_cast<double>(cameras.size());
   }
-  const BoundsResult bounds = EstimateBounds(cameras, points, BoundsOptions{}, "model check");
+  const BoundsResult bounds = EstimateBounds(cameras, BoundsPoints(rec), BoundsOptions{}, "model check");
   c.ghosts = FindGhostGroups(rec, bounds.box, c.bad_poses);
   for (const GhostGroup& g : c.ghosts) c.ghost_photos += static_cast<int>(g.names.size());
   return c;
