@@ -123,8 +123,7 @@ void ScoreAfterPoseFit(const EvalOptions& o, LoadedCheckpoint& l, const std::vec
   for (const recon::PosedImage& v : test) {
     transforms.push_back(corrections.TransformFor(v.camera));
     start.push_back(corrections.PoseFor(v.camera));
-    const int side = std::max(v.image.width, v.image.height);
-    const int factor = o.pose_fit_side > 0 ? (side + o.pose_fit_side - 1) / o.pose_fit_side : 1;
+    const int factor = PoseFitDownscale(v.image.width, v.image.height, o.pose_fit_side);
     small.push_back(factor > 1 ? recon::Downscaled(v, factor) : v);
   }
   recon::PoseFitOptions fit;

@@ -7,6 +7,7 @@
 //     IoU, precision and recall of our binary masks against it, per image and pooled.
 #pragma once
 
+#include <algorithm>
 #include <filesystem>
 #include <functional>
 #include <string>
@@ -23,6 +24,12 @@ namespace perf::exporter {
 // 400 px: 21.72 against 21.71 dB, 13.9 against 156.6 s; docs/tuning.md "The eval's pose fit").
 inline constexpr int kPoseFitIterations = 12;
 inline constexpr int kPoseFitSide = 100;
+
+// The least integer downscale that brings a width x height photo's longer side to at most `side`
+// pixels (side 0: 1, as it is).
+inline int PoseFitDownscale(int width, int height, int side) {
+  return side > 0 ? std::max(1, (std::max(width, height) + side - 1) / side) : 1;
+}
 
 struct EvalOptions {
   std::filesystem::path workspace;

@@ -5,7 +5,6 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
-#include <cmath>
 #include <cstdio>
 #include <map>
 #include <numbers>
@@ -388,14 +387,14 @@ ExportResult RunExport(const ExportOptions& o) {
 double EstimateExportAndEvalSeconds(recon::Backend* backend, recon::VecId params, const Scene& scene,
                                     const ExportOptions& o, bool pose_fit) {
   const SceneImage* photo = nullptr;
-  int photos = 0, cameras = 0;
+  int photos = 0;
   double test_pixels = 0;
-  std::set<int> seen;
+  std::set<int> cameras;
   for (const SceneImage& im : scene.images) {
     if (im.split == Split::kExcluded) continue;
     ++photos;
     if (photo == nullptr) photo = &im;
-    if (seen.insert(im.camera_id).second) ++cameras;
+    cameras.insert(im.camera_id);
     const SceneCamera& cam = scene.camera(im.camera_id);
     if (im.split == Split::kTest) test_pixels += static_cast<double>(cam.width) * cam.height;
   }
@@ -425,13 +424,12 @@ double EstimateExportAndEvalSeconds(recon::Backend* backend, recon::VecId params
   }
   // Masks are rendered one photo at a time and written in parallel batches of 8 (ExportMasks).
   const double writers = std::clamp<double>(tbb::this_task_arena::max_concurrency(), 1, 8);
-  const double masks = cameras * frame_seconds + photos * (mask_seconds + files_seconds / writers);
+  const double masks = static_cast<double>(cameras.size()) * frame_seconds + photos * (mask_seconds + files_seconds / writers);
   const double renders = (o.renders ? test_pixels + orbit_pixels : 0) * per_pixel;
   // eval: each held-out view rendered and scored (about twice its render); the pose fit's
   // iterations on the views at most kPoseFitSide across, each about kPoseFitRenders renders.
   constexpr double kPoseFitRenders = 16;  // the example: 2.9 s for 5 views of 100 x 67
-  const double side = std::max(cam.width, cam.height);
-  const double factor = std::ceil(side / kPoseFitSide);
+  const double factor = PoseFitDownscale(cam.width, cam.height, kPoseFitSide);
   const double fit = pose_fit ? kPoseFitIterations * kPoseFitRenders * test_pixels / (factor * factor) * per_pixel : 0;
   return masks + renders + 2 * test_pixels * per_pixel + fit;
 }

@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cmath>
 #include <fstream>
 #include <iomanip>
 #include <iostream>
@@ -17,12 +16,12 @@
 #include "common/stopwatch.h"
 #include "export/evaluate.h"
 #include "export/export.h"
-#include "recon_cuda/run/time_plan.h"
 #include "pipeline/stage_freshness.h"
 #include "pipeline/stage_progress.h"
 #include "recon_cuda/data/checkpoint.h"
 #include "recon_cuda/run/level_choice.h"
 #include "recon_cuda/run/reconstruct.h"
+#include "recon_cuda/run/time_plan.h"
 #include "sfm_import/colmap_runner.h"
 #include "sfm_import/ghost_repair.h"
 #include "sfm_import/importer.h"

@@ -11,10 +11,9 @@
 namespace perf {
 
 namespace {
-constexpr const char* kCommandLine = "command line";
-}  // namespace
 
-namespace {
+constexpr const char* kCommandLine = "command line";
+
 // Where the bands are solved, in words (recon::ShFromLevelIndex says how the value counts);
 // levels 0: from the photos.
 std::string ShLevels(int sh_from_level, int levels) {

@@ -26,7 +26,7 @@ struct LoadedCheckpoint {
 
 // The checkpoint a workspace's outputs come from: the one recon/recon.json names as final where
 // the run that wrote it also wrote the newest checkpoint (recon.json no older than it; a finer
-// level that scored worse held-out is not final: FinalLevel), else the highest level; empty
+// level that scored worse held-out is not final: FinalLevelIndex), else the highest level; empty
 // when there is none.
 std::filesystem::path FinalCheckpointPath(const std::filesystem::path& workspace);
 
