@@ -18,6 +18,7 @@ PACKAGES=(
   assimp-utils                           # the independent check of the mesh files (MeshAssimpTest)
   libgtest-dev libgmock-dev libbenchmark-dev    # tests and benchmarks
   colmap                                 # photos -> sparse model (perf sfm), model_converter in tests
+  libsqlite3-dev                         # COLMAP's database read back (the ghost repair)
   libopenmpi-dev openmpi-bin             # ranks across processes and nodes (mpirun perf reconstruct)
   clang                                  # libFuzzer target for the binary readers (optional)
   libcpp-httplib-dev libjs-three         # perf view: its HTTP server and the page's three.js

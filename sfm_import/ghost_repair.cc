@@ -2,12 +2,15 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <set>
+#include <vector>
 
 #include "common/atomic_file.h"
 #include "common/errors.h"
 #include "common/stopwatch.h"
 #include "sfm_import/camera_models.h"
 #include "sfm_import/colmap_runner.h"
+#include "sfm_import/ghost_register.h"
 #include "sfm_import/importer.h"
 
 namespace perf {
@@ -37,12 +40,37 @@ nlohmann::json CheckJson(const ModelCheck& c) {
           {"poses_look_wrong", c.bad_poses.size()}, {"ghost_groups", ghosts}, {"summary", c.Describe()}};
 }
 
+// perf sfm of the photos, starting from the given camera where the model has one for all photos.
+SfmOptions SfmFromGiven(const colmap::Reconstruction& given, const fs::path& images, const fs::path& dir,
+                        const RepairOptions& o) {
+  SfmOptions so;
+  so.images = images;
+  if (given.cameras.size() == 1) {
+    const colmap::Camera& cam = given.cameras.begin()->second;
+    if (const colmap::CameraModelInfo* info = colmap::FindCameraModel(cam.model_id)) {
+      so.camera_model = std::string(info->name);
+      so.camera_params = CameraParamsArgument(cam);
+    }
+  }
+  so.workspace = dir;
+  so.num_threads = o.threads > 0 ? o.threads : -1;
+  so.check_stop = o.check_stop;
+  so.progress = [&o](const std::string& line) { Say(o, "repair: " + line); };
+  return so;
+}
+
+std::string Join(const std::vector<std::string>& parts) {
+  std::string out;
+  for (const std::string& p : parts) out += (out.empty() ? "" : "; ") + p;
+  return out;
+}
+
 }  // namespace
 
 nlohmann::json RepairResult::ToJson() const {
   return {{"attempted", attempted}, {"used", used}, {"why", why}, {"model", model.string()},
           {"before", CheckJson(before)}, {"after", after.registered > 0 ? CheckJson(after) : nlohmann::json()},
-          {"seconds", seconds}};
+          {"route", route}, {"tries", tries}, {"seconds", seconds}};
 }
 
 RepairResult RepairModel(const RepairOptions& o) {
@@ -78,51 +106,62 @@ RepairResult RepairModel(const RepairOptions& o) {
   }
   r.attempted = true;
   Say(o, StrCat("repair: the model has ", r.before.ghosts.size(), " ghost group(s) (", r.before.ghost_photos,
-                " photos placed as a second copy of the object): making the model again from the photos (perf sfm "
-                "into ", dir.string(), "; --no-repair imports it as given)"));
-  SfmOptions so;
-  so.images = r.images;
-  if (given.cameras.size() == 1) {  // COLMAP starts from the given camera (one for all photos)
-    const colmap::Camera& cam = given.cameras.begin()->second;
-    if (const colmap::CameraModelInfo* info = colmap::FindCameraModel(cam.model_id)) {
-      so.camera_model = std::string(info->name);
-      for (double p : cam.params) {
-        char buf[32];
-        std::snprintf(buf, sizeof buf, "%.10g", p);
-        if (!so.camera_params.empty()) so.camera_params += ',';
-        so.camera_params += buf;
-      }
-    }
-  }
-  so.workspace = dir;
-  so.num_threads = o.threads > 0 ? o.threads : -1;
-  so.check_stop = o.check_stop;
-  so.progress = [&](const std::string& line) { Say(o, "repair: " + line); };
-  try {
-    const SfmResult sfm = RunSfm(so);
-    const colmap::Reconstruction made = colmap::ReadReconstruction(sfm.sparse_dir);
+                " photos placed as a second copy of the object): registering them again into the model without "
+                "them (COLMAP, in ", dir.string(), "; --no-repair imports the model as given)"));
+  std::set<std::string> group;
+  for (const GhostGroup& g : r.before.ghosts) group.insert(g.names.begin(), g.names.end());
+  const auto decide = [&](const std::string& route, const colmap::Reconstruction& made, const std::string& said) {
     r.after = CheckModel(made);
     std::string why;
     r.used = RepairIsBetter(r.after, r.before, &why);
-    r.why = StrCat(r.used ? "the new model is used: " : "the model is kept: the new one is not better: ", why);
+    r.route = route;
+    r.why = StrCat(r.used ? "the model " + said + " is used: " : "the model " + said + " is not better: ", why);
+    r.tries.push_back(r.why);
+    Say(o, "repair: " + r.why);
     if (r.used) {
       colmap::WriteReconstruction(repaired, made, colmap::ModelFormat::kBinary);
       r.model = repaired;
     }
+  };
+  const auto failed = [&](const std::string& what, const Error& e) {
+    std::string text = e.what();
+    r.tries.push_back(what + " (" + text.substr(0, text.find('\n')) + ")");
+    Say(o, "repair: " + r.tries.back());
+  };
+  try {
+    RegisterGroupOptions ro;
+    ro.images = r.images;
+    ro.dir = dir / "register";
+    ro.threads = o.threads > 0 ? o.threads : -1;
+    ro.say = [&](const std::string& line) { Say(o, "repair: " + line); };
+    ro.check_stop = o.check_stop;
+    const GroupRegistration reg = RegisterGroupAgain(given, group, ro);
+    decide("register", reg.model,
+           StrCat("with the group registered again (", reg.placed.size(), " of ", group.size(), " placed)"));
   } catch (const Interrupted&) {
     throw;
   } catch (const Error& e) {
-    std::string what = e.what();
-    what = what.substr(0, what.find('\n'));
-    r.why = "the model is kept: perf sfm could not make a model of the photos (" + what + ")";
+    failed("COLMAP could not register the group again", e);
   }
+  if (!r.used) {
+    Say(o, "repair: making the model again from the photos (perf sfm into " + dir.string() + ")");
+    try {
+      const colmap::Reconstruction made = colmap::ReadReconstruction(RunSfm(SfmFromGiven(given, r.images, dir, o)).sparse_dir);
+      decide("sfm", made, "made again by perf sfm");
+    } catch (const Interrupted&) {
+      throw;
+    } catch (const Error& e) {
+      failed("perf sfm could not make a model of the photos", e);
+    }
+  }
+  r.why = r.used ? r.tries.back() : "the model is kept: " + Join(r.tries);
   r.seconds = SecondsSince(start);
   EnsureWritableDirectory(dir);
   nlohmann::json j = r.ToJson();
   j["user_model"] = model_path;
   j["user_model_time"] = model_time;
   WriteFileAtomically(record, j.dump(2) + "\n");
-  Say(o, "repair: " + r.why);
+  if (!r.used) Say(o, "repair: " + r.why);
   return r;
 }
 

@@ -14,6 +14,7 @@
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "sfm_import/model_check.h"
 
@@ -35,6 +36,8 @@ struct RepairResult {
   bool attempted = false;        // a ghost was found and a new model made (or recorded before)
   bool used = false;             // the new model is imported
   std::string why;               // the decision in words
+  std::string route;             // "register" (the group registered again) or "sfm" (made again)
+  std::vector<std::string> tries;  // what each route made of it, in order
   ModelCheck before, after;
   double seconds = 0;
   nlohmann::json ToJson() const;
