@@ -141,6 +141,7 @@ std::vector<GhostGroup> FindGhostGroups(const colmap::Reconstruction& rec, const
     g.main_radius = main.radius;
     g.main_photos = static_cast<int>(main.photos.size());
     g.main_points = static_cast<int>(main.points.size());
+    for (int k = 0; k < 3; ++k) g.centre[k] = c.centre[k], g.main_centre[k] = main.centre[k];
     out.push_back(std::move(g));
   }
   return out;

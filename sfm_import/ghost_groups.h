@@ -14,6 +14,7 @@
 // 3-4 dB more (docs/tuning.md "A ghost object in COLMAP's model").
 #pragma once
 
+#include <array>
 #include <map>
 #include <string>
 #include <vector>
@@ -43,6 +44,7 @@ struct GhostGroup {
   double separation = 0;           // from the group's in-box centre to the main group's (world units)
   double main_radius = 0;          // RMS distance of the main group's in-box points from their centre
   int main_photos = 0, main_points = 0;
+  std::array<double, 3> centre{}, main_centre{};  // the group's in-box points' mean, the main group's
   // e.g. "11 photos (DSCF5605.JPG ... DSCF5635.JPG) see 624 sparse points inside the box 2.6 units
   // (2.9 times the object's radius) from the 3577 that the other 60 photos see, and share none".
   std::string Describe() const;

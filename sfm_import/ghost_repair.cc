@@ -10,6 +10,7 @@
 #include "common/stopwatch.h"
 #include "sfm_import/camera_models.h"
 #include "sfm_import/colmap_runner.h"
+#include "sfm_import/ghost_move.h"
 #include "sfm_import/ghost_register.h"
 #include "sfm_import/importer.h"
 
@@ -154,6 +155,7 @@ RepairResult RepairModel(const RepairOptions& o) {
       failed("perf sfm could not make a model of the photos", e);
     }
   }
+  if (!r.used) decide("move", MoveGhostsOntoObject(given, r.before.ghosts), "with each group moved onto the object");
   r.why = r.used ? r.tries.back() : "the model is kept: " + Join(r.tries);
   r.seconds = SecondsSince(start);
   EnsureWritableDirectory(dir);

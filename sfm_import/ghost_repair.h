@@ -36,7 +36,9 @@ struct RepairResult {
   bool attempted = false;        // a ghost was found and a new model made (or recorded before)
   bool used = false;             // the new model is imported
   std::string why;               // the decision in words
-  std::string route;             // "register" (the group registered again) or "sfm" (made again)
+  // "register" (the group registered again: ghost_register.h), "sfm" (made again) or "move"
+  // (moved onto the object: ghost_move.h)
+  std::string route;
   std::vector<std::string> tries;  // what each route made of it, in order
   ModelCheck before, after;
   double seconds = 0;
