@@ -1,13 +1,12 @@
 // COLMAP's mistakes repaired, not only named: where a user's model (perf import / perf run
-// --colmap) holds a ghost group (ghost_groups.h) and its photos are at hand, the model is made
-// again from the photos (perf sfm into WORKSPACE/repair/) and both are checked (model_check.h).
-// The new one goes to WORKSPACE/sparse_repaired/ and is imported instead only where it is better
-// (no ghost, as many photos placed well, points that fit as well), saying why either way; the
-// user's model is only read. WORKSPACE/repair/repair.json records the decision for that model (its
-// path and time), so that a run again does not repeat it. A new model of bonsai's photos had no
-// ghost and scored the ghost's views 3-4 dB higher (docs/tuning.md "A ghost object in COLMAP's
-// model"); the example's 200 px photos are too small for COLMAP to register (0 of 42), and its
-// model is kept.
+// --colmap) holds a ghost group (ghost_groups.h) and its photos are at hand, three routes are tried
+// in turn, each checked against the user's model (model_check.h): the group registered again into
+// the model without it (ghost_register.h), the model made again from the photos (perf sfm into
+// WORKSPACE/repair/), and each group moved onto the object (ghost_move.h, for photos too small to
+// match). The first that is better goes to WORKSPACE/sparse_repaired/ and is imported instead,
+// saying why either way; the user's model is only read. WORKSPACE/repair/repair.json records the
+// tries and the decision for that model (its path and time), so that a run again does not repeat
+// them.
 #pragma once
 
 #include <filesystem>
