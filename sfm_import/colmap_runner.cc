@@ -337,9 +337,12 @@ fs::path WriteSecondPassPairs(const SfmRun& run, const std::vector<std::string>&
 }
 
 // (d) Sequential matching misses photos taken out of order: match those left out with every
-// other photo and register them into the model (COLMAP's image_registrator), then adjust. The
-// result replaces the best model only when every step worked and it holds more photos.
-void RegisterLeftOut(SfmRun& run, bool exhaustive, Mapping* mapping) {
+// other photo and register them into the model (COLMAP's image_registrator), then adjust. Photos
+// that see too few of the model's points then are tried again as the model grows: each further
+// pass continues COLMAP's mapper from the model (it registers, triangulates and adjusts), until a
+// pass adds none. The result replaces the best model only when every step worked and it holds
+// more photos; `passes` gets the photos each pass added.
+void RegisterLeftOut(SfmRun& run, bool exhaustive, Mapping* mapping, std::vector<int>* passes) {
   if (exhaustive || !run.options.second_pass || mapping->best.num_images >= run.n) return;
   const auto missing = LeftOut(run.inputs, *mapping->best_dir);
   if (!missing || missing->empty()) return;
@@ -354,7 +357,7 @@ void RegisterLeftOut(SfmRun& run, bool exhaustive, Mapping* mapping) {
     if (!ok) return;
     const StepResult r = run.Step(args, stage, parse);
     ok = !r.failed();
-    if (!ok) Report(run.options, StrCat("sfm: ", args.front(), " failed (see ", run.log_path.string(), "); keeping the first model"));
+    if (!ok) Report(run.options, StrCat("sfm: ", args.front(), " failed (see ", run.log_path.string(), "); keeping the model before it"));
   };
   step(WithSiftMatching(run, {"matches_importer", "--database_path", run.database.string(), "--match_list_path",
                               pairs.string(), "--match_type", "pairs"}),
@@ -364,10 +367,28 @@ void RegisterLeftOut(SfmRun& run, bool exhaustive, Mapping* mapping) {
        "registering", MapperParser(run.n));
   step({"bundle_adjuster", "--input_path", second.string(), "--output_path", second.string()}, "adjusting",
        [](const std::string&) { return std::optional<std::string>(); });
-  const auto counts = ok ? ReadModelCounts(second) : std::nullopt;
-  if (counts && counts->num_images > mapping->best.num_images) {
-    *std::max_element(mapping->model_sizes.begin(), mapping->model_sizes.end()) = counts->num_images;  // it grew
-    mapping->best_dir = second;
+  std::optional<ModelCounts> counts = ok ? ReadModelCounts(second) : std::nullopt;
+  if (!counts || counts->num_images <= mapping->best.num_images) return;
+  *std::max_element(mapping->model_sizes.begin(), mapping->model_sizes.end()) = counts->num_images;  // it grew
+  passes->push_back(counts->num_images - mapping->best.num_images);
+  Report(run.options, StrCat("sfm: pass 2 registered ", passes->back(), " more (", counts->num_images, "/", run.n, ")"));
+  mapping->best_dir = second;
+  mapping->best = *counts;
+  for (int pass = 3; mapping->best.num_images < run.n && pass < 3 + run.options.max_more_passes; ++pass) {
+    const fs::path next = run.models_dir / StrCat("pass_", pass);
+    RemoveOwned(next);
+    EnsureWritableDirectory(next);
+    step({"mapper", "--database_path", run.database.string(), "--image_path", run.options.images.string(), "--input_path",
+          mapping->best_dir->string(), "--output_path", next.string(), "--Mapper.num_threads", run.threads},
+         "mapping", MapperParser(run.n));
+    counts = ok ? ReadModelCounts(next) : std::nullopt;
+    const int added = counts ? counts->num_images - mapping->best.num_images : 0;
+    Report(run.options, StrCat("sfm: pass ", pass, " registered ", std::max(0, added), " more (",
+                               mapping->best.num_images + std::max(0, added), "/", run.n, ")"));
+    if (added <= 0) break;
+    passes->push_back(added);
+    *std::max_element(mapping->model_sizes.begin(), mapping->model_sizes.end()) = counts->num_images;
+    mapping->best_dir = next;
     mapping->best = *counts;
   }
 }
@@ -429,7 +450,7 @@ SfmResult RunSfm(const SfmOptions& options) {
   Mapping mapping = Map(run);
   RematchIfOutOfOrder(run, &exhaustive, &mapping);
   CheckEnoughRegistered(run, mapping);
-  RegisterLeftOut(run, exhaustive, &mapping);
+  RegisterLeftOut(run, exhaustive, &mapping, &result.passes);
   InstallModel(run, mapping, &result);
   result.seconds = elapsed();
   ReportModel(run, mapping, exhaustive, result);

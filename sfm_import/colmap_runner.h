@@ -1,6 +1,7 @@
 // `perf sfm`: photos -> COLMAP sparse model by running the `colmap` CLI (CPU SIFT, headless):
 // feature_extractor, a matcher (exhaustive for small sets, sequential beyond), mapper, and after
-// sequential matching a second pass for the photos left out; then the largest model becomes
+// sequential matching a second pass for the photos left out, and more passes while they add
+// photos; then the largest model becomes
 // WORKSPACE/sparse/0, and the photos it left out are named. COLMAP's own output goes to WORKSPACE/colmap/colmap.log.
 #pragma once
 
@@ -31,6 +32,9 @@ struct SfmOptions {
   // After sequential matching, match the photos the model left out with every other photo and
   // register them into it (matches_importer, image_registrator, bundle_adjuster).
   bool second_pass = true;
+  // After the second pass, photos still left out are tried again as the model grows (COLMAP's
+  // mapper continued from the model), at most this many more passes, until one adds none.
+  int max_more_passes = 4;
   int max_image_size = 1600;             // SiftExtraction.max_image_size
   int max_num_features = 8192;           // SiftExtraction.max_num_features
   int num_threads = -1;                  // -1: all cores
@@ -55,6 +59,7 @@ struct SfmResult {
   int num_registered_images = 0;
   int num_points = 0;
   std::vector<std::string> left_out;  // input photos not in the model (empty when unknown)
+  std::vector<int> passes;            // the photos each registration pass added (the second on)
   double seconds = 0;
   bool kept = false;  // the model already at sparse/0 was kept (made from these photos; no --force)
 };

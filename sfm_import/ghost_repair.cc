@@ -137,8 +137,13 @@ RepairResult RepairModel(const RepairOptions& o) {
     ro.say = [&](const std::string& line) { Say(o, "repair: " + line); };
     ro.check_stop = o.check_stop;
     const GroupRegistration reg = RegisterGroupAgain(given, group, ro);
-    decide("register", reg.model,
-           StrCat("with the group registered again (", reg.placed.size(), " of ", group.size(), " placed)"));
+    // A photo COLMAP left out or placed where its pose looks wrong is moved onto the object instead.
+    std::vector<std::string> moved;
+    const colmap::Reconstruction made =
+        MoveWhatWasNotPlaced(reg.model, given, r.before.ghosts, CheckModel(reg.model).bad_poses, &moved);
+    decide("register", made,
+           StrCat("with the group registered again (", group.size() - moved.size(), " of ", group.size(), " placed",
+                  moved.empty() ? std::string() : StrCat(", ", moved.size(), " moved onto the object"), ")"));
   } catch (const Interrupted&) {
     throw;
   } catch (const Error& e) {

@@ -43,9 +43,7 @@ LevelMonitor::LevelMonitor(ReconstructRun& run) : run_(run), o_(run.options) {
   std::vector<int64_t> rays;
   for (int level = 0; level < run_.levels; ++level) {
     caps.push_back(ho.IterationsAt(level));
-    const int factor = ho.pyramid ? PyramidFactor(run_.train_views, run_.geometry, ho.start_resolution << level,
-                                                  1 << (run_.levels - 1 - level))
-                                  : 1;
+    const int factor = LevelDownscale(ho, run_.train_views, run_.geometry, ho.start_resolution << level, level);
     int64_t n = 0;
     for (const ViewFrustum& v : run_.train_views) n += static_cast<int64_t>(v.width / factor) * (v.height / factor);
     rays.push_back(n);

@@ -89,6 +89,10 @@ double TimePlanner::ReserveAt(int level) const {
   return reserve_ * std::pow(kReserveGrowth, std::max(0, level - reserve_level_));
 }
 
+std::vector<int> TimePlanner::PlanFrom(int level, int done) const {
+  return PlanIterations(SecondsLeft(ReserveAt(static_cast<int>(levels_.size()) - 1)), Estimates(level, done));
+}
+
 std::vector<LevelEstimate> TimePlanner::Estimates(int from, int done) const {
   std::vector<LevelEstimate> out;
   int base = -1;  // the last level measured
@@ -155,14 +159,13 @@ PlanVerdict TimePlanner::AfterIteration(int level, int done, const std::function
     l.iteration = (2 * l.iteration + seconds) / 3;
   }
   l.ran = done;
-  const int last = static_cast<int>(levels_.size()) - 1;
   if (done == 1 && measure_after) {
     reserve_ = measure_after();
     reserve_level_ = level;
   }
   // The plan for the level is fixed at its second iteration (its first where it has one).
   if (done == std::min(2, caps_[level])) {
-    const std::vector<int> plan = PlanIterations(SecondsLeft(ReserveAt(last)), Estimates(level, done));
+    const std::vector<int> plan = PlanFrom(level, done);
     l.planned = done + plan[0];
     later_planned_ = std::any_of(plan.begin() + 1, plan.end(), [](int n) { return n > 0; });
     const std::string line = Describe(level, plan);
@@ -183,7 +186,7 @@ PlanVerdict TimePlanner::AfterIteration(int level, int done, const std::function
   if (later_planned_) return PlanVerdict::kEndLevel;
   // The plan's finest level ran its iterations: where they went faster than planned, the time
   // left goes to a finer level that now fits, or else to more of this one.
-  const std::vector<int> plan = PlanIterations(SecondsLeft(ReserveAt(last)), Estimates(level, done));
+  const std::vector<int> plan = PlanFrom(level, done);
   if (std::any_of(plan.begin() + 1, plan.end(), [](int n) { return n > 0; })) {
     message_ = StrCat("time plan: level ", level + 1, " ran its ", l.planned, " planned iterations sooner than planned; ",
                       "level ", level + 2, " fits in the time left");

@@ -84,6 +84,9 @@ class TimePlanner {
   double Now() const;  // seconds since the budget's start
   double SecondsLeft(double reserve) const;
   std::vector<LevelEstimate> Estimates(int from, int done) const;
+  // The plan from `level` (`done` of its iterations run) in the time left less the finest
+  // level's export and eval.
+  std::vector<int> PlanFrom(int level, int done) const;
   double ReserveAt(int level) const;
   std::string Describe(int from, const std::vector<int>& plan) const;
 

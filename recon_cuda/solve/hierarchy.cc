@@ -27,6 +27,11 @@ VolumeShape NextLevelShape(const HierarchyOptions& o, const VolumeGeometry& geom
   return next.WithBricks(OccupiedBricks(shape, geometry, x, next.n, o.occupancy, views));
 }
 
+int LevelDownscale(const HierarchyOptions& o, std::span<const ViewFrustum> views, const VolumeGeometry& geometry, int n,
+                   int level) {
+  return o.pyramid ? PyramidFactor(views, geometry, n, 1 << (o.levels - 1 - level)) : 1;
+}
+
 std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geometry, const TrainingViews& train,
                                   const HierarchyOptions& o, HierarchyStart start, const HierarchyCallbacks& cb) {
   std::vector<float> x = std::move(start.x);
@@ -38,7 +43,7 @@ std::vector<float> SolveHierarchy(Backend* backend, const VolumeGeometry& geomet
     HierarchyLevel h;
     h.level = level;
     h.levels = o.levels;
-    h.image_downscale = o.pyramid ? PyramidFactor(train.views, geometry, shape.n, 1 << (o.levels - 1 - level)) : 1;
+    h.image_downscale = LevelDownscale(o, train.views, geometry, shape.n, level);
     const RaySet rays = train.rays(h.image_downscale);
     h.rays = rays.size();
     // Shells no finer than this level's rays can pin down.

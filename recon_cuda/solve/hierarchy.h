@@ -69,6 +69,11 @@ struct HierarchyOptions {
 // min(ladder, 8).
 int ShellResolution(int ladder, int64_t rays, int num_shells, double min_rays_per_texel);
 
+// The downscale of the training photos (`views`) that `level` of `o` fits with its n^3 grid:
+// PyramidFactor, or 1 without the pyramid. The time plan counts each level's rays by it.
+int LevelDownscale(const HierarchyOptions& o, std::span<const ViewFrustum> views, const VolumeGeometry& geometry, int n,
+                   int level);
+
 // The resolutions of `level`, its grid dense.
 VolumeShape LevelShape(const HierarchyOptions& options, int num_shells, int level);
 

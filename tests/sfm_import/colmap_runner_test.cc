@@ -820,6 +820,54 @@ exit 0
   EXPECT_TRUE(said("warning: only 2 of 3 photos (66 %) are in the model; try --matcher exhaustive"));
 }
 
+// Photos the second pass cannot register (they see too few of the model's points) are tried
+// again as the model grows: pass 3 continues COLMAP's mapper from the second pass's model and
+// registers d.jpg; then every photo is in, and no pass 4 runs. Each pass says what it added.
+TEST(ColmapRunner, MorePassesRegisterWhatTheSecondLeftOut) {
+  TempDir dir("passes");
+  const fs::path first = dir.path() / "first", second = dir.path() / "second", full = dir.path() / "full";
+  WriteNamedModel(first, {"a.jpg", "b.jpg"});
+  WriteNamedModel(second, {"a.jpg", "b.jpg", "c.jpg"});
+  WriteNamedModel(full, {"a.jpg", "b.jpg", "c.jpg", "d.jpg"});
+  const std::string script = StrCat(R"SH(#!/bin/sh
+PATH=/usr/bin:/bin:$PATH
+step="$1"
+echo "fake colmap $step"
+for a in "$@"; do echo "arg=[$a]"; done
+continued=""
+while [ $# -gt 0 ]; do
+  case "$1" in --output_path) out="$2";; --input_path) continued="$2";; esac; shift
+done
+case "$step" in
+  mapper) if [ -n "$continued" ]; then cp ")SH", full.string(), R"SH("/* "$out/"; else mkdir -p "$out/0" && cp ")SH",
+                                    first.string(), R"SH("/* "$out/0/"; fi ;;
+  image_registrator) cp ")SH", second.string(), R"SH("/* "$out/" ;;
+esac
+exit 0
+)SH");
+  SfmOptions options;
+  options.images = dir.path() / "photos";
+  for (const char* name : {"a.jpg", "b.jpg", "c.jpg", "d.jpg"}) WritePhoto(options.images / name);
+  options.workspace = dir.path() / "work";
+  options.colmap_binary = (dir.path() / "bin" / "colmap").string();
+  WriteExecutable(options.colmap_binary, script);
+  options.exhaustive_max_images = 1;  // sequential
+  options.min_registered_images = 2;
+  std::vector<std::string> progress;
+  options.progress = [&](const std::string& line) { progress.push_back(line); };
+  const auto said = [&](const std::string& text) { return Said(progress, text); };
+
+  const SfmResult r = RunSfm(options);
+  EXPECT_EQ(r.num_registered_images, 4);
+  EXPECT_TRUE(r.left_out.empty());
+  EXPECT_EQ(r.passes, (std::vector<int>{1, 1}));
+  EXPECT_TRUE(said("sfm: pass 2 registered 1 more (3/4)"));
+  EXPECT_TRUE(said("sfm: pass 3 registered 1 more (4/4)"));
+  EXPECT_FALSE(said("pass 4"));
+  const std::string log = ReadFile(options.workspace / "colmap" / "colmap.log");
+  EXPECT_NE(log.find("arg=[--input_path]"), std::string::npos) << log;
+}
+
 // Photos not taken in order: sequential matching leaves most of them out of the model, so the
 // run matches every pair and maps again (the fake's mapper then finds them all).
 TEST(ColmapRunner, PhotosNotInOrderFallBackToEveryPair) {

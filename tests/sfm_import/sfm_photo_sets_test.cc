@@ -7,6 +7,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstdio>
+#include <numeric>
 #include <random>
 #include <string>
 #include <vector>
@@ -22,6 +24,9 @@ namespace {
 namespace fs = std::filesystem;
 
 constexpr int kPhotos = 24;
+// The hard stretch: eight photos from this one, their values times kHardGain plus noise.
+constexpr size_t kHardFirst = 8;
+constexpr float kHardGain = 0.1f, kHardNoise = 0.01f;
 
 // The first kPhotos bonsai photos by name, or empty (with a skip) when data or colmap is missing.
 std::vector<fs::path> BonsaiPhotos(const fs::path& bonsai) {
@@ -119,6 +124,36 @@ TEST(SfmPhotoSets, ThreeCameras) {
   ExpectMostRegistered(run);
   EXPECT_TRUE(Said(run, "3 cameras from the photos' size and EXIF"));
   EXPECT_EQ(run.model.cameras.size(), 3u);
+}
+
+// A stretch of eight consecutive photos made hard to match (darkened to a tenth, with noise): the
+// photos left out after the second pass are tried again as the model grows, and the passes after
+// the second register some of them (issue 64: "every photo in").
+TEST(SfmPhotoSets, AHardStretchIsRegisteredByMorePasses) {
+  PERF_REQUIRE_DATA(bonsai, "bonsai");
+  if (!HaveColmap()) GTEST_SKIP() << "`colmap` is not on PATH";
+  test::TempDir dir;
+  fs::create_directories(dir / "photos");
+  const std::vector<fs::path> photos = BonsaiPhotos(bonsai);
+  std::mt19937 rng(64);
+  std::normal_distribution<float> noise(0.f, kHardNoise);
+  for (size_t i = 0; i < photos.size(); ++i) {
+    Image im = ReadImage(photos[i]);
+    if (i >= kHardFirst && i < kHardFirst + 8) {
+      for (int y = 0; y < im.height; ++y)
+        for (int x = 0; x < im.width; ++x)
+          for (int c = 0; c < im.channels; ++c) im.at(x, y, c) = std::clamp(kHardGain * im.at(x, y, c) + noise(rng), 0.f, 1.f);
+    }
+    WriteImage(dir / "photos" / photos[i].filename().replace_extension(".png"), im, PixelFormat::kUInt8);
+  }
+  const SfmRun run = RunDefaults(dir / "photos", dir / "ws");
+  std::string log;
+  for (const std::string& l : run.progress) log += l + "\n";
+  std::printf("%s", log.c_str());
+  ASSERT_GE(run.result.passes.size(), 2u) << "no pass after the second added a photo\n" << log;
+  const int after_second = run.result.num_registered_images - std::accumulate(run.result.passes.begin() + 1, run.result.passes.end(), 0);
+  EXPECT_GT(run.result.num_registered_images, after_second) << log;
+  EXPECT_TRUE(Said(run, "sfm: pass 3 registered ")) << log;
 }
 
 }  // namespace
