@@ -5,6 +5,7 @@
 #include "pipeline/commands.h"
 #include "pipeline/progress.h"
 #include "sfm_import/colmap_runner.h"
+#include "sfm_import/model_check.h"
 
 namespace perf {
 
@@ -53,6 +54,7 @@ void AddSfmCommand(CLI::App& app) {
     o->check_stop = [] {
       if (StopRequested().load()) throw Interrupted("COLMAP was stopped; run the same command again to start over");
     };
+    o->check_model = ObjectModelDoubtOf;
     SfmResult r;
     RemoveNewWorkspaceOnFailure(lock.get(), o->workspace, false, [&] { r = RunSfm(*o); });
     if (!*quiet) {

@@ -25,6 +25,7 @@
 #include "sfm_import/colmap_runner.h"
 #include "sfm_import/ghost_repair.h"
 #include "sfm_import/importer.h"
+#include "sfm_import/model_check.h"
 #include "viewer/live_view.h"
 
 namespace perf {
@@ -130,6 +131,7 @@ class Runner {
     so.workspace = o_.workspace;
     so.force = o_.force;
     so.check_stop = [&] { CheckStop(); };
+    so.check_model = ObjectModelDoubtOf;
     so.progress = [&](const std::string& line) {
       CheckStop();
       Say(line.rfind("sfm: ", 0) == 0 ? line : "sfm: " + line);  // RunSfm's own lines already say so

@@ -393,6 +393,35 @@ void RegisterLeftOut(SfmRun& run, bool exhaustive, Mapping* mapping, std::vector
   }
 }
 
+// (e) A model that looks wrong for the capture (options.check_model) after sequential matching is
+// made again from every pair; the new one is kept where it does not look wrong, else the first
+// (set aside in colmap/first_model while the mapper runs again). `doubt` gets the kept one's.
+void RemakeIfWrong(SfmRun& run, bool* exhaustive, Mapping* mapping, std::string* doubt) {
+  if (!run.options.check_model) return;
+  *doubt = run.options.check_model(*mapping->best_dir);
+  if (doubt->empty() || *exhaustive || run.options.matcher != "auto") return;
+  Report(run.options, StrCat("sfm: the model of ", mapping->best.num_images, " photos looks wrong (", *doubt,
+                             "): matching every pair and mapping again"));
+  const fs::path first = run.colmap_dir / "first_model";
+  ReplaceDirectory(*mapping->best_dir, first);
+  Mapping before = *mapping;
+  before.best_dir = first;
+  const StepResult r = run.Step(WithSiftMatching(run, {"exhaustive_matcher", "--database_path", run.database.string()}),
+                                "matching", ExhaustiveParser());
+  if (r.failed()) ThrowStepFailed("exhaustive_matcher", r, run.log_path);
+  *exhaustive = true;
+  Mapping again = Map(run);
+  const std::string again_doubt = again.best_dir ? run.options.check_model(*again.best_dir) : "no model";
+  if (again.best_dir && again_doubt.empty() && again.best.num_images >= run.options.min_registered_images) {
+    Report(run.options, StrCat("sfm: the model from every pair (", again.best.num_images, " photos) looks right: it is kept"));
+    *mapping = again;
+    doubt->clear();
+    return;
+  }
+  Report(run.options, StrCat("sfm: the model from every pair looks wrong too (", again_doubt, "): keeping the first"));
+  *mapping = before;
+}
+
 // The chosen model becomes WORKSPACE/sparse/0; `result` gets its counts and the photos it left out.
 void InstallModel(const SfmRun& run, const Mapping& mapping, SfmResult* result) {
   ReplaceDirectory(*mapping.best_dir, result->sparse_dir);
@@ -416,6 +445,10 @@ void ReportModel(const SfmRun& run, const Mapping& mapping, bool exhaustive, con
              ", in ",
              static_cast<int>(result.seconds + 0.5), " s -> ", result.sparse_dir.string()));
   if (!result.left_out.empty()) Report(run.options, "sfm: left out: " + NameList(result.left_out));
+  if (!result.doubt.empty()) {
+    Report(run.options, "sfm: warning: the model looks wrong (" + result.doubt +
+                            "); perf import checks it again and names what it finds");
+  }
   if (best.num_images < 0.9 * n) {
     Report(run.options, StrCat("sfm: warning: only ", best.num_images, " of ", n, " photos (",
                                static_cast<int>(100.0 * best.num_images / n), " %) are in the model; ",
@@ -451,6 +484,8 @@ SfmResult RunSfm(const SfmOptions& options) {
   RematchIfOutOfOrder(run, &exhaustive, &mapping);
   CheckEnoughRegistered(run, mapping);
   RegisterLeftOut(run, exhaustive, &mapping, &result.passes);
+  RemakeIfWrong(run, &exhaustive, &mapping, &result.doubt);
+  result.exhaustive = exhaustive;
   InstallModel(run, mapping, &result);
   result.seconds = elapsed();
   ReportModel(run, mapping, exhaustive, result);

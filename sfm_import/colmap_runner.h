@@ -43,6 +43,12 @@ struct SfmOptions {
   // A COLMAP step that prints nothing for this long is stopped and reported as stuck (its
   // slowest steps print at least every few minutes on 2 cores); 30 minutes.
   double idle_timeout_seconds = 1800;
+  // Looks at the model made (its folder) and says why it looks wrong, or returns "" (empty: no
+  // check). Where it looks wrong after sequential matching, every pair is matched and the photos
+  // mapped again; the model from every pair replaces it where it does not look wrong. perf run and
+  // perf sfm pass ObjectModelDoubt (model_check.h): a ghost, or cameras that do not look at a
+  // common point as an object capture's do.
+  std::function<std::string(const std::filesystem::path&)> check_model;
   // Called with one line of progress per step (stage name and a short status).
   std::function<void(const std::string&)> progress;
   // Called while a COLMAP step runs, at least every quarter second (common/subprocess.h); throwing
@@ -60,6 +66,8 @@ struct SfmResult {
   int num_points = 0;
   std::vector<std::string> left_out;  // input photos not in the model (empty when unknown)
   std::vector<int> passes;            // the photos each registration pass added (the second on)
+  bool exhaustive = false;            // every pair was matched (by choice or after sequential)
+  std::string doubt;                  // check_model's word on the model installed ("": none)
   double seconds = 0;
   bool kept = false;  // the model already at sparse/0 was kept (made from these photos; no --force)
 };

@@ -8,8 +8,6 @@
 // DSCF5608's in-mask PSNR from 15.2 to 19.2 dB (docs/tuning.md "Ghost repair").
 #pragma once
 
-#include <map>
-#include <string>
 #include <vector>
 
 #include "sfm_import/colmap_model.h"
@@ -19,15 +17,5 @@ namespace perf {
 
 // `given` with each of `ghosts` moved onto the object (same ids).
 colmap::Reconstruction MoveGhostsOntoObject(colmap::Reconstruction given, const std::vector<GhostGroup>& ghosts);
-
-// `registered` (the user's model with the groups registered again, in its ids: ghost_register.h)
-// with each photo of `ghosts` that it left out, or placed where its pose looks wrong (`wrong`,
-// name -> why: bad_poses.h), put back where MoveGhostsOntoObject puts it, seeing no points. The
-// names of those photos go to `moved`. On bonsai COLMAP registered 2 of its 16 ghost photos 14 and
-// 25 units from the others (docs/tuning.md).
-colmap::Reconstruction MoveWhatWasNotPlaced(colmap::Reconstruction registered, const colmap::Reconstruction& given,
-                                            const std::vector<GhostGroup>& ghosts,
-                                            const std::map<std::string, std::string>& wrong,
-                                            std::vector<std::string>* moved);
 
 }  // namespace perf

@@ -137,13 +137,13 @@ RepairResult RepairModel(const RepairOptions& o) {
     ro.say = [&](const std::string& line) { Say(o, "repair: " + line); };
     ro.check_stop = o.check_stop;
     const GroupRegistration reg = RegisterGroupAgain(given, group, ro);
-    // A photo COLMAP left out or placed where its pose looks wrong is moved onto the object instead.
-    std::vector<std::string> moved;
+    // A photo COLMAP left out or placed where its pose looks wrong keeps its given pose.
+    std::vector<std::string> kept;
     const colmap::Reconstruction made =
-        MoveWhatWasNotPlaced(reg.model, given, r.before.ghosts, CheckModel(reg.model).bad_poses, &moved);
+        KeepGivenWhereNotPlaced(reg.model, given, group, CheckModel(reg.model).bad_poses, &kept);
     decide("register", made,
-           StrCat("with the group registered again (", group.size() - moved.size(), " of ", group.size(), " placed",
-                  moved.empty() ? std::string() : StrCat(", ", moved.size(), " moved onto the object"), ")"));
+           StrCat("with the group registered again (", group.size() - kept.size(), " of ", group.size(), " placed",
+                  kept.empty() ? std::string() : StrCat(", ", kept.size(), " at the given pose"), ")"));
   } catch (const Interrupted&) {
     throw;
   } catch (const Error& e) {

@@ -101,4 +101,30 @@ bool RepairIsBetter(const ModelCheck& repaired, const ModelCheck& user, std::str
   return failed.empty();
 }
 
+std::string ObjectModelDoubt(const ModelCheck& check) {
+  constexpr double kLookedAt = 0.8;
+  std::vector<std::string> doubts;
+  if (!check.ghosts.empty()) {
+    doubts.push_back(StrCat("it holds ", check.ghosts.size(), check.ghosts.size() == 1 ? " ghost group (" : " ghost groups (",
+                            check.ghost_photos, " photos)"));
+  }
+  if (check.registered >= 3 && check.looked_at < kLookedAt) {
+    doubts.push_back(StrCat("only ", static_cast<int>(100 * check.looked_at), " % of its cameras look at a common point (at least ",
+                            static_cast<int>(100 * kLookedAt), " % expected of an object capture)"));
+  }
+  std::string out;
+  for (const std::string& d : doubts) out += (out.empty() ? "" : "; ") + d;
+  return out;
+}
+
+std::string ObjectModelDoubtOf(const std::filesystem::path& dir) {
+  try {
+    return ObjectModelDoubt(CheckModel(colmap::ReadReconstruction(dir)));
+  } catch (const InputError&) {
+    return {};
+  } catch (const IoError&) {
+    return {};
+  }
+}
+
 }  // namespace perf

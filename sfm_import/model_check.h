@@ -4,6 +4,7 @@
 // made again from the photos (ghost_repair.h).
 #pragma once
 
+#include <filesystem>
 #include <map>
 #include <string>
 #include <vector>
@@ -44,5 +45,13 @@ ModelCheck CheckModel(const colmap::Reconstruction& rec);
 // new model at 4 % apart put its box beside the object), and, where the user's cameras look at a
 // common point, as many of its own doing so (less 10 %). `why` says which held or failed.
 bool RepairIsBetter(const ModelCheck& repaired, const ModelCheck& user, std::string* why);
+
+// Why `check` looks wrong for an object capture ("it holds 2 ghost groups (16 photos)", "only 41 %
+// of its cameras look at a common point (at least 80 % expected)"), or "": perf sfm's models are
+// made again from every pair where this says something (colmap_runner.h check_model). Bonsai's
+// right models: 100 %; two wrong ones of its photos: 41 % and 73 %.
+std::string ObjectModelDoubt(const ModelCheck& check);
+// ObjectModelDoubt of the model in `dir` ("" where it cannot be read: the import names that).
+std::string ObjectModelDoubtOf(const std::filesystem::path& dir);
 
 }  // namespace perf

@@ -923,6 +923,64 @@ exit 0
   EXPECT_FALSE(fs::exists(marker));
 }
 
+// A model that looks wrong (check_model: for perf run, a ghost or cameras that do not look at a
+// common point) after sequential matching is made again from every pair, and the new one kept
+// where it looks right, though it holds fewer photos; where it looks wrong too, the first is
+// kept, with a warning.
+TEST(ColmapRunner, AModelThatLooksWrongIsMadeAgainFromEveryPair) {
+  TempDir dir("wrong");
+  const fs::path first = dir.path() / "first", remade = dir.path() / "remade";
+  WriteNamedModel(first, {"a.jpg", "b.jpg", "c.jpg", "d.jpg"});
+  WriteNamedModel(remade, {"a.jpg", "b.jpg", "c.jpg"});
+  const fs::path marker = dir.path() / "matched_all";
+  const std::string script = StrCat(R"SH(#!/bin/sh
+PATH=/usr/bin:/bin:$PATH
+step="$1"
+echo "fake colmap $step"
+while [ $# -gt 0 ]; do [ "$1" = "--output_path" ] && out="$2"; shift; done
+case "$step" in
+  exhaustive_matcher) touch ")SH", marker.string(), R"SH(" ;;
+  mapper) mkdir -p "$out/0"
+    if [ -e ")SH", marker.string(), R"SH(" ]; then cp ")SH", remade.string(), R"SH("/* "$out/0/"; else cp ")SH",
+                                    first.string(), R"SH("/* "$out/0/"; fi ;;
+esac
+exit 0
+)SH");
+  SfmOptions options;
+  options.images = dir.path() / "photos";
+  for (const char* name : {"a.jpg", "b.jpg", "c.jpg", "d.jpg"}) WritePhoto(options.images / name);
+  options.workspace = dir.path() / "work";
+  options.colmap_binary = (dir.path() / "bin" / "colmap").string();
+  WriteExecutable(options.colmap_binary, script);
+  options.exhaustive_max_images = 2;  // sequential first
+  options.single_camera = false;
+  bool remade_looks_wrong = false;
+  options.check_model = [&](const fs::path& model) -> std::string {
+    const size_t n = colmap::ReadReconstruction(model).images.size();
+    return n == 4 ? "only 40 % of its cameras look at a common point" : remade_looks_wrong ? "it holds 1 ghost group" : "";
+  };
+  std::vector<std::string> progress;
+  options.progress = [&](const std::string& line) { progress.push_back(line); };
+  SfmResult r = RunSfm(options);
+  EXPECT_EQ(r.num_registered_images, 3);
+  EXPECT_TRUE(r.exhaustive);
+  EXPECT_TRUE(r.doubt.empty()) << r.doubt;
+  EXPECT_TRUE(Said(progress, "sfm: the model of 4 photos looks wrong (only 40 % of its cameras look at a common point): "
+                             "matching every pair and mapping again"));
+  EXPECT_TRUE(Said(progress, "sfm: the model from every pair (3 photos) looks right: it is kept"));
+
+  fs::remove(marker);
+  progress.clear();
+  options.force = true;
+  remade_looks_wrong = true;
+  r = RunSfm(options);
+  EXPECT_EQ(r.num_registered_images, 4);
+  EXPECT_EQ(r.doubt, "only 40 % of its cameras look at a common point");
+  EXPECT_TRUE(Said(progress, "sfm: the model from every pair looks wrong too (it holds 1 ghost group): keeping the first"));
+  EXPECT_TRUE(Said(progress, "sfm: warning: the model looks wrong (only 40 % of its cameras look at a common point)"));
+  EXPECT_EQ(colmap::ReadReconstruction(r.sparse_dir).images.size(), 4u);
+}
+
 // Photos from two zoom settings of one camera and a crop without EXIF: three cameras, each
 // extracted with its own image list; photos that all agree: one extraction, one camera.
 TEST(ColmapRunner, PhotosShareACameraOnlyWhereSizeAndExifAgree) {
