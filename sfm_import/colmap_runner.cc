@@ -339,8 +339,10 @@ fs::path WriteSecondPassPairs(const SfmRun& run, const std::vector<std::string>&
 // (d) Sequential matching misses photos taken out of order: match those left out with every
 // other photo and register them into the model (COLMAP's image_registrator), then adjust. Photos
 // that see too few of the model's points then are tried again as the model grows: each further
-// pass continues COLMAP's mapper from the model (it registers, triangulates and adjusts), until a
-// pass adds none. The result replaces the best model only when every step worked and it holds
+// pass triangulates the points the photos registered so far see (point_triangulator) and
+// registers again, until a pass adds none; then the model is adjusted once more. (COLMAP's mapper
+// continued from the model added 5 photos in one run and none in the next on the same photos;
+// these passes add the same every time: docs/tuning.md.) The result replaces the best model only when every step worked and it holds
 // more photos; `passes` gets the photos each pass added.
 void RegisterLeftOut(SfmRun& run, bool exhaustive, Mapping* mapping, std::vector<int>* passes) {
   if (exhaustive || !run.options.second_pass || mapping->best.num_images >= run.n) return;
@@ -375,12 +377,17 @@ void RegisterLeftOut(SfmRun& run, bool exhaustive, Mapping* mapping, std::vector
   mapping->best_dir = second;
   mapping->best = *counts;
   for (int pass = 3; mapping->best.num_images < run.n && pass < 3 + run.options.max_more_passes; ++pass) {
-    const fs::path next = run.models_dir / StrCat("pass_", pass);
-    RemoveOwned(next);
-    EnsureWritableDirectory(next);
-    step({"mapper", "--database_path", run.database.string(), "--image_path", run.options.images.string(), "--input_path",
-          mapping->best_dir->string(), "--output_path", next.string(), "--Mapper.num_threads", run.threads},
-         "mapping", MapperParser(run.n));
+    const fs::path points = run.models_dir / StrCat("pass_", pass, "_points"), next = run.models_dir / StrCat("pass_", pass);
+    for (const fs::path& d : {points, next}) {
+      RemoveOwned(d);
+      EnsureWritableDirectory(d);
+    }
+    step({"point_triangulator", "--database_path", run.database.string(), "--image_path", run.options.images.string(),
+          "--input_path", mapping->best_dir->string(), "--output_path", points.string(), "--Mapper.num_threads", run.threads},
+         "triangulating", [](const std::string&) { return std::optional<std::string>(); });
+    step({"image_registrator", "--database_path", run.database.string(), "--input_path", points.string(), "--output_path",
+          next.string(), "--Mapper.num_threads", run.threads},
+         "registering", MapperParser(run.n));
     counts = ok ? ReadModelCounts(next) : std::nullopt;
     const int added = counts ? counts->num_images - mapping->best.num_images : 0;
     Report(run.options, StrCat("sfm: pass ", pass, " registered ", std::max(0, added), " more (",
@@ -390,6 +397,10 @@ void RegisterLeftOut(SfmRun& run, bool exhaustive, Mapping* mapping, std::vector
     *std::max_element(mapping->model_sizes.begin(), mapping->model_sizes.end()) = counts->num_images;
     mapping->best_dir = next;
     mapping->best = *counts;
+  }
+  if (passes->size() > 1) {  // the photos the later passes added, adjusted with the rest
+    step({"bundle_adjuster", "--input_path", mapping->best_dir->string(), "--output_path", mapping->best_dir->string()},
+         "adjusting", [](const std::string&) { return std::optional<std::string>(); });
   }
 }
 

@@ -32,8 +32,8 @@ struct SfmOptions {
   // After sequential matching, match the photos the model left out with every other photo and
   // register them into it (matches_importer, image_registrator, bundle_adjuster).
   bool second_pass = true;
-  // After the second pass, photos still left out are tried again as the model grows (COLMAP's
-  // mapper continued from the model), at most this many more passes, until one adds none.
+  // After the second pass, photos still left out are tried again as the model grows (points
+  // triangulated, then registered again), at most this many more passes, until one adds none.
   int max_more_passes = 4;
   int max_image_size = 1600;             // SiftExtraction.max_image_size
   int max_num_features = 8192;           // SiftExtraction.max_num_features

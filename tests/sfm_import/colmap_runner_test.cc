@@ -821,27 +821,28 @@ exit 0
 }
 
 // Photos the second pass cannot register (they see too few of the model's points) are tried
-// again as the model grows: pass 3 continues COLMAP's mapper from the second pass's model and
-// registers d.jpg; then every photo is in, and no pass 4 runs. Each pass says what it added.
+// again as the model grows: pass 3 triangulates the model's points and registers again, adding
+// d.jpg; then every photo is in, no pass 4 runs, and the model is adjusted. Each pass says what it
+// added.
 TEST(ColmapRunner, MorePassesRegisterWhatTheSecondLeftOut) {
   TempDir dir("passes");
   const fs::path first = dir.path() / "first", second = dir.path() / "second", full = dir.path() / "full";
   WriteNamedModel(first, {"a.jpg", "b.jpg"});
   WriteNamedModel(second, {"a.jpg", "b.jpg", "c.jpg"});
   WriteNamedModel(full, {"a.jpg", "b.jpg", "c.jpg", "d.jpg"});
+  const fs::path once = dir.path() / "registered_once";
   const std::string script = StrCat(R"SH(#!/bin/sh
 PATH=/usr/bin:/bin:$PATH
 step="$1"
 echo "fake colmap $step"
-for a in "$@"; do echo "arg=[$a]"; done
-continued=""
 while [ $# -gt 0 ]; do
-  case "$1" in --output_path) out="$2";; --input_path) continued="$2";; esac; shift
+  case "$1" in --output_path) out="$2";; --input_path) in="$2";; esac; shift
 done
 case "$step" in
-  mapper) if [ -n "$continued" ]; then cp ")SH", full.string(), R"SH("/* "$out/"; else mkdir -p "$out/0" && cp ")SH",
-                                    first.string(), R"SH("/* "$out/0/"; fi ;;
-  image_registrator) cp ")SH", second.string(), R"SH("/* "$out/" ;;
+  mapper) mkdir -p "$out/0" && cp ")SH", first.string(), R"SH("/* "$out/0/" ;;
+  point_triangulator) cp "$in"/* "$out/" ;;
+  image_registrator) if [ -e ")SH", once.string(), R"SH(" ]; then cp ")SH", full.string(), R"SH("/* "$out/"; else cp ")SH",
+                                    second.string(), R"SH("/* "$out/"; touch ")SH", once.string(), R"SH("; fi ;;
 esac
 exit 0
 )SH");
@@ -865,7 +866,8 @@ exit 0
   EXPECT_TRUE(said("sfm: pass 3 registered 1 more (4/4)"));
   EXPECT_FALSE(said("pass 4"));
   const std::string log = ReadFile(options.workspace / "colmap" / "colmap.log");
-  EXPECT_NE(log.find("arg=[--input_path]"), std::string::npos) << log;
+  EXPECT_NE(log.find("fake colmap point_triangulator"), std::string::npos) << log;
+  EXPECT_NE(log.rfind("fake colmap bundle_adjuster"), log.find("fake colmap bundle_adjuster")) << "adjusted after pass 3";
 }
 
 // Photos not taken in order: sequential matching leaves most of them out of the model, so the

@@ -26,7 +26,7 @@ namespace fs = std::filesystem;
 constexpr int kPhotos = 24;
 // The hard stretch: eight photos from this one, their values times kHardGain plus noise.
 constexpr size_t kHardFirst = 8;
-constexpr float kHardGain = 0.1f, kHardNoise = 0.01f;
+constexpr float kHardGain = 0.2f, kHardNoise = 0.02f;
 
 // The first kPhotos bonsai photos by name, or empty (with a skip) when data or colmap is missing.
 std::vector<fs::path> BonsaiPhotos(const fs::path& bonsai) {
