@@ -141,9 +141,14 @@ RepairResult RepairModel(const RepairOptions& o) {
     std::vector<std::string> kept;
     const colmap::Reconstruction made =
         KeepGivenWhereNotPlaced(reg.model, given, group, CheckModel(reg.model).bad_poses, &kept);
-    decide("register", made,
-           StrCat("with the group registered again (", group.size() - kept.size(), " of ", group.size(), " placed",
-                  kept.empty() ? std::string() : StrCat(", ", kept.size(), " at the given pose"), ")"));
+    if (kept.size() == group.size()) {
+      r.tries.push_back(StrCat("COLMAP registered none of the group's ", group.size(), " photos again"));
+      Say(o, "repair: " + r.tries.back());
+    } else {
+      decide("register", made,
+             StrCat("with the group registered again (", group.size() - kept.size(), " of ", group.size(), " placed",
+                    kept.empty() ? std::string() : StrCat(", ", kept.size(), " at the given pose"), ")"));
+    }
   } catch (const Interrupted&) {
     throw;
   } catch (const Error& e) {
