@@ -202,39 +202,4 @@ GroupRegistration RegisterGroupAgain(const colmap::Reconstruction& given, const 
   return r;
 }
 
-colmap::Reconstruction KeepGivenWhereNotPlaced(colmap::Reconstruction registered, const colmap::Reconstruction& given,
-                                               const std::set<std::string>& group,
-                                               const std::map<std::string, std::string>& wrong,
-                                               std::vector<std::string>* kept) {
-  std::map<std::string, uint32_t> placed;
-  for (const auto& [id, im] : registered.images) placed[im.name] = id;
-  std::set<uint32_t> replaced;
-  for (const auto& [id, im] : given.images) {
-    if (!group.count(im.name) || (placed.count(im.name) && !wrong.count(im.name))) continue;
-    if (placed.count(im.name)) replaced.insert(placed[im.name]);
-    colmap::Image copy = im;
-    for (colmap::Point2D& p : copy.points2D) p.point3D_id = colmap::kInvalidPoint3DId;
-    if (placed.count(im.name)) registered.images.erase(placed[im.name]);
-    registered.images[id] = std::move(copy);
-    registered.cameras[im.camera_id] = given.cameras.at(im.camera_id);
-    if (kept != nullptr) kept->push_back(im.name);
-  }
-  // The points lose what the replaced photos saw; a point seen by fewer than two photos goes.
-  for (auto it = registered.points3D.begin(); it != registered.points3D.end();) {
-    auto& track = it->second.track;
-    track.erase(std::remove_if(track.begin(), track.end(),
-                               [&](const colmap::TrackElement& t) { return replaced.count(t.image_id) > 0; }),
-                track.end());
-    if (track.size() >= 2) {
-      ++it;
-      continue;
-    }
-    for (const colmap::TrackElement& t : track) {
-      registered.images.at(t.image_id).points2D.at(t.point2D_idx).point3D_id = colmap::kInvalidPoint3DId;
-    }
-    it = registered.points3D.erase(it);
-  }
-  return registered;
-}
-
 }  // namespace perf

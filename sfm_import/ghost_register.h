@@ -11,7 +11,6 @@
 
 #include <filesystem>
 #include <functional>
-#include <map>
 #include <set>
 #include <string>
 #include <vector>
@@ -39,16 +38,6 @@ struct GroupRegistration {
   colmap::Reconstruction model;
   std::vector<std::string> placed, left_out;  // the group's photos
 };
-
-// `registered` (RegisterGroupAgain's model) with each photo of `group` that it left out, or placed
-// where its pose looks wrong (`wrong`, name -> why: bad_poses.h), back at its pose in `given`,
-// seeing no points; their names go to `kept`. On bonsai COLMAP placed 1 or 2 of its 16 ghost
-// photos 14-25 units from the others; moved onto the object instead (ghost_move.h), DSCF5605
-// scored 12.6 dB against 16.4 dB at its given pose (docs/tuning.md).
-colmap::Reconstruction KeepGivenWhereNotPlaced(colmap::Reconstruction registered, const colmap::Reconstruction& given,
-                                               const std::set<std::string>& group,
-                                               const std::map<std::string, std::string>& wrong,
-                                               std::vector<std::string>* kept);
 
 // `camera`'s parameters as COLMAP's --ImageReader.camera_params takes them ("731.4,722.35,...").
 std::string CameraParamsArgument(const colmap::Camera& camera);

@@ -8,12 +8,10 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <map>
 #include <set>
 
 #include "sfm_import/colmap_pose.h"
 #include "sfm_import/ghost_move.h"
-#include "sfm_import/ghost_register.h"
 #include "sfm_import/ghost_repair.h"
 #include "tests/sfm_import/synthetic_ghost.h"
 #include "tests/test_util.h"
@@ -137,48 +135,6 @@ TEST(GhostMove, ASyntheticGhostIsMovedOntoTheObject) {
     EXPECT_NEAR(now.norm() / distance, 1.0, 0.02) << im.name;
     EXPECT_LT(centre_error, (0.05 + 0.02) * distance) << im.name;
   }
-}
-
-// What the registration left out or placed wrongly keeps its given pose: one photo of the group
-// missing from the registered model and one placed far away both come back at their poses in the
-// user's model, seeing no points; the points lose what the far one saw; the others stay as
-// registered, and the model is a valid one.
-TEST(GhostRegister, WhatWasNotPlacedKeepsItsGivenPose) {
-  PERF_REQUIRE_DATA(bonsai, "bonsai");
-  const colmap::Reconstruction original = colmap::ReadReconstruction(bonsai / "sparse" / "0");
-  const test::SyntheticGhost ghost = test::MakeSyntheticGhost(original);
-  const std::vector<std::string> group(ghost.group.begin(), ghost.group.end());
-  const std::string missing = group[0], far = group[1], fine = group[2];
-  colmap::Reconstruction registered = original;  // the group as registered: at its true poses
-  std::map<std::string, uint32_t> id;
-  for (const auto& [i, im] : original.images) id[im.name] = i;
-  for (auto& [pid, p] : registered.points3D) {
-    std::erase_if(p.track, [&](const colmap::TrackElement& t) { return t.image_id == id[missing]; });
-  }
-  registered.images.erase(id[missing]);
-  registered.images.at(id[far]).tvec[2] += 20;  // far away
-  int far_seen = 0;
-  for (const auto& [pid, p] : registered.points3D) {
-    for (const colmap::TrackElement& t : p.track) far_seen += t.image_id == id[far];
-  }
-  ASSERT_GT(far_seen, 0);
-  std::vector<std::string> moved;
-  const colmap::Reconstruction out =
-      KeepGivenWhereNotPlaced(registered, ghost.model, ghost.group, {{far, "far away"}}, &moved);
-  EXPECT_EQ(std::set<std::string>(moved.begin(), moved.end()), (std::set<std::string>{missing, far}));
-  for (const std::string& name : {missing, far}) {
-    ASSERT_TRUE(out.images.count(id[name])) << name;
-    const colmap::Image& im = out.images.at(id[name]);
-    EXPECT_EQ(im.tvec, ghost.model.images.at(id[name]).tvec) << name;
-    EXPECT_EQ(im.qvec, ghost.model.images.at(id[name]).qvec) << name;
-    for (const colmap::Point2D& p : im.points2D) EXPECT_EQ(p.point3D_id, colmap::kInvalidPoint3DId) << name;
-  }
-  EXPECT_EQ(out.images.at(id[fine]).tvec, registered.images.at(id[fine]).tvec);
-  for (const auto& [pid, p] : out.points3D) {
-    EXPECT_GE(p.track.size(), 2u);
-    for (const colmap::TrackElement& t : p.track) EXPECT_NE(t.image_id, id[far]);
-  }
-  EXPECT_NO_THROW(colmap::ValidateReconstruction(out, "moved"));
 }
 
 TEST(GhostRepair, TheExamplesGroupIsMovedSayingWhyAndNotTriedAgain) {
