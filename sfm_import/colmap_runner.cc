@@ -47,14 +47,6 @@ std::string ModelSizes(std::vector<int> sizes) {
   return out;
 }
 
-// "a.jpg, b.jpg, c.jpg and 4 more"
-std::string NameList(const std::vector<std::string>& names, size_t shown = 8) {
-  std::string list;
-  for (size_t i = 0; i < names.size() && i < shown; ++i) list += (i ? ", " : "") + names[i];
-  if (names.size() > shown) list += StrCat(" and ", names.size() - shown, " more");
-  return list;
-}
-
 // What every step of one run shares: the options, the photos, COLMAP, its files and its log.
 struct SfmRun {
   SfmRun(const SfmOptions& o, const std::vector<std::string>& photos)
@@ -88,38 +80,6 @@ struct Mapping {
 std::vector<std::string> WithSiftMatching(const SfmRun& run, std::vector<std::string> args) {
   args.insert(args.end(), {"--SiftMatching.use_gpu", "0", "--SiftMatching.num_threads", run.threads});
   return args;
-}
-
-// What the model at sparse/0 was made from: WORKSPACE/colmap/inputs.json, the images folder and
-// its photos as COLMAP named them, written when a run installs its model (a run that fails
-// before leaves the model and its record as they were).
-fs::path InputsRecordPath(const SfmOptions& options) { return options.workspace / "colmap" / "inputs.json"; }
-
-nlohmann::json InputsRecord(const SfmOptions& options, const std::vector<std::string>& inputs) {
-  return {{"images", RecordedPath(options.images)}, {"photos", inputs}};
-}
-
-// How the recorded inputs differ from `inputs` ("made from other photos (1 added since: c.jpg)");
-// empty when they do not, or when nothing was recorded (a model of an older perf, or one put there
-// by hand: kept).
-std::string InputsChanged(const SfmOptions& options, const std::vector<std::string>& inputs) {
-  std::error_code ec;
-  if (!fs::is_regular_file(InputsRecordPath(options), ec)) return {};
-  const nlohmann::json before = nlohmann::json::parse(ReadFileToString(InputsRecordPath(options)), nullptr, false);
-  if (!before.is_object() || !before.contains("photos") || !before["photos"].is_array()) return {};
-  const std::string folder = before.value("images", "");
-  if (!RecordedAs(folder, options.images)) return "made from the photos in " + folder;
-  std::set<std::string> old_names, new_names(inputs.begin(), inputs.end());
-  for (const auto& n : before["photos"]) {
-    if (n.is_string()) old_names.insert(n.get<std::string>());
-  }
-  std::vector<std::string> added, gone;
-  std::set_difference(new_names.begin(), new_names.end(), old_names.begin(), old_names.end(), std::back_inserter(added));
-  std::set_difference(old_names.begin(), old_names.end(), new_names.begin(), new_names.end(), std::back_inserter(gone));
-  std::string why;
-  if (!added.empty()) why = StrCat(added.size(), " added since: ", NameList(added));
-  if (!gone.empty()) why += StrCat(why.empty() ? "" : "; ", gone.size(), " gone: ", NameList(gone));
-  return why.empty() ? why : "made from other photos (" + why + ")";
 }
 
 // Without --force, a model already at WORKSPACE/sparse/0 is kept: says so and fills `result`'s
@@ -287,6 +247,13 @@ Mapping Map(SfmRun& run) {
   return m;
 }
 
+// Matches the pairs not matched yet (COLMAP keeps those that are).
+void MatchEveryPair(SfmRun& run) {
+  const StepResult r = run.Step(WithSiftMatching(run, {"exhaustive_matcher", "--database_path", run.database.string()}),
+                                "matching", ExhaustiveParser());
+  if (r.failed()) ThrowStepFailed("exhaustive_matcher", r, run.log_path);
+}
+
 // Sequential matching assumed the photos were taken in order (file names give no other clue
 // when EXIF is stripped). A model of fewer than half of them says they were not: match the
 // remaining pairs (COLMAP keeps the pairs already matched) and map again.
@@ -294,9 +261,7 @@ void RematchIfOutOfOrder(SfmRun& run, bool* exhaustive, Mapping* mapping) {
   if (*exhaustive || run.options.matcher != "auto" || mapping->best.num_images >= run.n / 2) return;
   Report(run.options, StrCat("sfm: sequential matching put only ", mapping->best.num_images, " of ", run.n,
                              " photos in a model, so they were not taken in order: matching every pair and mapping again"));
-  const StepResult r = run.Step(WithSiftMatching(run, {"exhaustive_matcher", "--database_path", run.database.string()}),
-                                "matching", ExhaustiveParser());
-  if (r.failed()) ThrowStepFailed("exhaustive_matcher", r, run.log_path);
+  MatchEveryPair(run);
   *exhaustive = true;
   *mapping = Map(run);
 }
@@ -336,14 +301,28 @@ fs::path WriteSecondPassPairs(const SfmRun& run, const std::vector<std::string>&
   return pairs;
 }
 
+// A registration pass's model in `dir` replaces the best where it holds more photos: says how
+// many the pass added and records it in `passes`. False where it added none.
+bool Adopt(const SfmRun& run, const fs::path& dir, bool ok, int pass, Mapping* mapping, std::vector<int>* passes) {
+  const std::optional<ModelCounts> counts = ok ? ReadModelCounts(dir) : std::nullopt;
+  const int added = counts ? std::max(0, counts->num_images - mapping->best.num_images) : 0;
+  Report(run.options, StrCat("sfm: pass ", pass, " registered ", added, " more (", mapping->best.num_images + added, "/", run.n, ")"));
+  if (added == 0) return false;
+  passes->push_back(added);
+  *std::max_element(mapping->model_sizes.begin(), mapping->model_sizes.end()) = counts->num_images;  // it grew
+  mapping->best_dir = dir;
+  mapping->best = *counts;
+  return true;
+}
+
 // (d) Sequential matching misses photos taken out of order: match those left out with every
 // other photo and register them into the model (COLMAP's image_registrator), then adjust. Photos
 // that see too few of the model's points then are tried again as the model grows: each further
 // pass triangulates the points the photos registered so far see (point_triangulator) and
-// registers again, until a pass adds none; then the model is adjusted once more. (COLMAP's mapper
+// registers again, until a pass adds none; then the model is adjusted once more (COLMAP's mapper
 // continued from the model added 5 photos in one run and none in the next on the same photos;
-// these passes add the same every time: docs/tuning.md.) The result replaces the best model only when every step worked and it holds
-// more photos; `passes` gets the photos each pass added.
+// these passes add the same every time: docs/tuning.md). A pass's model replaces the best only
+// when every step worked and it holds more photos; `passes` gets the photos each pass added.
 void RegisterLeftOut(SfmRun& run, bool exhaustive, Mapping* mapping, std::vector<int>* passes) {
   if (exhaustive || !run.options.second_pass || mapping->best.num_images >= run.n) return;
   const auto missing = LeftOut(run.inputs, *mapping->best_dir);
@@ -352,61 +331,47 @@ void RegisterLeftOut(SfmRun& run, bool exhaustive, Mapping* mapping, std::vector
   const fs::path pairs = WriteSecondPassPairs(run, *missing, &num_pairs);
   Report(run.options, StrCat("sfm: ", mapping->best.num_images, "/", run.n, " images registered after sequential matching; matching the ",
                              missing->size(), " left out with every other photo (", num_pairs, " pairs)"));
-  const fs::path second = run.models_dir / "second_pass";
-  EnsureWritableDirectory(second);
   bool ok = true;
   const auto step = [&](const std::vector<std::string>& args, const std::string& stage, const ProgressParser& parse) {
     if (!ok) return;
-    const StepResult r = run.Step(args, stage, parse);
-    ok = !r.failed();
+    ok = !run.Step(args, stage, parse).failed();
     if (!ok) Report(run.options, StrCat("sfm: ", args.front(), " failed (see ", run.log_path.string(), "); keeping the model before it"));
   };
+  const ProgressParser quiet = [](const std::string&) { return std::optional<std::string>(); };
+  const auto model_dir = [&](const std::string& name) {
+    const fs::path dir = run.models_dir / name;
+    RemoveOwned(dir);
+    EnsureWritableDirectory(dir);
+    return dir;
+  };
+  const fs::path second = model_dir("second_pass");
   step(WithSiftMatching(run, {"matches_importer", "--database_path", run.database.string(), "--match_list_path",
                               pairs.string(), "--match_type", "pairs"}),
        "matching", ExhaustiveParser());
   step({"image_registrator", "--database_path", run.database.string(), "--input_path", mapping->best_dir->string(),
         "--output_path", second.string(), "--Mapper.num_threads", run.threads},
        "registering", MapperParser(run.n));
-  step({"bundle_adjuster", "--input_path", second.string(), "--output_path", second.string()}, "adjusting",
-       [](const std::string&) { return std::optional<std::string>(); });
-  std::optional<ModelCounts> counts = ok ? ReadModelCounts(second) : std::nullopt;
-  if (!counts || counts->num_images <= mapping->best.num_images) return;
-  *std::max_element(mapping->model_sizes.begin(), mapping->model_sizes.end()) = counts->num_images;  // it grew
-  passes->push_back(counts->num_images - mapping->best.num_images);
-  Report(run.options, StrCat("sfm: pass 2 registered ", passes->back(), " more (", counts->num_images, "/", run.n, ")"));
-  mapping->best_dir = second;
-  mapping->best = *counts;
+  step({"bundle_adjuster", "--input_path", second.string(), "--output_path", second.string()}, "adjusting", quiet);
+  if (!Adopt(run, second, ok, 2, mapping, passes)) return;
   for (int pass = 3; mapping->best.num_images < run.n && pass < 3 + run.options.max_more_passes; ++pass) {
-    const fs::path points = run.models_dir / StrCat("pass_", pass, "_points"), next = run.models_dir / StrCat("pass_", pass);
-    for (const fs::path& d : {points, next}) {
-      RemoveOwned(d);
-      EnsureWritableDirectory(d);
-    }
+    const fs::path points = model_dir(StrCat("pass_", pass, "_points")), next = model_dir(StrCat("pass_", pass));
     step({"point_triangulator", "--database_path", run.database.string(), "--image_path", run.options.images.string(),
           "--input_path", mapping->best_dir->string(), "--output_path", points.string(), "--Mapper.num_threads", run.threads},
-         "triangulating", [](const std::string&) { return std::optional<std::string>(); });
+         "triangulating", quiet);
     step({"image_registrator", "--database_path", run.database.string(), "--input_path", points.string(), "--output_path",
           next.string(), "--Mapper.num_threads", run.threads},
          "registering", MapperParser(run.n));
-    counts = ok ? ReadModelCounts(next) : std::nullopt;
-    const int added = counts ? counts->num_images - mapping->best.num_images : 0;
-    Report(run.options, StrCat("sfm: pass ", pass, " registered ", std::max(0, added), " more (",
-                               mapping->best.num_images + std::max(0, added), "/", run.n, ")"));
-    if (added <= 0) break;
-    passes->push_back(added);
-    *std::max_element(mapping->model_sizes.begin(), mapping->model_sizes.end()) = counts->num_images;
-    mapping->best_dir = next;
-    mapping->best = *counts;
+    if (!Adopt(run, next, ok, pass, mapping, passes)) break;
   }
   if (passes->size() > 1) {  // the photos the later passes added, adjusted with the rest
     step({"bundle_adjuster", "--input_path", mapping->best_dir->string(), "--output_path", mapping->best_dir->string()},
-         "adjusting", [](const std::string&) { return std::optional<std::string>(); });
+         "adjusting", quiet);
   }
 }
 
-// (e) A model that looks wrong for the capture (options.check_model) after sequential matching is
-// made again from every pair; the new one is kept where it does not look wrong, else the first
-// (set aside in colmap/first_model while the mapper runs again). `doubt` gets the kept one's.
+// (e) A model that looks wrong (options.check_model) after sequential matching is made again from
+// every pair, and kept where it does not look wrong, else the first (set aside in
+// colmap/first_model while the mapper runs again). `doubt` gets the kept one's.
 void RemakeIfWrong(SfmRun& run, bool* exhaustive, Mapping* mapping, std::string* doubt) {
   if (!run.options.check_model) return;
   *doubt = run.options.check_model(*mapping->best_dir);
@@ -417,9 +382,7 @@ void RemakeIfWrong(SfmRun& run, bool* exhaustive, Mapping* mapping, std::string*
   ReplaceDirectory(*mapping->best_dir, first);
   Mapping before = *mapping;
   before.best_dir = first;
-  const StepResult r = run.Step(WithSiftMatching(run, {"exhaustive_matcher", "--database_path", run.database.string()}),
-                                "matching", ExhaustiveParser());
-  if (r.failed()) ThrowStepFailed("exhaustive_matcher", r, run.log_path);
+  MatchEveryPair(run);
   *exhaustive = true;
   Mapping again = Map(run);
   const std::string again_doubt = again.best_dir ? run.options.check_model(*again.best_dir) : "no model";
@@ -436,7 +399,7 @@ void RemakeIfWrong(SfmRun& run, bool* exhaustive, Mapping* mapping, std::string*
 // The chosen model becomes WORKSPACE/sparse/0; `result` gets its counts and the photos it left out.
 void InstallModel(const SfmRun& run, const Mapping& mapping, SfmResult* result) {
   ReplaceDirectory(*mapping.best_dir, result->sparse_dir);
-  WriteFileAtomically(InputsRecordPath(run.options), InputsRecord(run.options, run.inputs).dump(1) + "\n");
+  WriteInputsRecord(run.options, run.inputs);
   result->num_registered_images = mapping.best.num_images;
   result->num_points = mapping.best.num_points;
   if (const auto missing = LeftOut(run.inputs, result->sparse_dir)) result->left_out = *missing;

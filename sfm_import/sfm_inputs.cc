@@ -1,13 +1,18 @@
 #include "sfm_import/sfm_inputs.h"
 
 #include <algorithm>
+#include <iterator>
+#include <nlohmann/json.hpp>
+#include <set>
 #include <array>
 #include <cctype>
 #include <cmath>
 #include <string_view>
 #include <system_error>
 
+#include "common/atomic_file.h"
 #include "common/errors.h"
+#include "common/inputs.h"
 #include "sfm_import/camera_models.h"
 #include "sfm_import/colmap_runner.h"
 #include "workspace/image_io.h"
@@ -88,6 +93,41 @@ void CheckPhotosReadable(const fs::path& images, const std::vector<std::string>&
                    StrCat(bad.size(), " of the ", names.size(), " photos cannot be read: ", listed, " (the first: ",
                           first_problem, ")"),
                    "remove them from the folder (or replace them with the photos), then run again");
+}
+
+// "a.jpg, b.jpg, c.jpg and 4 more"
+std::string NameList(const std::vector<std::string>& names, size_t shown) {
+  std::string list;
+  for (size_t i = 0; i < names.size() && i < shown; ++i) list += (i ? ", " : "") + names[i];
+  if (names.size() > shown) list += StrCat(" and ", names.size() - shown, " more");
+  return list;
+}
+
+fs::path InputsRecordPath(const SfmOptions& options) { return options.workspace / "colmap" / "inputs.json"; }
+
+void WriteInputsRecord(const SfmOptions& options, const std::vector<std::string>& inputs) {
+  const nlohmann::json record = {{"images", RecordedPath(options.images)}, {"photos", inputs}};
+  WriteFileAtomically(InputsRecordPath(options), record.dump(1) + "\n");
+}
+
+std::string InputsChanged(const SfmOptions& options, const std::vector<std::string>& inputs) {
+  std::error_code ec;
+  if (!fs::is_regular_file(InputsRecordPath(options), ec)) return {};
+  const nlohmann::json before = nlohmann::json::parse(ReadFileToString(InputsRecordPath(options)), nullptr, false);
+  if (!before.is_object() || !before.contains("photos") || !before["photos"].is_array()) return {};
+  const std::string folder = before.value("images", "");
+  if (!RecordedAs(folder, options.images)) return "made from the photos in " + folder;
+  std::set<std::string> old_names, new_names(inputs.begin(), inputs.end());
+  for (const auto& n : before["photos"]) {
+    if (n.is_string()) old_names.insert(n.get<std::string>());
+  }
+  std::vector<std::string> added, gone;
+  std::set_difference(new_names.begin(), new_names.end(), old_names.begin(), old_names.end(), std::back_inserter(added));
+  std::set_difference(old_names.begin(), old_names.end(), new_names.begin(), new_names.end(), std::back_inserter(gone));
+  std::string why;
+  if (!added.empty()) why = StrCat(added.size(), " added since: ", NameList(added));
+  if (!gone.empty()) why += StrCat(why.empty() ? "" : "; ", gone.size(), " gone: ", NameList(gone));
+  return why.empty() ? why : "made from other photos (" + why + ")";
 }
 
 }  // namespace sfm_detail
