@@ -870,14 +870,9 @@ exit 0
   EXPECT_NE(log.rfind("fake colmap bundle_adjuster"), log.find("fake colmap bundle_adjuster")) << "adjusted after pass 3";
 }
 
-// Photos not taken in order: sequential matching leaves most of them out of the model, so the
-// run matches every pair and maps again (the fake's mapper then finds them all).
-TEST(ColmapRunner, PhotosNotInOrderFallBackToEveryPair) {
-  TempDir dir("unordered");
-  const fs::path first = dir.path() / "first", full = dir.path() / "full";
-  WriteNamedModel(first, {"a.jpg"});
-  WriteNamedModel(full, {"a.jpg", "b.jpg", "c.jpg", "d.jpg"});
-  const fs::path marker = dir.path() / "matched_all";
+// A run of photos a.jpg to d.jpg, matched in sequence first, with a fake colmap whose mapper
+// makes `before` until every pair was matched (which touches `marker`), then `after`.
+SfmOptions FakeEveryPairRun(const fs::path& dir, const fs::path& before, const fs::path& after, const fs::path& marker) {
   const std::string script = StrCat(R"SH(#!/bin/sh
 PATH=/usr/bin:/bin:$PATH
 step="$1"
@@ -886,19 +881,31 @@ while [ $# -gt 0 ]; do [ "$1" = "--output_path" ] && out="$2"; shift; done
 case "$step" in
   exhaustive_matcher) touch ")SH", marker.string(), R"SH(" ;;
   mapper) mkdir -p "$out/0"
-    if [ -e ")SH", marker.string(), R"SH(" ]; then cp ")SH", full.string(), R"SH("/* "$out/0/"; else cp ")SH",
-                                    first.string(), R"SH("/* "$out/0/"; fi ;;
+    if [ -e ")SH", marker.string(), R"SH(" ]; then cp ")SH", after.string(), R"SH("/* "$out/0/"; else cp ")SH",
+                                    before.string(), R"SH("/* "$out/0/"; fi ;;
 esac
 exit 0
 )SH");
   SfmOptions options;
-  options.images = dir.path() / "photos";
+  options.images = dir / "photos";
   for (const char* name : {"a.jpg", "b.jpg", "c.jpg", "d.jpg"}) WritePhoto(options.images / name);
-  options.workspace = dir.path() / "work";
-  options.colmap_binary = (dir.path() / "bin" / "colmap").string();
+  options.workspace = dir / "work";
+  options.colmap_binary = (dir / "bin" / "colmap").string();
   WriteExecutable(options.colmap_binary, script);
   options.exhaustive_max_images = 2;  // sequential first
   options.single_camera = false;
+  return options;
+}
+
+// Photos not taken in order: sequential matching leaves most of them out of the model, so the
+// run matches every pair and maps again (the fake's mapper then finds them all).
+TEST(ColmapRunner, PhotosNotInOrderFallBackToEveryPair) {
+  TempDir dir("unordered");
+  const fs::path first = dir.path() / "first", full = dir.path() / "full";
+  WriteNamedModel(first, {"a.jpg"});
+  WriteNamedModel(full, {"a.jpg", "b.jpg", "c.jpg", "d.jpg"});
+  const fs::path marker = dir.path() / "matched_all";
+  SfmOptions options = FakeEveryPairRun(dir.path(), first, full, marker);
   std::vector<std::string> progress;
   options.progress = [&](const std::string& line) { progress.push_back(line); };
   const SfmResult r = RunSfm(options);
@@ -935,27 +942,7 @@ TEST(ColmapRunner, AModelThatLooksWrongIsMadeAgainFromEveryPair) {
   WriteNamedModel(first, {"a.jpg", "b.jpg", "c.jpg", "d.jpg"});
   WriteNamedModel(remade, {"a.jpg", "b.jpg", "c.jpg"});
   const fs::path marker = dir.path() / "matched_all";
-  const std::string script = StrCat(R"SH(#!/bin/sh
-PATH=/usr/bin:/bin:$PATH
-step="$1"
-echo "fake colmap $step"
-while [ $# -gt 0 ]; do [ "$1" = "--output_path" ] && out="$2"; shift; done
-case "$step" in
-  exhaustive_matcher) touch ")SH", marker.string(), R"SH(" ;;
-  mapper) mkdir -p "$out/0"
-    if [ -e ")SH", marker.string(), R"SH(" ]; then cp ")SH", remade.string(), R"SH("/* "$out/0/"; else cp ")SH",
-                                    first.string(), R"SH("/* "$out/0/"; fi ;;
-esac
-exit 0
-)SH");
-  SfmOptions options;
-  options.images = dir.path() / "photos";
-  for (const char* name : {"a.jpg", "b.jpg", "c.jpg", "d.jpg"}) WritePhoto(options.images / name);
-  options.workspace = dir.path() / "work";
-  options.colmap_binary = (dir.path() / "bin" / "colmap").string();
-  WriteExecutable(options.colmap_binary, script);
-  options.exhaustive_max_images = 2;  // sequential first
-  options.single_camera = false;
+  SfmOptions options = FakeEveryPairRun(dir.path(), first, remade, marker);
   bool remade_looks_wrong = false;
   options.check_model = [&](const fs::path& model) -> std::string {
     const size_t n = colmap::ReadReconstruction(model).images.size();
