@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <map>
 #include <set>
+#include <utility>
 #include <vector>
 
 #include "common/atomic_file.h"
@@ -112,8 +113,10 @@ RepairResult RepairModel(const RepairOptions& o) {
                 "them (COLMAP, in ", dir.string(), "; --no-repair imports the model as given)"));
   std::set<std::string> group;
   for (const GhostGroup& g : r.before.ghosts) group.insert(g.names.begin(), g.names.end());
-  const auto decide = [&](const std::string& route, const colmap::Reconstruction& made, const std::string& said) {
-    r.after = CheckModel(made);
+  // `made`'s check against the given model's decides; `check` is CheckModel(made).
+  const auto decide = [&](const std::string& route, const colmap::Reconstruction& made, ModelCheck check,
+                          const std::string& said) {
+    r.after = std::move(check);
     std::string why;
     r.used = RepairIsBetter(r.after, r.before, &why);
     r.route = route;
@@ -125,10 +128,13 @@ RepairResult RepairModel(const RepairOptions& o) {
       r.model = repaired;
     }
   };
+  const auto tried = [&](const std::string& what) {
+    r.tries.push_back(what);
+    Say(o, "repair: " + what);
+  };
   const auto failed = [&](const std::string& what, const Error& e) {
-    std::string text = e.what();
-    r.tries.push_back(what + " (" + text.substr(0, text.find('\n')) + ")");
-    Say(o, "repair: " + r.tries.back());
+    const std::string text = e.what();
+    tried(what + " (" + text.substr(0, text.find('\n')) + ")");
   };
   try {
     RegisterGroupOptions ro;
@@ -141,13 +147,13 @@ RepairResult RepairModel(const RepairOptions& o) {
     // A photo COLMAP placed where its pose looks wrong is left out by the import, as in any model
     // (kept at its given pose, bonsai's DSCF5605 scored 12.3 dB, moved onto the object 12.6 dB,
     // against 16.4 dB with the whole ghost group as given: docs/tuning.md).
-    const std::map<std::string, std::string> wrong = CheckModel(reg.model).bad_poses;
-    const size_t placed = std::count_if(reg.placed.begin(), reg.placed.end(), [&](const std::string& n) { return !wrong.count(n); });
+    ModelCheck check = CheckModel(reg.model);
+    const size_t placed =
+        std::count_if(reg.placed.begin(), reg.placed.end(), [&](const std::string& n) { return !check.bad_poses.count(n); });
     if (placed == 0) {
-      r.tries.push_back(StrCat("COLMAP registered none of the group's ", group.size(), " photos again"));
-      Say(o, "repair: " + r.tries.back());
+      tried(StrCat("COLMAP registered none of the group's ", group.size(), " photos again"));
     } else {
-      decide("register", reg.model,
+      decide("register", reg.model, std::move(check),
              StrCat("with the group registered again (", placed, " of ", group.size(), " placed",
                     placed < group.size() ? StrCat("; ", group.size() - placed, " left out or placed wrongly") : std::string(),
                     ")"));
@@ -161,14 +167,17 @@ RepairResult RepairModel(const RepairOptions& o) {
     Say(o, "repair: making the model again from the photos (perf sfm into " + dir.string() + ")");
     try {
       const colmap::Reconstruction made = colmap::ReadReconstruction(RunSfm(SfmFromGiven(given, r.images, dir, o)).sparse_dir);
-      decide("sfm", made, "made again by perf sfm");
+      decide("sfm", made, CheckModel(made), "made again by perf sfm");
     } catch (const Interrupted&) {
       throw;
     } catch (const Error& e) {
       failed("perf sfm could not make a model of the photos", e);
     }
   }
-  if (!r.used) decide("move", MoveGhostsOntoObject(given, r.before.ghosts), "with each group moved onto the object");
+  if (!r.used) {
+    const colmap::Reconstruction moved = MoveGhostsOntoObject(given, r.before.ghosts);
+    decide("move", moved, CheckModel(moved), "with each group moved onto the object");
+  }
   r.why = r.used ? r.tries.back() : "the model is kept: " + Join(r.tries);
   r.seconds = SecondsSince(start);
   EnsureWritableDirectory(dir);
