@@ -103,6 +103,7 @@ void AddImportCommand(CLI::App& app) {
         const RepairResult repaired = RepairModel(ro);
         o.colmap_dir = repaired.model;
         o.images_dir = repaired.images;
+        o.turn_unknown = repaired.TurnUnknown();
       }
       r = RunImport(o);
     });

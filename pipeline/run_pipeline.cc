@@ -145,6 +145,7 @@ class Runner {
 
   void Import(fs::path model, StageReport* s) {
     fs::path images = o_.images;
+    std::vector<std::vector<std::string>> turn_unknown;
     if (!o_.colmap.empty()) {  // the user's model (perf sfm's own is not made again)
       RepairOptions ro;
       ro.model = model;
@@ -158,6 +159,7 @@ class Runner {
       r_->repair = repaired.ToJson();
       model = repaired.model;
       if (repaired.used) images = repaired.images;
+      turn_unknown = repaired.TurnUnknown();
     }
     const fs::path input = o_.nerf.empty() ? model : o_.nerf;
     const fs::path scene = o_.workspace / "scene.json";
@@ -184,6 +186,7 @@ class Runner {
     }
     io.workspace = o_.workspace;
     io.keep_bad_poses = o_.keep_bad_poses;
+    io.turn_unknown = std::move(turn_unknown);
     io.max_size = preset_.max_size;
     io.num_threads = o_.threads;
     Progress progress("import", o_.quiet);

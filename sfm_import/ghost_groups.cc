@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <map>
 #include <numeric>
+#include <set>
 #include <unordered_map>
 
 #include "common/errors.h"
@@ -157,6 +158,19 @@ std::vector<std::string> MarkGhostGroups(const colmap::Reconstruction& rec,
     }
   }
   return warnings;
+}
+
+void MarkTurnUnknown(const std::vector<std::vector<std::string>>& groups, Scene* scene) {
+  for (size_t k = 0; k < groups.size(); ++k) {
+    const std::set<std::string> names(groups[k].begin(), groups[k].end());
+    for (SceneImage& im : scene->images) {
+      if (!names.count(im.name)) continue;
+      im.turn_group = static_cast<int>(k);
+      im.pose_doubt = StrCat("moved onto the object with the ", names.size(),
+                             " photos of its ghost group by the repair (perf import); its turn about the object "
+                             "is not known: perf reconstruct searches it against the other photos");
+    }
+  }
 }
 
 }  // namespace perf

@@ -66,4 +66,9 @@ std::vector<GhostGroup> FindGhostGroups(const colmap::Reconstruction& rec, const
 std::vector<std::string> MarkGhostGroups(const colmap::Reconstruction& rec,
                                          const std::map<std::string, std::string>& left_out, Scene* scene);
 
+// Marks the photos of each of `groups` (moved onto the object, ghost_move.h: RepairResult::TurnUnknown) in
+// `scene`: turn_group k for the k-th group, and a pose_doubt saying what was done and what
+// perf reconstruct does next. Names not in the scene are passed over.
+void MarkTurnUnknown(const std::vector<std::vector<std::string>>& groups, Scene* scene);
+
 }  // namespace perf

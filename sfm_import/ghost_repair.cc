@@ -76,6 +76,13 @@ nlohmann::json RepairResult::ToJson() const {
           {"route", route}, {"tries", tries}, {"seconds", seconds}};
 }
 
+std::vector<std::vector<std::string>> RepairResult::TurnUnknown() const {
+  std::vector<std::vector<std::string>> groups;
+  if (!used || route != "move") return groups;
+  for (const GhostGroup& g : before.ghosts) groups.push_back(g.names);
+  return groups;
+}
+
 RepairResult RepairModel(const RepairOptions& o) {
   const auto start = WallClock::now();
   RepairResult r;
@@ -102,6 +109,7 @@ RepairResult RepairModel(const RepairOptions& o) {
       r.attempted = true;
       r.used = j.value("used", false);
       r.why = j.value("why", "");
+      r.route = j.value("route", "");
       if (r.used) r.model = repaired;
       Say(o, StrCat("repair: as decided before (", record.string(), "): ", r.why));
       return r;

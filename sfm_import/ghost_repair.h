@@ -42,6 +42,10 @@ struct RepairResult {
   ModelCheck before, after;
   double seconds = 0;
   nlohmann::json ToJson() const;
+  // The groups moved onto the object (route "move", used), each its photos: their turn about the
+  // object is not known, and the import marks them for perf reconstruct to search
+  // (ImportOptions::turn_unknown).
+  std::vector<std::vector<std::string>> TurnUnknown() const;
 };
 
 // Throws what reading the user's model throws, and Interrupted; a failed perf sfm is a decision

@@ -320,6 +320,7 @@ void ImportColmap(const ImportOptions& o, ImportResult* r) {
                      format == colmap::ModelFormat::kBinary ? "binary" : "text", o.downscale, o.max_size};
   PlaceBoundsAndShells(o, BoundsPoints(rec), model_dir.string(), r);
   for (std::string& w : MarkGhostGroups(rec, bad_poses, &r->scene)) r->warnings.push_back(std::move(w));
+  MarkTurnUnknown(o.turn_unknown, &r->scene);
   EnsureWritableDirectory(o.workspace / "images");
   RunJobs(jobs, o, photos.largest);
 }

@@ -35,6 +35,9 @@ struct ImportOptions {
   // scene.json, out of training and scoring; true keeps them as train/test like the others.
   bool keep_bad_poses = false;
   Eigen::Vector3d background = Eigen::Vector3d::Ones();  // RGBA photos are composited over it
+  // COLMAP: groups of photos whose turn about the object is not known (RepairResult::TurnUnknown),
+  // marked in scene.json for perf reconstruct to search (ghost_move.h MarkTurnUnknown).
+  std::vector<std::vector<std::string>> turn_unknown;
 
   // Overrides of the automatic placement (bounds.h).
   std::optional<Eigen::Vector3d> box_center, box_size;

@@ -159,6 +159,7 @@ std::string SceneToJson(const Scene& scene) {
               {"world_from_cam", MatToJson<3, 4>(im.world_from_cam)}};
     if (im.split == Split::kExcluded) e["excluded_because"] = im.excluded_because;
     if (!im.pose_doubt.empty()) e["pose_doubt"] = im.pose_doubt;
+    if (im.turn_group >= 0) e["turn_group"] = im.turn_group;
     if (!im.alpha_path.empty()) e["alpha_path"] = im.alpha_path;
     if (im.refined_world_from_cam) e["refined_world_from_cam"] = MatToJson<3, 4>(*im.refined_world_from_cam);
     if (im.refined_focal_scale) e["refined_focal_scale"] = *im.refined_focal_scale;
@@ -290,6 +291,10 @@ Scene SceneFromJson(const std::string& text, const std::string& name) {
       im.excluded_because = r.String(e["excluded_because"], p + ".excluded_because");
     }
     if (e.contains("pose_doubt")) im.pose_doubt = r.String(e["pose_doubt"], p + ".pose_doubt");
+    if (e.contains("turn_group")) {
+      im.turn_group = r.Int(e["turn_group"], p + ".turn_group");
+      if (im.turn_group < 0) r.Fail(p + ".turn_group", e["turn_group"], "expected a group number, 0 or more");
+    }
     for (const char* field : {"world_from_cam", "refined_world_from_cam"}) {
       if (!e.contains(field) && std::string(field) != "world_from_cam") continue;
       const Eigen::Matrix<double, 3, 4> pose = r.Mat<3, 4>(r.Get(e, field, p), p + "." + field);

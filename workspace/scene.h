@@ -59,6 +59,10 @@ struct SceneImage {
   // Why its imported pose is in doubt although it is kept (perf import: a photo of a group that
   // sees a second copy of the object, sfm_import/ghost_groups.h); empty otherwise.
   std::string pose_doubt;
+  // A group of photos whose turn about the object is not known (the ghost repair moved it onto
+  // the object without matches, sfm_import/ghost_move.h): perf reconstruct searches the turn
+  // (recon_cuda/run/turn_search.h) and clears this. -1: none; else the group's number.
+  int turn_group = -1;
 };
 
 // Axis-aligned in the box's own frame: world point p is inside when

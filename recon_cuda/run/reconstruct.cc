@@ -13,6 +13,7 @@
 #include "recon_cuda/run/level_monitor.h"
 #include "recon_cuda/run/render_views.h"
 #include "recon_cuda/run/reconstruct_run.h"
+#include "recon_cuda/run/turn_search.h"
 #include "recon_cuda/run/run_settings.h"
 
 namespace perf::recon {
@@ -96,6 +97,9 @@ class Reconstruction {
     LoadPhotos(start.level);
     Describe();
     if (start.level == 0 && o_.init_shells_from_photos) MeanColour(run_.train, run_.comm, run_.hierarchy.init.shell_colour);
+    if (start.level == 0) {
+      for (const TurnSearch& t : SearchTurns(run_, o_.turn_search)) run_.result.turn_search.push_back(t.ToJson());
+    }
     Fit(std::move(start));
     ChooseFinalLevel();
     run_.result.hierarchy = run_.hierarchy;
@@ -403,6 +407,7 @@ json ReconstructResult::ToJson(const ReconstructOptions& o) const {
               {"levels_note", levels_choice.Describe()},
               {"memory_stop", memory_stop},
               {"time_plan", time_plan},
+              {"turn_search", turn_search},
               {"iterations_per_level", o.iterations},
               {"level_iterations", o.level_iterations},
               {"excluded_views", excluded_views},

@@ -59,6 +59,8 @@ struct ReconstructResult {
   std::string memory_stop;          // automatic levels: why the hierarchy ended early (empty: it did not)
   // With a time budget: the plan, what each level ran and why the plan ended the run (TimePlanner::ToJson); null without.
   nlohmann::json time_plan;
+  // The turn searched for each group the repair moved onto the object (turn_search.h TurnSearch::ToJson).
+  nlohmann::json turn_search = nlohmann::json::array();
 
   // What recon.json records beyond the levels.
   HierarchyOptions hierarchy;               // as derived for the scene (ReconstructOptions::Hierarchy)

@@ -16,6 +16,7 @@
 #include "recon_cuda/run/level_choice.h"
 #include "recon_cuda/run/photo_fit.h"
 #include "recon_cuda/run/time_plan.h"
+#include "recon_cuda/run/turn_search.h"
 #include "recon_cuda/solve/hierarchy.h"
 
 namespace perf {
@@ -103,6 +104,9 @@ struct ReconstructOptions {
   // After the first level, the training photos that fit far worse than the median are named
   // (photo_fit.h; output, log and recon.json) and kept.
   PhotoFitOptions photo_fit;
+  // Before a fresh hierarchy, the turn of each group the ghost repair moved onto the object
+  // (scene.json turn_group) is searched against a first level of the other photos (turn_search.h).
+  TurnSearchOptions turn_search;
   OccupancyOptions occupancy;  // which bricks a sparse level keeps
   bool resume = false;          // continue after the last checkpoint instead of starting over
   // With resume: start over instead when the last run's recorded settings (run_settings.h) differ
