@@ -35,6 +35,20 @@ void Report(const SfmOptions& options, const std::string& line) {
   if (options.progress) options.progress(line);
 }
 
+ColmapSteps::ColmapSteps(SfmOptions options, fs::path colmap, const fs::path& log_path)
+    : options_(std::move(options)), colmap_(std::move(colmap)), log_(log_path, true, "COLMAP log") {}
+
+StepResult ColmapSteps::Run(const std::vector<std::string>& args, const std::string& stage,
+                            const ProgressParser& parse) {
+  return RunColmapStep(colmap_, args, stage, parse, options_, log_);
+}
+
+void ColmapSteps::RunOrThrow(const std::vector<std::string>& args, const std::string& stage,
+                             const ProgressParser& parse) {
+  const StepResult r = Run(args, stage, parse);
+  if (r.failed()) ThrowStepFailed(args.front(), r, log_.path());
+}
+
 fs::path FindColmap(const std::string& binary) {
   return FindExecutable(binary,
                         "install COLMAP (`sudo apt-get install colmap`, or run scripts/setup.sh), or pass its path "

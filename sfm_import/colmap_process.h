@@ -50,6 +50,28 @@ StepResult RunColmapStep(const std::filesystem::path& colmap, const std::vector<
 [[noreturn]] void ThrowStepFailed(const std::string& step, const StepResult& r,
                                   const std::filesystem::path& log_path);
 
+// COLMAP's steps of one run (perf sfm's, the repair's registration): the binary, one log they all
+// append to, and the caller's progress and stop (options.progress, options.check_stop).
+class ColmapSteps {
+ public:
+  ColmapSteps() = default;
+  // colmap: FindColmap's; the log is opened (appended to) at log_path.
+  ColmapSteps(SfmOptions options, std::filesystem::path colmap, const std::filesystem::path& log_path);
+
+  // Runs `colmap <args>` (RunColmapStep) with this run's log.
+  StepResult Run(const std::vector<std::string>& args, const std::string& stage, const ProgressParser& parse);
+  // Run, and ThrowStepFailed (named by args.front()) when the step fails.
+  void RunOrThrow(const std::vector<std::string>& args, const std::string& stage, const ProgressParser& parse);
+
+  const std::filesystem::path& colmap() const { return colmap_; }
+  const std::filesystem::path& log_path() const { return log_.path(); }
+
+ private:
+  SfmOptions options_;
+  std::filesystem::path colmap_;
+  LogFile log_;
+};
+
 // Progress parsers for the steps (COLMAP 3.8 output).
 ProgressParser ExtractionParser();
 ProgressParser ExhaustiveParser();

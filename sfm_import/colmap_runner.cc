@@ -54,16 +54,16 @@ struct SfmRun {
 
   // Runs one COLMAP step with this run's log and progress.
   StepResult Step(const std::vector<std::string>& args, const std::string& stage, const ProgressParser& parse) {
-    return RunColmapStep(colmap, args, stage, parse, options, log);
+    return steps.Run(args, stage, parse);
   }
+  const fs::path& log_path() const { return steps.log_path(); }
 
   const SfmOptions& options;
   const std::vector<std::string>& inputs;  // the photos, as COLMAP names them
   int n = 0;                                // how many
-  fs::path colmap;                          // the binary
   fs::path colmap_dir;                      // WORKSPACE/colmap
-  fs::path log_path, database, models_dir;  // in colmap_dir
-  LogFile log;
+  fs::path database, models_dir;            // in colmap_dir
+  ColmapSteps steps;                        // the binary and colmap_dir/colmap.log
   std::string threads;  // every step's number of threads
 };
 
@@ -106,10 +106,9 @@ bool KeepExistingModel(const SfmOptions& options, const std::vector<std::string>
 // log (appended to).
 SfmRun StartRun(const SfmOptions& options, const std::vector<std::string>& inputs) {
   SfmRun run(options, inputs);
-  run.colmap = FindColmap(options.colmap_binary);
+  const fs::path colmap = FindColmap(options.colmap_binary);
   run.colmap_dir = options.workspace / "colmap";
   EnsureWorkFolder(run.colmap_dir);  // COLMAP's: PERF removes its database and models between runs
-  run.log_path = run.colmap_dir / "colmap.log";
   run.database = run.colmap_dir / "database.db";
   run.models_dir = run.colmap_dir / "sparse";
 
@@ -119,7 +118,7 @@ SfmRun StartRun(const SfmOptions& options, const std::vector<std::string>& input
   for (const char* suffix : {"", "-shm", "-wal"}) RemoveOwned(run.database.string() + suffix);
   RemoveOwned(run.models_dir);
   EnsureWritableDirectory(run.models_dir);
-  run.log = LogFile(run.log_path, true, "COLMAP log");
+  run.steps = ColmapSteps(options, colmap, run.colmap_dir / "colmap.log");
   run.threads = std::to_string(options.num_threads);
   return run;
 }
@@ -148,7 +147,7 @@ void ExtractFeatures(SfmRun& run, const PhotoTags& tags) {
     groups = GroupByCamera(run.inputs, tags);
     Report(options, "sfm: " + DescribeGroups(groups));
   }
-  Report(options, StrCat("sfm: extracting features from ", run.n, " images (", run.colmap.string(), ")"));
+  Report(options, StrCat("sfm: extracting features from ", run.n, " images (", run.steps.colmap().string(), ")"));
   const auto extract = [&](const std::vector<std::string>& list_args) {
     std::vector<std::string> args = {"feature_extractor", "--database_path", run.database.string(), "--image_path",
                                      options.images.string(), "--ImageReader.camera_model", options.camera_model,
@@ -159,7 +158,7 @@ void ExtractFeatures(SfmRun& run, const PhotoTags& tags) {
     if (!options.camera_params.empty()) args.insert(args.end(), {"--ImageReader.camera_params", options.camera_params});
     args.insert(args.end(), list_args.begin(), list_args.end());
     const StepResult r = run.Step(args, "features", ExtractionParser());
-    if (r.failed()) ThrowStepFailed("feature_extractor", r, run.log_path);
+    if (r.failed()) ThrowStepFailed("feature_extractor", r, run.log_path());
   };
   if (groups.size() > 1) {
     for (size_t g = 0; g < groups.size(); ++g) {
@@ -213,7 +212,7 @@ void Match(SfmRun& run, bool exhaustive) {
   }
   const StepResult r = run.Step(WithSiftMatching(run, args), "matching", parser);
   if (r.failed()) {
-    ThrowStepFailed(exhaustive ? "exhaustive_matcher" : "sequential_matcher", r, run.log_path);
+    ThrowStepFailed(exhaustive ? "exhaustive_matcher" : "sequential_matcher", r, run.log_path());
   }
 }
 
@@ -230,7 +229,7 @@ Mapping Map(SfmRun& run) {
   // COLMAP 3.8 exits with 1 when no initial pair could be found: a property of the photos,
   // not a failure of the tool.
   m.no_initial_pair = !r.idle && !r.signal && r.exit_code != 0 && r.saw("failed to create sparse model");
-  if (r.failed() && !m.no_initial_pair) ThrowStepFailed("mapper", r, run.log_path);
+  if (r.failed() && !m.no_initial_pair) ThrowStepFailed("mapper", r, run.log_path());
   std::error_code ec;
   for (const auto& entry : fs::directory_iterator(run.models_dir, ec)) {
     const std::string name = entry.path().filename().string();
@@ -251,7 +250,7 @@ Mapping Map(SfmRun& run) {
 void MatchEveryPair(SfmRun& run) {
   const StepResult r = run.Step(WithSiftMatching(run, {"exhaustive_matcher", "--database_path", run.database.string()}),
                                 "matching", ExhaustiveParser());
-  if (r.failed()) ThrowStepFailed("exhaustive_matcher", r, run.log_path);
+  if (r.failed()) ThrowStepFailed("exhaustive_matcher", r, run.log_path());
 }
 
 // Sequential matching assumed the photos were taken in order (file names give no other clue
@@ -272,7 +271,7 @@ void CheckEnoughRegistered(const SfmRun& run, const Mapping& mapping) {
   if (!mapping.best_dir && mapping.no_initial_pair) {
     throw InputError(options.images.string(), "registered images", StrCat("0 of ", run.n),
                      "COLMAP could not reconstruct any part of the scene (no pair of photos "
-                     "with enough matches; see " + run.log_path.string() + ")",
+                     "with enough matches; see " + run.log_path().string() + ")",
                      kTooFewHint);
   }
   if (!mapping.best_dir || mapping.best.num_images < options.min_registered_images) {
@@ -335,7 +334,7 @@ void RegisterLeftOut(SfmRun& run, bool exhaustive, Mapping* mapping, std::vector
   const auto step = [&](const std::vector<std::string>& args, const std::string& stage, const ProgressParser& parse) {
     if (!ok) return;
     ok = !run.Step(args, stage, parse).failed();
-    if (!ok) Report(run.options, StrCat("sfm: ", args.front(), " failed (see ", run.log_path.string(), "); keeping the model before it"));
+    if (!ok) Report(run.options, StrCat("sfm: ", args.front(), " failed (see ", run.log_path().string(), "); keeping the model before it"));
   };
   const ProgressParser quiet = [](const std::string&) { return std::optional<std::string>(); };
   const auto model_dir = [&](const std::string& name) {

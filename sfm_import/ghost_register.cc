@@ -19,23 +19,20 @@ namespace fs = std::filesystem;
 using namespace sfm_detail;
 using Pair = std::pair<std::string, std::string>;
 
-// COLMAP's steps with one log and the caller's progress and stop.
+// COLMAP's steps of the registration, in its folder, with the caller's progress and stop.
 struct Steps {
-  Steps(const RegisterGroupOptions& o) : dir(o.dir), threads(std::to_string(o.threads)) {
+  explicit Steps(const RegisterGroupOptions& o) : dir(o.dir), threads(std::to_string(o.threads)) {
+    SfmOptions sfm;
     sfm.progress = o.say;
     sfm.check_stop = o.check_stop;
-    colmap = FindColmap(sfm.colmap_binary);
-    log = LogFile(dir / "colmap.log", true, "COLMAP log");
+    colmap = ColmapSteps(sfm, FindColmap(sfm.colmap_binary), dir / "colmap.log");
   }
   void Run(const std::vector<std::string>& args, const std::string& stage, const ProgressParser& parse) {
-    const StepResult r = RunColmapStep(colmap, args, stage, parse, sfm, log);
-    if (r.failed()) ThrowStepFailed(args.front(), r, log.path());
+    colmap.RunOrThrow(args, stage, parse);
   }
   fs::path dir;
   std::string threads;
-  SfmOptions sfm;
-  fs::path colmap;
-  LogFile log;
+  ColmapSteps colmap;
 };
 
 // One extraction per camera of the model, from its parameters (COLMAP keeps them as a prior; the

@@ -165,6 +165,22 @@ TEST(GhostRepair, TheExamplesGroupIsMovedSayingWhyAndNotTriedAgain) {
   EXPECT_TRUE(r.after.ghosts.empty()) << r.after.Describe();
   EXPECT_TRUE(fs::exists(dir / "ws" / "repair" / "repair.json"));
   EXPECT_TRUE(fs::exists(dir / "ws" / "sparse_repaired" / "images.bin"));
+  // The moved group's turn is left to perf reconstruct: the import marks its photos.
+  const std::vector<std::vector<std::string>> unknown = r.TurnUnknown();
+  ASSERT_EQ(unknown.size(), 1u);
+  EXPECT_EQ(unknown[0], r.before.ghosts[0].names);
+  EXPECT_TRUE(as_given.TurnUnknown().empty());
+  Scene scene;
+  for (const char* name : {"DSCF5608.JPG", "DSCF5610.JPG", "DSCF5614.JPG"}) {
+    SceneImage im;
+    im.name = name;
+    scene.images.push_back(im);
+  }
+  MarkTurnUnknown(unknown, &scene);
+  EXPECT_EQ(scene.images[0].turn_group, 0);
+  EXPECT_EQ(scene.images[1].turn_group, -1);
+  EXPECT_EQ(scene.images[2].turn_group, 0);
+  EXPECT_NE(scene.images[0].pose_doubt.find("searches it"), std::string::npos) << scene.images[0].pose_doubt;
   // Again: the recorded decision, without COLMAP.
   lines.clear();
   const auto t0 = std::chrono::steady_clock::now();
@@ -172,6 +188,7 @@ TEST(GhostRepair, TheExamplesGroupIsMovedSayingWhyAndNotTriedAgain) {
   EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0);
   EXPECT_TRUE(again.used);
   EXPECT_EQ(again.model, r.model);
+  EXPECT_EQ(again.TurnUnknown(), unknown);  // the route is recorded too
   ASSERT_FALSE(lines.empty());
   EXPECT_NE(lines.back().find("as decided before"), std::string::npos) << lines.back();
   EXPECT_EQ(test::FilesUnder(example / "sparse" / "0"), model_before);

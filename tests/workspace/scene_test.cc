@@ -40,6 +40,7 @@ Scene MakeScene() {
     im.split = i == 0 ? Split::kTest : i == 2 ? Split::kExcluded : Split::kTrain;
     if (i == 2) im.excluded_because = "pose looks wrong: 18.2 units from the cameras' centre";
     if (i == 0) im.pose_doubt = "in a group that sees the object elsewhere: 5 photos";
+    if (i == 1) im.turn_group = 2;
     im.world_from_cam.leftCols<3>() = Eigen::AngleAxisd(0.1 * i + 0.2, Eigen::Vector3d::UnitY()).toRotationMatrix();
     im.world_from_cam.col(3) = Eigen::Vector3d(i, 2.0 / 7.0, -1e-9);
     if (i == 1) {
@@ -78,6 +79,7 @@ TEST(Scene, JsonRoundTripIsExact) {
     EXPECT_EQ(back.images[i].split, s.images[i].split);
     EXPECT_EQ(back.images[i].excluded_because, s.images[i].excluded_because);
     EXPECT_EQ(back.images[i].pose_doubt, s.images[i].pose_doubt);
+    EXPECT_EQ(back.images[i].turn_group, s.images[i].turn_group);
     EXPECT_EQ(back.images[i].world_from_cam, s.images[i].world_from_cam);
     EXPECT_EQ(back.images[i].refined_world_from_cam, s.images[i].refined_world_from_cam);
     EXPECT_EQ(back.images[i].refined_focal_scale, s.images[i].refined_focal_scale);
@@ -148,6 +150,8 @@ INSTANTIATE_TEST_SUITE_P(
         Corruption{"images[2].split", [](nlohmann::json& j) { j["images"][2]["split"] = "val"; }},
         Corruption{"images[2].excluded_because", [](nlohmann::json& j) { j["images"][2]["excluded_because"] = 5; }},
         Corruption{"images[0].pose_doubt", [](nlohmann::json& j) { j["images"][0]["pose_doubt"] = true; }},
+        Corruption{"images[0].turn_group", [](nlohmann::json& j) { j["images"][0]["turn_group"] = -3; }},
+        Corruption{"images[0].turn_group", [](nlohmann::json& j) { j["images"][0]["turn_group"] = "one"; }},
         Corruption{"images[0].world_from_cam", [](nlohmann::json& j) { j["images"][0]["world_from_cam"][0][0] = 5.0; }},
         Corruption{"images", [](nlohmann::json& j) { j["images"] = nlohmann::json::array(); }},
         Corruption{"images[1].refined_focal_scale", [](nlohmann::json& j) { j["images"][1]["refined_focal_scale"] = 0.0; }},
