@@ -137,7 +137,7 @@ class Searcher {
     const GroupMove turned = GroupMove::Turn(pivot, FindTurn(turn_score, up, toward, o_, &t.turns_tried));
     t.turn_degrees = turned.Degrees();
     t.psnr_turned = score(turned);
-    const std::vector<Pose> fitted = FitEach(turned, level, params, photos);
+    const std::vector<Pose> fitted = FitEach(backend, x, turned, level, params, photos);
     GroupViews f = g;
     for (size_t i = 0; i < f.views.size(); ++i) f.poses[i] = fitted[i];
     t.psnr_fitted = ScoreMove(backend, x, f, GroupMove{});
@@ -178,15 +178,17 @@ class Searcher {
   }
 
   // Each of the group's training cameras fitted alone to its photo (pose_fit.h, on a backend of
-  // its own: `backend` keeps the level), from `start`'s move.
-  std::vector<Pose> FitEach(const GroupMove& start, const VolumeShape& level, const std::vector<float>& params,
-                            const std::vector<std::string>& photos) const {
+  // its own: `backend` keeps the level), from `start`'s move, each photo through its best colour
+  // transform there.
+  std::vector<Pose> FitEach(Backend* backend, VecId x, const GroupMove& start, const VolumeShape& level,
+                            const std::vector<float>& params, const std::vector<std::string>& photos) const {
     GroupViews g = Views(photos, o_.fit_pixels);
     for (size_t i = 0; i < g.views.size(); ++i) SetPose(start.Apply(g.poses[i]), &g.views[i].camera);
+    std::vector<ColourTransform<float>> transforms;
+    ScoreExposed(backend, x, g.views, &transforms);
     const std::unique_ptr<Backend> fit_backend = MakeBackend(run_.options.device, run_.options.threads);
-    const std::vector<PoseValues> values =
-        FitViewPoses(fit_backend.get(), level, params, run_.geometry, g.views,
-                     std::vector<ColourTransform<float>>(g.views.size()), std::vector<PoseValues>(g.views.size()), {});
+    const std::vector<PoseValues> values = FitViewPoses(fit_backend.get(), level, params, run_.geometry, g.views,
+                                                        transforms, std::vector<PoseValues>(g.views.size()), {});
     std::vector<Pose> fitted;
     for (size_t i = 0; i < g.views.size(); ++i) {
       fitted.push_back(PoseOf(CorrectedCamera(g.views[i].camera, values[i].data(), run_.geometry)));
@@ -199,7 +201,7 @@ class Searcher {
   std::set<std::string> marked_;
 };
 
-// The scene's images and the loaded photos of a group turned by t.turn; its mark cleared either way.
+// The scene's images and the loaded photos of a group moved by t.move where used; its mark cleared either way.
 void Apply(ReconstructRun& run, const TurnSearch& t) {
   const std::set<std::string> names(t.photos.begin(), t.photos.end());
   for (SceneImage& im : run.scene.images) {
@@ -331,7 +333,10 @@ std::vector<TurnSearch> SearchTurns(ReconstructRun& run, const TurnSearchOptions
     return {};
   }
   const Others others = OtherPhotos(run, marked);
-  if (others.photos.empty()) return {};
+  if (others.photos.empty()) {
+    run.Say("turn search: every training photo is in a moved group; their poses stay as imported");
+    return {};
+  }
   run.Say(StrCat("turn search: ", groups.size(), " group(s) of ", marked.size(),
                  " photos moved onto the object by the repair; fitting the first level from the other ",
                  others.photos.size(), " training photos"));
