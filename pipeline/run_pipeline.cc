@@ -132,6 +132,11 @@ class Runner {
     so.force = o_.force;
     so.check_stop = [&] { CheckStop(); };
     so.check_model = ObjectModelDoubtOf;
+    if (r_->time_budget > 0) {
+      so.seconds_left = [deadline = Budget().Deadline()] {
+        return std::chrono::duration<double>(deadline - WallClock::now()).count();
+      };
+    }
     so.progress = [&](const std::string& line) {
       CheckStop();
       Say(line.rfind("sfm: ", 0) == 0 ? line : "sfm: " + line);  // RunSfm's own lines already say so

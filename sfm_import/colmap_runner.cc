@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <fstream>
@@ -65,6 +66,7 @@ struct SfmRun {
   fs::path database, models_dir;            // in colmap_dir
   ColmapSteps steps;                        // the binary and colmap_dir/colmap.log
   std::string threads;  // every step's number of threads
+  double match_seconds = 0, map_seconds = 0;  // the last Match's and Map's
 };
 
 // The models of one mapper run. COLMAP writes one numbered folder per disconnected model; the
@@ -210,7 +212,9 @@ void Match(SfmRun& run, bool exhaustive) {
             "1"};
     parser = SequentialParser();
   }
+  const Clock::time_point start = Clock::now();
   const StepResult r = run.Step(WithSiftMatching(run, args), "matching", parser);
+  run.match_seconds = std::chrono::duration<double>(Clock::now() - start).count();
   if (r.failed()) {
     ThrowStepFailed(exhaustive ? "exhaustive_matcher" : "sequential_matcher", r, run.log_path());
   }
@@ -222,10 +226,12 @@ Mapping Map(SfmRun& run) {
   RemoveOwned(run.models_dir);
   EnsureWritableDirectory(run.models_dir);
   Mapping m;
+  const Clock::time_point start = Clock::now();
   const StepResult r = run.Step(
       {"mapper", "--database_path", run.database.string(), "--image_path", run.options.images.string(),
        "--output_path", run.models_dir.string(), "--Mapper.num_threads", run.threads},
       "mapping", MapperParser(run.n));
+  run.map_seconds = std::chrono::duration<double>(Clock::now() - start).count();
   // COLMAP 3.8 exits with 1 when no initial pair could be found: a property of the photos,
   // not a failure of the tool.
   m.no_initial_pair = !r.idle && !r.signal && r.exit_code != 0 && r.saw("failed to create sparse model");
@@ -368,13 +374,33 @@ void RegisterLeftOut(SfmRun& run, bool exhaustive, Mapping* mapping, std::vector
   }
 }
 
+// What matching the pairs sequential matching left (at the rate it matched its own, about
+// n (overlap + log2 n) pairs with quadratic overlap) and mapping again would take, in seconds.
+double EveryPairSeconds(const SfmRun& run) {
+  const double n = run.n, all = n * (n - 1) / 2;
+  const double done = std::min(all, n * (run.options.sequential_overlap + std::floor(std::log2(std::max(2.0, n)))));
+  return run.match_seconds * std::max(0.0, all - done) / std::max(1.0, done) + run.map_seconds;
+}
+
 // (e) A model that looks wrong (options.check_model) after sequential matching is made again from
 // every pair, and kept where it does not look wrong, else the first (set aside in
-// colmap/first_model while the mapper runs again). `doubt` gets the kept one's.
+// colmap/first_model while the mapper runs again); not where a time budget cannot afford it.
+// `doubt` gets the kept one's.
 void RemakeIfWrong(SfmRun& run, bool* exhaustive, Mapping* mapping, std::string* doubt) {
   if (!run.options.check_model) return;
   *doubt = run.options.check_model(*mapping->best_dir);
   if (doubt->empty() || *exhaustive || run.options.matcher != "auto") return;
+  if (run.options.seconds_left) {
+    const double needs = EveryPairSeconds(run), left = run.options.seconds_left();
+    if (needs > left) {
+      Report(run.options, StrCat("sfm: the model of ", mapping->best.num_images, " photos looks wrong (", *doubt,
+                                 "); matching every pair and mapping again would take about ",
+                                 static_cast<int>(needs), " s, more than the time budget leaves (",
+                                 static_cast<int>(std::max(0.0, left)), " s): it is kept (a larger --time-budget, "
+                                 "or perf sfm without one, makes it again)"));
+      return;
+    }
+  }
   Report(run.options, StrCat("sfm: the model of ", mapping->best.num_images, " photos looks wrong (", *doubt,
                              "): matching every pair and mapping again"));
   const fs::path first = run.colmap_dir / "first_model";

@@ -49,6 +49,9 @@ struct SfmOptions {
   // perf sfm pass ObjectModelDoubt (model_check.h): a ghost, or cameras that do not look at a
   // common point as an object capture's do.
   std::function<std::string(const std::filesystem::path&)> check_model;
+  // With a time budget (perf run --time-budget): the seconds it leaves. A remake from every pair
+  // (above) that would take longer, at the rate sequential matching ran, is not run. Unset: none.
+  std::function<double()> seconds_left;
   // Called with one line of progress per step (stage name and a short status).
   std::function<void(const std::string&)> progress;
   // Called while a COLMAP step runs, at least every quarter second (common/subprocess.h); throwing

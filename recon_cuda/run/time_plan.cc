@@ -174,6 +174,7 @@ PlanVerdict TimePlanner::AfterIteration(int level, int done, const std::function
   }
   l.last = Now();
   if (done >= caps_[level]) return PlanVerdict::kGoOn;  // the level ends by itself
+  if (level == 0 && done < kMinFirstIterations) return PlanVerdict::kGoOn;  // the first level's floor
   // An iteration more would pass the budget's end: the run ends here, whatever the plan said.
   if (l.last + l.iteration + ReserveAt(level) > budget_.seconds) {
     stopped_ = StrCat("the budget's end is near at level ", level + 1, " iteration ", done, " (", Sec(l.last),

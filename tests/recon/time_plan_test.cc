@@ -60,9 +60,9 @@ TEST(PlanIterations, TheFirstLevelRunsAtLeastOnce) {
   EXPECT_EQ(PlanIterations(-3, e), (std::vector<int>{1, 0}));
 }
 
-// A budget already spent: the planner ends the run at the first level's first iteration and leaves
-// out the next level, saying why.
-TEST(TimePlanner, ABudgetSpentEndsTheRunAndSaysWhy) {
+// A budget already spent (by perf sfm, say): the first level still runs its floor of
+// kMinFirstIterations, then the planner ends the run and leaves out the next level, saying why.
+TEST(TimePlanner, ABudgetSpentEndsTheRunAfterTheFirstLevelsFloorAndSaysWhy) {
   TimeBudget b;
   b.seconds = 10;
   b.start = WallClock::now() - std::chrono::seconds(20);
@@ -70,14 +70,29 @@ TEST(TimePlanner, ABudgetSpentEndsTheRunAndSaysWhy) {
   ASSERT_TRUE(plan.BeforeLevel(0));
   plan.LevelStarted(0);
   int measured = 0;
-  EXPECT_EQ(plan.AfterIteration(0, 1, [&] { ++measured; return 1.0; }), PlanVerdict::kStop);
+  for (int it = 1; it < kMinFirstIterations; ++it) {
+    EXPECT_EQ(plan.AfterIteration(0, it, [&] { ++measured; return 1.0; }), PlanVerdict::kGoOn) << it;
+  }
+  EXPECT_EQ(plan.AfterIteration(0, kMinFirstIterations, [&] { ++measured; return 1.0; }), PlanVerdict::kStop);
   EXPECT_EQ(measured, 1);
   EXPECT_NE(plan.stopped().find("budget"), std::string::npos) << plan.stopped();
   EXPECT_FALSE(plan.BeforeLevel(1));
   EXPECT_NE(plan.TakeMessage().find("level 2 (64^3"), std::string::npos);
   const nlohmann::json j = plan.ToJson();
   EXPECT_EQ(j["budget_seconds"], 10.0);
-  EXPECT_EQ(j["levels"][0]["iterations"], 1);
+  EXPECT_EQ(j["levels"][0]["iterations"], kMinFirstIterations);
+}
+
+// A first level capped below the floor ends by itself.
+TEST(TimePlanner, TheFloorIsTheFirstLevelsCapWhereThatIsLess) {
+  TimeBudget b;
+  b.seconds = 10;
+  b.start = WallClock::now() - std::chrono::seconds(20);
+  TimePlanner plan(b, 32, {3, 30}, {1000, 1000});
+  ASSERT_TRUE(plan.BeforeLevel(0));
+  plan.LevelStarted(0);
+  for (int it = 1; it <= 3; ++it) EXPECT_EQ(plan.AfterIteration(0, it, [] { return 1.0; }), PlanVerdict::kGoOn) << it;
+  EXPECT_FALSE(plan.BeforeLevel(1));
 }
 
 // A budget that holds everything: the plan changes nothing.

@@ -968,6 +968,25 @@ TEST(ColmapRunner, AModelThatLooksWrongIsMadeAgainFromEveryPair) {
   EXPECT_TRUE(Said(progress, "sfm: the model from every pair looks wrong too (it holds 1 ghost group): keeping the first"));
   EXPECT_TRUE(Said(progress, "sfm: warning: the model looks wrong (only 40 % of its cameras look at a common point)"));
   EXPECT_EQ(colmap::ReadReconstruction(r.sparse_dir).images.size(), 4u);
+
+  // A time budget that has room for it: made again as above; one spent: kept, saying why.
+  for (const double left : {1e6, -5.0}) {
+    fs::remove(marker);
+    progress.clear();
+    remade_looks_wrong = false;
+    options.seconds_left = [left] { return left; };
+    r = RunSfm(options);
+    EXPECT_EQ(fs::exists(marker), left > 0) << left;
+    EXPECT_EQ(r.num_registered_images, left > 0 ? 3 : 4) << left;
+    EXPECT_EQ(r.exhaustive, left > 0) << left;
+  }
+  bool said = false;
+  for (const std::string& line : progress) {
+    said = said || (line.find("matching every pair and mapping again would take about") != std::string::npos &&
+                    line.find("more than the time budget leaves (0 s): it is kept") != std::string::npos);
+  }
+  EXPECT_TRUE(said);
+  EXPECT_EQ(r.doubt, "only 40 % of its cameras look at a common point");
 }
 
 // Photos from two zoom settings of one camera and a crop without EXIF: three cameras, each
