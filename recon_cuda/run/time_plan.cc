@@ -174,9 +174,10 @@ PlanVerdict TimePlanner::AfterIteration(int level, int done, const std::function
   }
   l.last = Now();
   if (done >= caps_[level]) return PlanVerdict::kGoOn;  // the level ends by itself
-  if (level == 0 && done < kMinFirstIterations) return PlanVerdict::kGoOn;  // the first level's floor
+  // The first level's floor: the plan may move on to the next level before it, but not end the run.
+  const bool floor = level == 0 && done < kMinFirstIterations;
   // An iteration more would pass the budget's end: the run ends here, whatever the plan said.
-  if (l.last + l.iteration + ReserveAt(level) > budget_.seconds) {
+  if (!floor && l.last + l.iteration + ReserveAt(level) > budget_.seconds) {
     stopped_ = StrCat("the budget's end is near at level ", level + 1, " iteration ", done, " (", Sec(l.last),
                       " s spent, about ", Sec(l.iteration), " s an iteration, export and eval ~", Sec(ReserveAt(level)),
                       " s): the run ends at this level");
@@ -199,6 +200,7 @@ PlanVerdict TimePlanner::AfterIteration(int level, int done, const std::function
     l.planned = done + 1;  // one more, then look again
     return PlanVerdict::kGoOn;
   }
+  if (floor) return PlanVerdict::kGoOn;
   stopped_ = StrCat("level ", level + 1, " ran its ", done, " iterations in the budget");
   message_ = "time plan: " + stopped_ + "; the run ends here";
   return PlanVerdict::kStop;

@@ -25,8 +25,9 @@ namespace perf::recon {
 // The finest level of a plan runs at least this many iterations (fewer: the level before ends the
 // run); it gets this share of the time left when the levels' iterations do not all fit.
 inline constexpr int kMinFinestIterations = 4;
-// The first level runs at least this many iterations (or its cap) even past the budget's end: a run
-// whose budget went to the stages before the solve (perf sfm) still ends with the object's figure.
+// The first level runs at least this many iterations (or its cap) even past the budget's end, unless
+// the plan moves on to the next level sooner: a run whose budget went to the stages before the
+// solve (perf sfm) still ends with the object's figure.
 inline constexpr int kMinFirstIterations = 8;
 inline constexpr double kFinestShare = 2.0 / 3.0;
 // The plan aims this fraction of the budget before the deadline (what the estimates miss).

@@ -327,7 +327,7 @@ std::vector<TurnSearch> SearchTurns(ReconstructRun& run, const TurnSearchOptions
     groups[im.turn_group].push_back(im.name);
     marked.insert(im.name);
   }
-  if (groups.empty() || !o.enabled) return {};
+  if (groups.empty()) return {};
   if (run.comm.size() > 1) {
     run.Say("turn search: not run with several ranks; the groups' poses stay as imported (run one process once)");
     return {};

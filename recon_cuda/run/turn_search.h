@@ -26,7 +26,6 @@ namespace perf::recon {
 struct ReconstructRun;
 
 struct TurnSearchOptions {
-  bool enabled = true;        // false: groups keep their poses as imported (and their marks)
   int max_pixels = 64;        // the photos are scored downscaled to at most this many pixels across
   double step_degrees = 10;   // the coarse turns about the up axis, all round
   int refinements = 3;        // then each a 3 x 3 x 3 neighbourhood about three axes, the step halved
