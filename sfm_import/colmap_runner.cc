@@ -384,8 +384,8 @@ double EveryPairSeconds(const SfmRun& run) {
 
 // (e) A model that looks wrong (options.check_model) after sequential matching is made again from
 // every pair, and kept where it does not look wrong, else the first (set aside in
-// colmap/first_model while the mapper runs again); not where a time budget cannot afford it.
-// `doubt` gets the kept one's.
+// colmap/first_model while the mapper runs again); under a time budget that cannot afford it too,
+// saying so. `doubt` gets the kept one's.
 void RemakeIfWrong(SfmRun& run, bool* exhaustive, Mapping* mapping, std::string* doubt) {
   if (!run.options.check_model) return;
   *doubt = run.options.check_model(*mapping->best_dir);
@@ -393,12 +393,9 @@ void RemakeIfWrong(SfmRun& run, bool* exhaustive, Mapping* mapping, std::string*
   if (run.options.seconds_left) {
     const double needs = EveryPairSeconds(run), left = run.options.seconds_left();
     if (needs > left) {
-      Report(run.options, StrCat("sfm: the model of ", mapping->best.num_images, " photos looks wrong (", *doubt,
-                                 "); matching every pair and mapping again would take about ",
-                                 static_cast<int>(needs), " s, more than the time budget leaves (",
-                                 static_cast<int>(std::max(0.0, left)), " s): it is kept (a larger --time-budget, "
-                                 "or perf sfm without one, makes it again)"));
-      return;
+      Report(run.options, StrCat("sfm: matching every pair and mapping again will take about ", static_cast<int>(needs),
+                                 " s, more than the time budget leaves (", static_cast<int>(std::max(0.0, left)),
+                                 " s): the run passes its budget rather than fit a model that looks wrong"));
     }
   }
   Report(run.options, StrCat("sfm: the model of ", mapping->best.num_images, " photos looks wrong (", *doubt,

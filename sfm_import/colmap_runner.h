@@ -50,7 +50,8 @@ struct SfmOptions {
   // common point as an object capture's do.
   std::function<std::string(const std::filesystem::path&)> check_model;
   // With a time budget (perf run --time-budget): the seconds it leaves. A remake from every pair
-  // (above) that would take longer, at the rate sequential matching ran, is not run. Unset: none.
+  // (above) that would take longer, at the rate sequential matching ran, is said to pass the
+  // budget, and runs: a model that looks wrong is not worth fitting in time. Unset: none.
   std::function<double()> seconds_left;
   // Called with one line of progress per step (stage name and a short status).
   std::function<void(const std::string&)> progress;
