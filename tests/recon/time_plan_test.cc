@@ -60,13 +60,18 @@ TEST(PlanIterations, TheFirstLevelRunsAtLeastOnce) {
   EXPECT_EQ(PlanIterations(-3, e), (std::vector<int>{1, 0}));
 }
 
-// A budget already spent (by perf sfm, say): the first level still runs its floor of
-// kMinFirstIterations, then the planner ends the run and leaves out the next level, saying why.
-TEST(TimePlanner, ABudgetSpentEndsTheRunAfterTheFirstLevelsFloorAndSaysWhy) {
+// 10 s, of which 20 have passed.
+TimeBudget SpentBudget() {
   TimeBudget b;
   b.seconds = 10;
   b.start = WallClock::now() - std::chrono::seconds(20);
-  TimePlanner plan(b, 32, {30, 30}, {1000, 1000});
+  return b;
+}
+
+// A budget already spent (by perf sfm, say): the first level still runs its floor of
+// kMinFirstIterations, then the planner ends the run and leaves out the next level, saying why.
+TEST(TimePlanner, ABudgetSpentEndsTheRunAfterTheFirstLevelsFloorAndSaysWhy) {
+  TimePlanner plan(SpentBudget(), 32, {30, 30}, {1000, 1000});
   ASSERT_TRUE(plan.BeforeLevel(0));
   plan.LevelStarted(0);
   int measured = 0;
@@ -85,10 +90,7 @@ TEST(TimePlanner, ABudgetSpentEndsTheRunAfterTheFirstLevelsFloorAndSaysWhy) {
 
 // A first level capped below the floor ends by itself.
 TEST(TimePlanner, TheFloorIsTheFirstLevelsCapWhereThatIsLess) {
-  TimeBudget b;
-  b.seconds = 10;
-  b.start = WallClock::now() - std::chrono::seconds(20);
-  TimePlanner plan(b, 32, {3, 30}, {1000, 1000});
+  TimePlanner plan(SpentBudget(), 32, {3, 30}, {1000, 1000});
   ASSERT_TRUE(plan.BeforeLevel(0));
   plan.LevelStarted(0);
   for (int it = 1; it <= 3; ++it) EXPECT_EQ(plan.AfterIteration(0, it, [] { return 1.0; }), PlanVerdict::kGoOn) << it;
