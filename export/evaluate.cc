@@ -141,11 +141,9 @@ void ScoreAfterPoseFit(const EvalOptions& o, LoadedCheckpoint& l, const std::vec
     recon::ApplyTransform(transforms[k], &render);
     ViewReport& v = r->views[k];
     v.psnr_pose_fit = recon::Psnr(render, moved.image);
-    const auto pose = [](const recon::PinholeCamera<float>& cam) {
-      return Eigen::Matrix<float, 3, 4, Eigen::RowMajor>(cam.world_from_cam).cast<double>().eval();
-    };
     const Eigen::Vector3d box(c.placement.box_center[0], c.placement.box_center[1], c.placement.box_center[2]);
-    const recon::CameraMove m = recon::MoveBetween(pose(corrections.CameraFor(test[k].camera)), pose(moved.camera), box);
+    const recon::CameraMove m = recon::MoveBetween(recon::WorldFromCam(corrections.CameraFor(test[k].camera)),
+                                                   recon::WorldFromCam(moved.camera), box);
     v.pose_fit_degrees = m.degrees;
     v.pose_fit_centre_fraction = m.centre_fraction;
     sum += v.psnr_pose_fit;

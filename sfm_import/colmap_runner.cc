@@ -390,6 +390,8 @@ void RemakeIfWrong(SfmRun& run, bool* exhaustive, Mapping* mapping, std::string*
   if (!run.options.check_model) return;
   *doubt = run.options.check_model(*mapping->best_dir);
   if (doubt->empty() || *exhaustive || run.options.matcher != "auto") return;
+  Report(run.options, StrCat("sfm: the model of ", mapping->best.num_images, " photos looks wrong (", *doubt,
+                             "): matching every pair and mapping again"));
   if (run.options.seconds_left) {
     const double needs = EveryPairSeconds(run), left = run.options.seconds_left();
     if (needs > left) {
@@ -398,8 +400,6 @@ void RemakeIfWrong(SfmRun& run, bool* exhaustive, Mapping* mapping, std::string*
                                  " s): the run passes its budget rather than fit a model that looks wrong"));
     }
   }
-  Report(run.options, StrCat("sfm: the model of ", mapping->best.num_images, " photos looks wrong (", *doubt,
-                             "): matching every pair and mapping again"));
   const fs::path first = run.colmap_dir / "first_model";
   ReplaceDirectory(*mapping->best_dir, first);
   Mapping before = *mapping;

@@ -1,12 +1,12 @@
 #include "sfm_import/sfm_inputs.h"
 
 #include <algorithm>
-#include <iterator>
-#include <nlohmann/json.hpp>
-#include <set>
 #include <array>
 #include <cctype>
 #include <cmath>
+#include <iterator>
+#include <nlohmann/json.hpp>
+#include <set>
 #include <string_view>
 #include <system_error>
 

@@ -19,6 +19,10 @@ PinholeCamera<float> ToPinhole(const SceneCamera& camera, const Eigen::Matrix<do
   return c;
 }
 
+Eigen::Matrix<double, 3, 4> WorldFromCam(const PinholeCamera<float>& camera) {
+  return Eigen::Matrix<float, 3, 4, Eigen::RowMajor>(camera.world_from_cam).cast<double>();
+}
+
 std::vector<ViewFrustum> SplitViews(const Scene& scene, Split split) {
   std::vector<ViewFrustum> views;
   for (const SceneImage& im : scene.images) {

@@ -42,6 +42,8 @@ std::vector<PosedImage> LoadImages(const Scene& scene, const std::filesystem::pa
                                    ImageShare share = {});
 
 PinholeCamera<float> ToPinhole(const SceneCamera& camera, const Eigen::Matrix<double, 3, 4>& world_from_cam);
+// The camera's world_from_cam [R | centre] in double (the inverse of ToPinhole's pose part).
+Eigen::Matrix<double, 3, 4> WorldFromCam(const PinholeCamera<float>& camera);
 
 // The cameras and image sizes of `split`'s images as LoadImages poses them, without reading an image.
 std::vector<ViewFrustum> SplitViews(const Scene& scene, Split split);

@@ -13,8 +13,8 @@
 #include "recon_cuda/run/level_monitor.h"
 #include "recon_cuda/run/render_views.h"
 #include "recon_cuda/run/reconstruct_run.h"
-#include "recon_cuda/run/turn_search.h"
 #include "recon_cuda/run/run_settings.h"
+#include "recon_cuda/run/turn_search.h"
 
 namespace perf::recon {
 namespace {

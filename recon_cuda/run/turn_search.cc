@@ -43,10 +43,6 @@ void SetPose(const Pose& p, PinholeCamera<float>* camera) {
   for (int k = 0; k < 12; ++k) camera->world_from_cam[k] = static_cast<float>(p(k / 4, k % 4));
 }
 
-Pose PoseOf(const PinholeCamera<float>& camera) {
-  return Eigen::Matrix<float, 3, 4, Eigen::RowMajor>(camera.world_from_cam).cast<double>();
-}
-
 // The colour transform (a gain and an offset per channel, by least squares) that takes `render`
 // closest to `photo`: the group's exposures are not known to the volume of the other photos.
 ColourTransform<float> BestTransform(const RenderOutput& render, const Image& photo) {
@@ -113,7 +109,9 @@ Others OtherPhotos(const ReconstructRun& run, const std::set<std::string>& marke
 
 class Searcher {
  public:
-  Searcher(ReconstructRun& run, const TurnSearchOptions& o) : run_(run), o_(o) {}
+  // marked: the photos of every group (the up axis is the other training cameras').
+  Searcher(ReconstructRun& run, const TurnSearchOptions& o, const std::set<std::string>& marked)
+      : run_(run), o_(o), marked_(marked) {}
 
   // The backend holds the level fitted from the other photos: x its parameters there, `level` and
   // `params` the same on the host (for the pose fit's own backend).
@@ -159,8 +157,6 @@ class Searcher {
     return t;
   }
 
-  void Mark(const std::set<std::string>& marked) { marked_ = marked; }
-
  private:
   GroupViews Views(const std::vector<std::string>& photos, int max_pixels) const {
     GroupViews g;
@@ -191,14 +187,14 @@ class Searcher {
                                                         transforms, std::vector<PoseValues>(g.views.size()), {});
     std::vector<Pose> fitted;
     for (size_t i = 0; i < g.views.size(); ++i) {
-      fitted.push_back(PoseOf(CorrectedCamera(g.views[i].camera, values[i].data(), run_.geometry)));
+      fitted.push_back(WorldFromCam(CorrectedCamera(g.views[i].camera, values[i].data(), run_.geometry)));
     }
     return fitted;
   }
 
   ReconstructRun& run_;
   const TurnSearchOptions& o_;
-  std::set<std::string> marked_;
+  const std::set<std::string>& marked_;
 };
 
 // The scene's images and the loaded photos of a group moved by t.move where used; its mark cleared either way.
@@ -345,8 +341,7 @@ std::vector<TurnSearch> SearchTurns(ReconstructRun& run, const TurnSearchOptions
   h.exposures = 0;
   h.poses = 0;
   h.stop_when_out_of_memory = false;
-  Searcher searcher(run, o);
-  searcher.Mark(marked);
+  Searcher searcher(run, o, marked);
   std::vector<TurnSearch> found;
   HierarchyCallbacks cb;
   cb.level_done = [&](const HierarchyLevel& level, const SolverSummary&, const std::vector<float>& x) {
