@@ -99,4 +99,10 @@ PosedImage Downscaled(const PosedImage& image, int factor) {
   return out;
 }
 
+std::vector<PosedImage> DownscaledAll(const std::vector<PosedImage>& images, int factor) {
+  std::vector<PosedImage> out(images.size());
+  tbb::parallel_for(size_t{0}, images.size(), [&](size_t i) { out[i] = Downscaled(images[i], factor); });
+  return out;
+}
+
 }  // namespace perf::recon

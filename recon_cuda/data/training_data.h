@@ -51,6 +51,8 @@ std::vector<ViewFrustum> SplitViews(const Scene& scene, Split split);
 // The image (and its alpha) downscaled by an integer factor (OpenImageIO filtered resize) with its intrinsics
 // scaled to match: pixel edges map to pixel edges, so f and c both divide by the factor.
 PosedImage Downscaled(const PosedImage& image, int factor);
+// Each image Downscaled, in parallel (the resizes are single-threaded each).
+std::vector<PosedImage> DownscaledAll(const std::vector<PosedImage>& images, int factor);
 
 // Rays of one level. Ordered image by image in 8 x 8 pixel tiles, so that consecutive rays (one
 // thread's block) meet the same cells: better cache use than scanlines.

@@ -434,9 +434,7 @@ TrainingViews ViewsForHierarchy(const std::vector<PosedImage>& train, Communicat
     if (factor == 1) {
       rays = MakeRaySet(train);
     } else {
-      std::vector<PosedImage> small;
-      for (const PosedImage& im : train) small.push_back(Downscaled(im, factor));
-      rays = MakeRaySet(small);
+      rays = MakeRaySet(DownscaledAll(train, factor));
     }
     if (comm != nullptr) {  // collectives: every rank calls both
       rays.first_index = comm->ShareOf(rays.size()).first;

@@ -1,15 +1,19 @@
 // perf run --time-budget as a user runs it: on lego at 50 x 50 a run given 60 s ends within 69 s
 // (15 % over at most) with a held-out PSNR within 0.3 dB of the same run without a budget (which
 // takes longer, so no run that fits does better by more); the plan is printed and recorded in
-// run.json. A budget too small for the second level leaves it out and says why; a bad duration
+// run.json. Where this machine runs lego without a budget in under 70 s, the budget is 85 % of
+// that run's time instead, so that it binds. A budget too small for the second level leaves it out and says why; a bad duration
 // is refused by name before anything is written.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <nlohmann/json.hpp>
 
 #include "common/atomic_file.h"
+#include "common/errors.h"
 #include "tests/pipeline/synthetic_workspace.h"
 #include "tests/test_util.h"
 
@@ -26,22 +30,24 @@ TEST(TimeBudgetCli, LegoIn60SecondsEndsWithinTheBudgetNearTheBestThatFits) {
   test::TempDir dir;
   const std::string run = test::PerfBinary() + " run --nerf " + (lego / "transforms_train.json").string() +
                           " --max-size 50 --workspace ";
-  const auto t0 = std::chrono::steady_clock::now();
-  const auto budgeted = RunCommand(run + (dir / "budget").string() + " --time-budget 60s");
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  ASSERT_EQ(budgeted.exit_code, 0) << budgeted.output;
-  EXPECT_NE(budgeted.output.find("time plan: budget 60.0 s"), std::string::npos) << budgeted.output;
   const auto reference = RunCommand(run + (dir / "none").string() + " --time-budget none");
   ASSERT_EQ(reference.exit_code, 0) << reference.output;
   EXPECT_EQ(reference.output.find("time plan"), std::string::npos) << reference.output;
+  const nlohmann::json without = ReadJson(dir / "none" / "run.json");
+  const double budget = std::min(60.0, std::floor(0.85 * without["seconds"].get<double>()));
+
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto budgeted = RunCommand(run + (dir / "budget").string() + StrCat(" --time-budget ", budget, "s"));
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ASSERT_EQ(budgeted.exit_code, 0) << budgeted.output;
+  EXPECT_NE(budgeted.output.find(StrCat("time plan: budget ", budget, ".0 s")), std::string::npos) << budgeted.output;
 
   const nlohmann::json with = ReadJson(dir / "budget" / "run.json");
-  const nlohmann::json without = ReadJson(dir / "none" / "run.json");
-  std::printf("lego 50x50: --time-budget 60s ended in %.1f s (run.json %.1f s) at %.2f dB; without a budget %.1f s at "
-              "%.2f dB\n", seconds, with["seconds"].get<double>(), with["test_psnr"].get<double>(),
+  std::printf("lego 50x50: --time-budget %.0fs ended in %.1f s (run.json %.1f s) at %.2f dB; without a budget %.1f s at "
+              "%.2f dB\n", budget, seconds, with["seconds"].get<double>(), with["test_psnr"].get<double>(),
               without["seconds"].get<double>(), without["test_psnr"].get<double>());
-  EXPECT_LE(seconds, 69.0);
-  EXPECT_EQ(with["time_budget"]["seconds"], 60.0);
+  EXPECT_LE(seconds, 1.15 * budget);
+  EXPECT_EQ(with["time_budget"]["seconds"], budget);
   EXPECT_EQ(with["time_budget"]["from"], "--time-budget");
   const nlohmann::json& plan = with["time_budget"]["plan"];
   ASSERT_TRUE(plan.is_object()) << with.dump(1);
@@ -51,7 +57,7 @@ TEST(TimeBudgetCli, LegoIn60SecondsEndsWithinTheBudgetNearTheBestThatFits) {
   for (const auto& l : plan["levels"]) EXPECT_LE(l["iterations"].get<int>(), 30) << l;
   EXPECT_EQ(without["time_budget"]["seconds"], 0.0);
   EXPECT_TRUE(without["time_budget"]["plan"].is_null());
-  EXPECT_GT(without["seconds"].get<double>(), 60.0) << "the budget did not bind: the test shows nothing";
+  EXPECT_GT(without["seconds"].get<double>(), budget) << "the budget did not bind: the test shows nothing";
   EXPECT_GE(with["test_psnr"].get<double>(), without["test_psnr"].get<double>() - 0.3);
 }
 

@@ -68,7 +68,7 @@ TEST(GroupMove, TurnKeepsItsPivot) {
 // A score that is best at `target` and falls with the angle from it.
 TEST(FindTurn, FindsTheBestTurnCoarseToFine) {
   const Eigen::Vector3d up(0.1, 0.2, 1), toward(1, 0, 0);
-  for (const Eigen::Matrix3d target :
+  for (const Eigen::Matrix3d& target :
        {Eigen::Matrix3d(Eigen::AngleAxisd(Radians(137), up.normalized())),
         Eigen::Matrix3d(Eigen::AngleAxisd(Radians(-64), up.normalized()) *
                         Eigen::AngleAxisd(Radians(7), Eigen::Vector3d::UnitY()))}) {
