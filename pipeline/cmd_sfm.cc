@@ -36,6 +36,12 @@ void AddSfmCommand(CLI::App& app) {
   cmd->add_option("--max-image-size", o->max_image_size, "Longest side used for feature extraction")
       ->capture_default_str();
   cmd->add_option("--max-features", o->max_num_features, "Most SIFT features per image")->capture_default_str();
+  cmd->add_option("--min-pose-inliers", o->min_pose_inliers,
+                  "A photo is placed only on at least this many inlier matches (0: max(30, max-features / 80); COLMAP's own: 30)")
+      ->capture_default_str();
+  cmd->add_option("--min-pose-inlier-ratio", o->min_pose_inlier_ratio,
+                  "... and this fraction of its matches as inliers (COLMAP's own: 0.25)")
+      ->capture_default_str();
   cmd->add_option("--min-registered", o->min_registered_images, "Fewer registered images is an error")
       ->capture_default_str();
   AddThreadsOption(cmd, &o->num_threads, -1);

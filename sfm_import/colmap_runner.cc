@@ -84,6 +84,14 @@ std::vector<std::string> WithSiftMatching(const SfmRun& run, std::vector<std::st
   return args;
 }
 
+// A mapping step's arguments with the settings every one shares: threads and how sure a placement must be.
+std::vector<std::string> WithMapper(const SfmRun& run, std::vector<std::string> args) {
+  args.insert(args.end(), {"--Mapper.num_threads", run.threads, "--Mapper.abs_pose_min_num_inliers",
+                           std::to_string(run.options.MinPoseInliers()), "--Mapper.abs_pose_min_inlier_ratio",
+                           StrCat(run.options.min_pose_inlier_ratio)});
+  return args;
+}
+
 // Without --force, a model already at WORKSPACE/sparse/0 is kept: says so and fills `result`'s
 // counts from it. False when there is none, when it was made from other photos than `inputs`
 // (said), or with --force.
@@ -228,8 +236,8 @@ Mapping Map(SfmRun& run) {
   Mapping m;
   const Clock::time_point start = Clock::now();
   const StepResult r = run.Step(
-      {"mapper", "--database_path", run.database.string(), "--image_path", run.options.images.string(),
-       "--output_path", run.models_dir.string(), "--Mapper.num_threads", run.threads},
+      WithMapper(run, {"mapper", "--database_path", run.database.string(), "--image_path", run.options.images.string(),
+                       "--output_path", run.models_dir.string()}),
       "mapping", MapperParser(run.n));
   run.map_seconds = std::chrono::duration<double>(Clock::now() - start).count();
   // COLMAP 3.8 exits with 1 when no initial pair could be found: a property of the photos,
@@ -353,18 +361,19 @@ void RegisterLeftOut(SfmRun& run, bool exhaustive, Mapping* mapping, std::vector
   step(WithSiftMatching(run, {"matches_importer", "--database_path", run.database.string(), "--match_list_path",
                               pairs.string(), "--match_type", "pairs"}),
        "matching", ExhaustiveParser());
-  step({"image_registrator", "--database_path", run.database.string(), "--input_path", mapping->best_dir->string(),
-        "--output_path", second.string(), "--Mapper.num_threads", run.threads},
+  step(WithMapper(run, {"image_registrator", "--database_path", run.database.string(), "--input_path",
+                        mapping->best_dir->string(), "--output_path", second.string()}),
        "registering", MapperParser(run.n));
   step({"bundle_adjuster", "--input_path", second.string(), "--output_path", second.string()}, "adjusting", quiet);
   if (!Adopt(run, second, ok, 2, mapping, passes)) return;
   for (int pass = 3; mapping->best.num_images < run.n && pass < 3 + run.options.max_more_passes; ++pass) {
     const fs::path points = model_dir(StrCat("pass_", pass, "_points")), next = model_dir(StrCat("pass_", pass));
-    step({"point_triangulator", "--database_path", run.database.string(), "--image_path", run.options.images.string(),
-          "--input_path", mapping->best_dir->string(), "--output_path", points.string(), "--Mapper.num_threads", run.threads},
+    step(WithMapper(run, {"point_triangulator", "--database_path", run.database.string(), "--image_path",
+                          run.options.images.string(), "--input_path", mapping->best_dir->string(), "--output_path",
+                          points.string()}),
          "triangulating", quiet);
-    step({"image_registrator", "--database_path", run.database.string(), "--input_path", points.string(), "--output_path",
-          next.string(), "--Mapper.num_threads", run.threads},
+    step(WithMapper(run, {"image_registrator", "--database_path", run.database.string(), "--input_path",
+                          points.string(), "--output_path", next.string()}),
          "registering", MapperParser(run.n));
     if (!Adopt(run, next, ok, pass, mapping, passes)) break;
   }

@@ -5,6 +5,7 @@
 // WORKSPACE/sparse/0, and the photos it left out are named. COLMAP's own output goes to WORKSPACE/colmap/colmap.log.
 #pragma once
 
+#include <algorithm>
 #include <filesystem>
 #include <functional>
 #include <string>
@@ -37,6 +38,13 @@ struct SfmOptions {
   int max_more_passes = 4;
   int max_image_size = 1600;             // SiftExtraction.max_image_size
   int max_num_features = 8192;           // SiftExtraction.max_num_features
+  // A photo is placed (mapper, registration passes) only on at least this many inlier matches
+  // (0: max(30, max_num_features / 80), 102 at 8192 features) and this fraction of its matches as
+  // inliers (COLMAP's own: 30 and 0.25). Bonsai's every-pair matches mapped with COLMAP's values put
+  // a stretch of photos in a ghost; with these 83 of 84 photos were in place (docs/tuning.md).
+  int min_pose_inliers = 0;              // Mapper.abs_pose_min_num_inliers
+  double min_pose_inlier_ratio = 0.4;    // Mapper.abs_pose_min_inlier_ratio
+  int MinPoseInliers() const { return min_pose_inliers > 0 ? min_pose_inliers : std::max(30, max_num_features / 80); }
   int num_threads = -1;                  // -1: all cores
   int min_registered_images = 3;         // fewer is an error
   bool force = false;                    // re-run even if a sparse model exists

@@ -171,6 +171,11 @@ void SfmOptions::Check() const {
                  "how many following photos each photo is matched with, e.g. 10");
   check_at_least("--max-image-size", max_image_size, 1, "longest side in pixels, e.g. 1600");
   check_at_least("--max-features", max_num_features, 1, "features per image, e.g. 8192");
+  check_at_least("--min-pose-inliers", min_pose_inliers, 0, "inlier matches a photo's placement needs, e.g. 100 (0: from --max-features)");
+  if (!(min_pose_inlier_ratio > 0 && min_pose_inlier_ratio < 1)) {
+    throw InputError(kCommandLine, "--min-pose-inlier-ratio", StrCat(min_pose_inlier_ratio), "must be in (0, 1)",
+                     "the fraction of a photo's matches that must be inliers, e.g. 0.4");
+  }
   if (!(idle_timeout_seconds > 0) || !std::isfinite(idle_timeout_seconds)) {
     throw InputError(kCommandLine, "--colmap-idle-timeout", StrCat(idle_timeout_seconds),
                      "must be a positive number of seconds", "e.g. 1800 (30 minutes)");

@@ -555,6 +555,19 @@ TEST(ColmapRunner, CheckNamesTheBadOption) {
   o.sequential_overlap = 0;
   EXPECT_EQ(field_of(o), "--overlap");
   o = options;
+  o.min_pose_inliers = -1;
+  EXPECT_EQ(field_of(o), "--min-pose-inliers");
+  for (double ratio : {0.0, 1.0, std::nan("")}) {
+    o = options;
+    o.min_pose_inlier_ratio = ratio;
+    EXPECT_EQ(field_of(o), "--min-pose-inlier-ratio") << ratio;
+  }
+  o = options;
+  o.max_num_features = 1024;
+  EXPECT_EQ(o.MinPoseInliers(), 30);  // COLMAP's own where the features are few
+  o.min_pose_inliers = 55;
+  EXPECT_EQ(o.MinPoseInliers(), 55);
+  o = options;
   o.num_threads = 0;
   EXPECT_EQ(field_of(o), "-j");
   o = options;
@@ -809,6 +822,12 @@ exit 0
   EXPECT_NE(log.find("arg=[image_registrator]"), std::string::npos);
   EXPECT_NE(log.find("arg=[bundle_adjuster]"), std::string::npos);
   EXPECT_FALSE(said("warning"));
+  // The mapper and the registration place a photo only on 102 inliers (8192 features / 80) and 40 %.
+  const std::string strict = "arg=[--Mapper.abs_pose_min_num_inliers]\narg=[102]\narg=[--Mapper.abs_pose_min_inlier_ratio]\narg=[0.4]";
+  EXPECT_NE(log.find("arg=[mapper]"), std::string::npos);
+  size_t placements = 0;
+  for (size_t at = log.find(strict); at != std::string::npos; at = log.find(strict, at + 1)) ++placements;
+  EXPECT_EQ(placements, 2u) << log;  // mapper, image_registrator
 
   progress.clear();
   options.force = true;
