@@ -12,6 +12,7 @@
 #include <optional>
 #include <set>
 #include <system_error>
+#include <thread>
 #include <vector>
 
 #include "common/atomic_file.h"
@@ -66,6 +67,7 @@ struct SfmRun {
   fs::path database, models_dir;            // in colmap_dir
   ColmapSteps steps;                        // the binary and colmap_dir/colmap.log
   std::string threads;  // every step's number of threads
+  int exhaustive_max = 0;  // the most photos auto mode matches pair by pair (AutoExhaustiveMax)
   double match_seconds = 0, map_seconds = 0;  // the last Match's and Map's
 };
 
@@ -133,9 +135,28 @@ SfmRun StartRun(const SfmOptions& options, const std::vector<std::string>& input
   return run;
 }
 
+// Seconds CPU matching takes per pair of photos at 8192 features on 2 threads (bonsai, 800 px).
+constexpr double kPairSeconds = 0.28;
+
+// The most photos auto mode matches pair by pair: exhaustive_max_images, and under a time budget
+// only as many as take at most half the time it leaves (at kPairSeconds, scaled by the threads).
+double PairSeconds(const SfmOptions& o) {
+  const int threads = o.num_threads > 0 ? o.num_threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  return kPairSeconds * 2.0 / std::min(threads, 16);
+}
+
+int AutoExhaustiveMax(const SfmRun& run) {
+  const SfmOptions& o = run.options;
+  if (!o.seconds_left) return o.exhaustive_max_images;
+  const double pairs = std::max(0.0, 0.5 * o.seconds_left()) / PairSeconds(o);
+  // n (n - 1) / 2 <= pairs
+  const int fits = static_cast<int>(std::floor(0.5 + std::sqrt(0.25 + 2.0 * pairs)));
+  return std::min(o.exhaustive_max_images, fits);
+}
+
 // Beyond the exhaustive limit, auto mode lets the photos' capture times choose the matcher.
 bool OrderMatters(const SfmRun& run) {
-  return run.options.matcher == "auto" && run.n > run.options.exhaustive_max_images;
+  return run.options.matcher == "auto" && run.n > run.exhaustive_max;
 }
 
 // The photos' headers, read once: for the camera groups (ExtractFeatures), and beyond the
@@ -188,8 +209,12 @@ void ExtractFeatures(SfmRun& run, const PhotoTags& tags) {
 // True for exhaustive.
 bool ChooseExhaustive(const SfmRun& run, const PhotoTags& tags) {
   const SfmOptions& options = run.options;
-  bool exhaustive = options.matcher == "exhaustive" ||
-                    (options.matcher == "auto" && run.n <= options.exhaustive_max_images);
+  bool exhaustive = options.matcher == "exhaustive" || (options.matcher == "auto" && run.n <= run.exhaustive_max);
+  if (options.matcher == "auto" && run.n > run.exhaustive_max && run.n <= options.exhaustive_max_images) {
+    Report(options, StrCat("sfm: every pair of the ", run.n, " photos would take about ",
+                           static_cast<int>(PairSeconds(options) * run.n * (run.n - 1) / 2), " s, more than half of what "
+                           "the time budget leaves: matching in sequence"));
+  }
   if (OrderMatters(run)) {
     // Beyond the exhaustive limit: do the photos' capture times say the names are in order?
     const CaptureOrder order = OrderFromTags(tags);
@@ -481,6 +506,7 @@ SfmResult RunSfm(const SfmOptions& options) {
 
   CheckPhotosReadable(options.images, inputs);
   SfmRun run = StartRun(options, inputs);
+  run.exhaustive_max = AutoExhaustiveMax(run);
   const PhotoTags tags = ReadTagsIfNeeded(run);
   ExtractFeatures(run, tags);
   bool exhaustive = ChooseExhaustive(run, tags);

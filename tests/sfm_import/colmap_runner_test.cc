@@ -951,6 +951,36 @@ TEST(ColmapRunner, PhotosNotInOrderFallBackToEveryPair) {
   EXPECT_FALSE(fs::exists(marker));
 }
 
+// Under a time budget auto matches every pair only where that takes at most half the time left;
+// without one, up to --exhaustive-max (100) photos.
+TEST(ColmapRunner, ABudgetTooShortForEveryPairMatchesInSequence) {
+  TempDir dir("budget_pairs");
+  const fs::path first = dir.path() / "first";
+  WriteNamedModel(first, {"a.jpg", "b.jpg", "c.jpg", "d.jpg"});
+  SfmOptions options = FakeEveryPairRun(dir.path(), first, first, dir.path() / "unused");
+  options.exhaustive_max_images = SfmOptions().exhaustive_max_images;
+  EXPECT_EQ(options.exhaustive_max_images, 100);
+  options.num_threads = 2;
+  std::vector<std::string> progress;
+  options.progress = [&](const std::string& line) { progress.push_back(line); };
+  const auto log_has = [&](const std::string& text) {
+    return ReadFile(options.workspace / "colmap" / "colmap.log").find(text) != std::string::npos;
+  };
+  // 4 photos: 6 pairs, ~1.7 s at 0.28 s a pair on 2 threads.
+  options.seconds_left = [] { return 3.0; };
+  RunSfm(options);
+  EXPECT_TRUE(log_has("fake colmap sequential_matcher"));
+  EXPECT_FALSE(log_has("fake colmap exhaustive_matcher"));
+  EXPECT_TRUE(Said(progress, "sfm: every pair of the 4 photos would take about 1 s, more than half of what the time "
+                             "budget leaves: matching in sequence"));
+  progress.clear();
+  options.force = true;
+  options.seconds_left = [] { return 4.0; };
+  RunSfm(options);
+  EXPECT_TRUE(log_has("fake colmap exhaustive_matcher"));
+  EXPECT_FALSE(Said(progress, "matching in sequence"));
+}
+
 // A model that looks wrong (check_model: for perf run, a ghost or cameras that do not look at a
 // common point) after sequential matching is made again from every pair, and the new one kept
 // where it looks right, though it holds fewer photos; where it looks wrong too, the first is
