@@ -12,7 +12,6 @@
 #include <optional>
 #include <set>
 #include <system_error>
-#include <thread>
 #include <vector>
 
 #include "common/atomic_file.h"
@@ -23,6 +22,7 @@
 #include "sfm_import/capture_order.h"
 #include "sfm_import/colmap_process.h"
 #include "sfm_import/sfm_inputs.h"
+#include "sfm_import/sfm_matching_time.h"
 #include "sfm_import/sfm_models.h"
 
 namespace fs = std::filesystem;
@@ -133,25 +133,6 @@ SfmRun StartRun(const SfmOptions& options, const std::vector<std::string>& input
   run.steps = ColmapSteps(options, colmap, run.colmap_dir / "colmap.log");
   run.threads = std::to_string(options.num_threads);
   return run;
-}
-
-// Seconds CPU matching takes per pair of photos at 8192 features on 2 threads (bonsai, 800 px).
-constexpr double kPairSeconds = 0.28;
-
-// The most photos auto mode matches pair by pair: exhaustive_max_images, and under a time budget
-// only as many as take at most half the time it leaves (at kPairSeconds, scaled by the threads).
-double PairSeconds(const SfmOptions& o) {
-  const int threads = o.num_threads > 0 ? o.num_threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  return kPairSeconds * 2.0 / std::min(threads, 16);
-}
-
-int AutoExhaustiveMax(const SfmRun& run) {
-  const SfmOptions& o = run.options;
-  if (!o.seconds_left) return o.exhaustive_max_images;
-  const double pairs = std::max(0.0, 0.5 * o.seconds_left()) / PairSeconds(o);
-  // n (n - 1) / 2 <= pairs
-  const int fits = static_cast<int>(std::floor(0.5 + std::sqrt(0.25 + 2.0 * pairs)));
-  return std::min(o.exhaustive_max_images, fits);
 }
 
 // Beyond the exhaustive limit, auto mode lets the photos' capture times choose the matcher.
@@ -408,14 +389,6 @@ void RegisterLeftOut(SfmRun& run, bool exhaustive, Mapping* mapping, std::vector
   }
 }
 
-// What matching the pairs sequential matching left (at the rate it matched its own, about
-// n (overlap + log2 n) pairs with quadratic overlap) and mapping again would take, in seconds.
-double EveryPairSeconds(const SfmRun& run) {
-  const double n = run.n, all = n * (n - 1) / 2;
-  const double done = std::min(all, n * (run.options.sequential_overlap + std::floor(std::log2(std::max(2.0, n)))));
-  return run.match_seconds * std::max(0.0, all - done) / std::max(1.0, done) + run.map_seconds;
-}
-
 // (e) A model that looks wrong (options.check_model) after sequential matching is made again from
 // every pair, and kept where it does not look wrong, else the first (set aside in
 // colmap/first_model while the mapper runs again); under a time budget that cannot afford it too,
@@ -427,7 +400,7 @@ void RemakeIfWrong(SfmRun& run, bool* exhaustive, Mapping* mapping, std::string*
   Report(run.options, StrCat("sfm: the model of ", mapping->best.num_images, " photos looks wrong (", *doubt,
                              "): matching every pair and mapping again"));
   if (run.options.seconds_left) {
-    const double needs = EveryPairSeconds(run), left = run.options.seconds_left();
+    const double needs = EveryPairSeconds(run.options, run.n, run.match_seconds, run.map_seconds), left = run.options.seconds_left();
     if (needs > left) {
       Report(run.options, StrCat("sfm: matching every pair and mapping again will take about ", static_cast<int>(needs),
                                  " s, more than the time budget leaves (", static_cast<int>(std::max(0.0, left)),
@@ -506,7 +479,7 @@ SfmResult RunSfm(const SfmOptions& options) {
 
   CheckPhotosReadable(options.images, inputs);
   SfmRun run = StartRun(options, inputs);
-  run.exhaustive_max = AutoExhaustiveMax(run);
+  run.exhaustive_max = AutoExhaustiveMax(options);
   const PhotoTags tags = ReadTagsIfNeeded(run);
   ExtractFeatures(run, tags);
   bool exhaustive = ChooseExhaustive(run, tags);
