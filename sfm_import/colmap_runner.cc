@@ -132,6 +132,7 @@ SfmRun StartRun(const SfmOptions& options, const std::vector<std::string>& input
   EnsureWritableDirectory(run.models_dir);
   run.steps = ColmapSteps(options, colmap, run.colmap_dir / "colmap.log");
   run.threads = std::to_string(options.num_threads);
+  run.exhaustive_max = AutoExhaustiveMax(options);
   return run;
 }
 
@@ -479,7 +480,6 @@ SfmResult RunSfm(const SfmOptions& options) {
 
   CheckPhotosReadable(options.images, inputs);
   SfmRun run = StartRun(options, inputs);
-  run.exhaustive_max = AutoExhaustiveMax(options);
   const PhotoTags tags = ReadTagsIfNeeded(run);
   ExtractFeatures(run, tags);
   bool exhaustive = ChooseExhaustive(run, tags);

@@ -2,8 +2,8 @@
 // (15 % over at most) with a held-out PSNR within 0.3 dB of the same run without a budget (which
 // takes longer, so no run that fits does better by more); the plan is printed and recorded in
 // run.json. Where this machine runs lego without a budget in under 70 s, the budget is 85 % of
-// that run's time instead, so that it binds. A budget too small for the second level leaves it out and says why; a bad duration
-// is refused by name before anything is written.
+// that run's time instead, so that it binds. A budget too small for the second level leaves it
+// out and says why; a bad duration is refused by name before anything is written.
 #include <gtest/gtest.h>
 
 #include <algorithm>
