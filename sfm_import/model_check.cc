@@ -112,6 +112,18 @@ std::string ObjectModelDoubt(const ModelCheck& check) {
     doubts.push_back(StrCat("only ", static_cast<int>(100 * check.looked_at), " % of its cameras look at a common point (at least ",
                             static_cast<int>(100 * kLookedAt), " % expected of an object capture)"));
   }
+  // Pixels are square: a camera whose two focal lengths came apart was bent to fit a wrong model.
+  constexpr double kAspect = 0.01;
+  for (const ModelCheck::Focal& f : check.focals) {
+    if (f.fx <= 0 || f.fy <= 0 || std::abs(f.fx / f.fy - 1) <= kAspect) continue;
+    char buf[200];
+    std::snprintf(buf, sizeof buf,
+                  "its camera's focal lengths differ by %.1f %% (fx %.0f, fy %.0f px; at most %.0f %% expected of "
+                  "square pixels)",
+                  100 * std::abs(f.fx / f.fy - 1), f.fx, f.fy, 100 * kAspect);
+    doubts.push_back(buf);
+    break;
+  }
   std::string out;
   for (const std::string& d : doubts) out += (out.empty() ? "" : "; ") + d;
   return out;

@@ -47,9 +47,10 @@ ModelCheck CheckModel(const colmap::Reconstruction& rec);
 bool RepairIsBetter(const ModelCheck& repaired, const ModelCheck& user, std::string* why);
 
 // Why `check` looks wrong for an object capture ("it holds 2 ghost groups (16 photos)", "only 41 %
-// of its cameras look at a common point (at least 80 % expected)"), or "": perf sfm's models are
-// made again from every pair where this says something (colmap_runner.h check_model). Bonsai's
-// right models: 100 %; two wrong ones of its photos: 41 % and 73 %.
+// of its cameras look at a common point (at least 80 % expected)", a camera whose fx and fy differ
+// by more than 1 %), or "": perf sfm's models are made again from every pair where this says
+// something (colmap_runner.h check_model). Bonsai's right models: 100 %, fx = fy; wrong ones of
+// its photos: 41 % and 73 %, or 100 % on an orbit bent in its first half with fx / fy 2 % apart.
 std::string ObjectModelDoubt(const ModelCheck& check);
 // ObjectModelDoubt of the model in `dir` ("" where it cannot be read: the import names that).
 std::string ObjectModelDoubtOf(const std::filesystem::path& dir);

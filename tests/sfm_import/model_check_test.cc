@@ -64,7 +64,7 @@ TEST(GhostRepair, ANewModelIsUsedOnlyWhereItIsBetter) {
 }
 
 // perf sfm's own models are made again where this says something (colmap_runner.h check_model).
-TEST(ModelCheck, AnObjectModelIsDoubtedForAGhostOrCamerasLookingApart) {
+TEST(ModelCheck, AnObjectModelIsDoubtedForAGhostCamerasLookingApartOrPixelsNotSquare) {
   ModelCheck c;
   c.registered = 84;
   c.looked_at = 1.0;
@@ -75,8 +75,16 @@ TEST(ModelCheck, AnObjectModelIsDoubtedForAGhostOrCamerasLookingApart) {
   c.ghosts.resize(2);
   c.ghost_photos = 16;
   EXPECT_EQ(ObjectModelDoubt(c), "it holds 2 ghost groups (16 photos)");
+  c.ghosts.clear();
+  c.focals = {{800, 533, 813.0, 813.4}};  // bonsai's model from every pair
+  EXPECT_EQ(ObjectModelDoubt(c), "");
+  c.focals.push_back({800, 533, 813.0, 797.0});  // its orbit bent by sequential matching
+  EXPECT_EQ(ObjectModelDoubt(c),
+            "its camera's focal lengths differ by 2.0 % (fx 813, fy 797 px; at most 1 % expected of square pixels)");
   PERF_REQUIRE_DATA(bonsai, "bonsai");
-  EXPECT_EQ(ObjectModelDoubtOf(bonsai / "sparse" / "0"), "it holds 2 ghost groups (16 photos)");
+  EXPECT_EQ(ObjectModelDoubtOf(bonsai / "sparse" / "0"),
+            "it holds 2 ghost groups (16 photos); its camera's focal lengths differ by 1.3 % (fx 731, fy 722 px; "
+            "at most 1 % expected of square pixels)");
   EXPECT_EQ(ObjectModelDoubtOf(bonsai / "no such model"), "");
 }
 
