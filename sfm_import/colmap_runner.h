@@ -17,7 +17,11 @@ struct SfmOptions {
   std::filesystem::path images;     // folder of photos (searched recursively by colmap)
   std::filesystem::path workspace;  // gets colmap/ (database, log, all models) and sparse/0
   std::string colmap_binary = "colmap";  // name on PATH or a path
-  std::string camera_model = "OPENCV";   // COLMAP camera model for extraction
+  // COLMAP camera model for extraction. SIMPLE_RADIAL (one focal length, one distortion term):
+  // bonsai's every-pair matches mapped with OPENCV gave wrong models twice of two (54-59 of 84
+  // photos, fx and fy 5 % apart), with SIMPLE_RADIAL 84 of 84 in a third of the time and 1.7 dB
+  // above the shipped model at one budget (docs/tuning.md "One focal length for mapping").
+  std::string camera_model = "SIMPLE_RADIAL";
   // Known intrinsics of every photo, in camera_model's parameter order, comma-separated
   // (ImageReader.camera_params; COLMAP starts from them and refines them); empty: from EXIF or a
   // guess. The repair (ghost_repair.h) passes the given model's.

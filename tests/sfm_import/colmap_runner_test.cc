@@ -386,7 +386,7 @@ TEST(ColmapRunner, ReconstructsSyntheticArc) {
 
   // Intrinsics: the default model, with the focal length the views were rendered with.
   const auto [model_id, focal] = ReadFirstCamera(result.sparse_dir / "cameras.bin");
-  EXPECT_EQ(model_id, 4);  // OPENCV
+  EXPECT_EQ(model_id, 2);  // SIMPLE_RADIAL
   std::cout << "recovered focal length: " << focal << " px (rendered with " << kFocal << ")\n";
   EXPECT_NEAR(focal, kFocal, 0.03 * kFocal);
 
