@@ -31,9 +31,9 @@ struct SfmOptions {
   bool single_camera = true;
   // Matcher: "auto" (exhaustive up to exhaustive_max_images, else sequential unless EXIF capture
   // times go against the file names: capture_order.h), "exhaustive", "sequential". CPU exhaustive matching costs ~0.28 s per pair on 2 cores (84 photos: 16.5 min).
-  // Bonsai's 84 photos matched in sequence gave bent or ghosted models in 4 runs of 4; every pair
-  // (with min_pose_inliers) a model 1.1 dB better than the shipped one (docs/tuning.md). Under a
-  // time budget (seconds_left), auto matches every pair only where that takes at most half the time left.
+  // With the OPENCV camera bonsai's 84 photos matched in sequence gave bent or ghosted models in 4
+  // runs of 4; with SIMPLE_RADIAL a right one (docs/tuning.md). Under a time budget (seconds_left),
+  // auto matches every pair only where that takes at most half the time left.
   std::string matcher = "auto";
   int exhaustive_max_images = 100;
   int sequential_overlap = 10;           // SequentialMatching.overlap (quadratic overlap on)
