@@ -31,11 +31,11 @@ struct SfmOptions {
   bool single_camera = true;
   // Matcher: "auto" (exhaustive up to exhaustive_max_images, else sequential unless EXIF capture
   // times go against the file names: capture_order.h), "exhaustive", "sequential". CPU exhaustive matching costs ~0.28 s per pair on 2 cores (84 photos: 16.5 min).
-  // With the OPENCV camera bonsai's 84 photos matched in sequence gave bent or ghosted models in 4
-  // runs of 4; with SIMPLE_RADIAL a right one (docs/tuning.md). Under a time budget (seconds_left),
+  // With SIMPLE_RADIAL bonsai's 84 photos matched in sequence mapped right 2 times of 2, from every
+  // pair 1 of 2 (docs/tuning.md "One focal length for mapping"). Under a time budget (seconds_left),
   // auto matches every pair only where that takes at most half the time left.
   std::string matcher = "auto";
-  int exhaustive_max_images = 100;
+  int exhaustive_max_images = 40;
   int sequential_overlap = 10;           // SequentialMatching.overlap (quadratic overlap on)
   // After sequential matching, match the photos the model left out with every other photo and
   // register them into it (matches_importer, image_registrator, bundle_adjuster).

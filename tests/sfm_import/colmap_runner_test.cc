@@ -952,14 +952,14 @@ TEST(ColmapRunner, PhotosNotInOrderFallBackToEveryPair) {
 }
 
 // Under a time budget auto matches every pair only where that takes at most half the time left;
-// without one, up to --exhaustive-max (100) photos.
+// without one, up to --exhaustive-max (40) photos.
 TEST(ColmapRunner, ABudgetTooShortForEveryPairMatchesInSequence) {
   TempDir dir("budget_pairs");
   const fs::path first = dir.path() / "first";
   WriteNamedModel(first, {"a.jpg", "b.jpg", "c.jpg", "d.jpg"});
   SfmOptions options = FakeEveryPairRun(dir.path(), first, first, dir.path() / "unused");
   options.exhaustive_max_images = SfmOptions().exhaustive_max_images;
-  EXPECT_EQ(options.exhaustive_max_images, 100);
+  EXPECT_EQ(options.exhaustive_max_images, 40);
   options.num_threads = 2;
   std::vector<std::string> progress;
   options.progress = [&](const std::string& line) { progress.push_back(line); };
