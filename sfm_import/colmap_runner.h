@@ -31,7 +31,7 @@ struct SfmOptions {
   bool single_camera = true;
   // Matcher: "auto" (exhaustive up to exhaustive_max_images, else sequential unless EXIF capture
   // times go against the file names: capture_order.h), "exhaustive", "sequential". CPU exhaustive matching costs ~0.28 s per pair on 2 cores (84 photos: 16.5 min).
-  // With SIMPLE_RADIAL bonsai's 84 photos matched in sequence mapped right 2 times of 2, from every
+  // With SIMPLE_RADIAL bonsai's 84 photos matched in sequence mapped right 3 times of 3, from every
   // pair 1 of 2 (docs/tuning.md "One focal length for mapping"). Under a time budget (seconds_left),
   // auto matches every pair only where that takes at most half the time left.
   std::string matcher = "auto";
