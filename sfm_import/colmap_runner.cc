@@ -192,12 +192,12 @@ void ExtractFeatures(SfmRun& run, const PhotoTags& tags) {
 bool ChooseExhaustive(const SfmRun& run, const PhotoTags& tags) {
   const SfmOptions& options = run.options;
   bool exhaustive = options.matcher == "exhaustive" || (options.matcher == "auto" && run.n <= run.exhaustive_max);
-  if (options.matcher == "auto" && run.n > run.exhaustive_max && run.n <= options.exhaustive_max_images) {
-    Report(options, StrCat("sfm: every pair of the ", run.n, " photos would take about ",
-                           static_cast<int>(PairSeconds(options) * run.n * (run.n - 1) / 2), " s, more than half of what "
-                           "the time budget leaves: matching in sequence"));
-  }
   if (OrderMatters(run)) {
+    if (run.n <= options.exhaustive_max_images) {  // within --exhaustive-max: the budget chose
+      Report(options, StrCat("sfm: every pair of the ", run.n, " photos would take about ",
+                             static_cast<int>(PairSeconds(options) * run.n * (run.n - 1) / 2),
+                             " s, more than half of what the time budget leaves: matching in sequence"));
+    }
     // Beyond the exhaustive limit: do the photos' capture times say the names are in order?
     const CaptureOrder order = OrderFromTags(tags);
     Report(options, "sfm: " + order.Describe());

@@ -115,12 +115,14 @@ std::string ObjectModelDoubt(const ModelCheck& check) {
   // Pixels are square: a camera whose two focal lengths came apart was bent to fit a wrong model.
   constexpr double kAspect = 0.01;
   for (const ModelCheck::Focal& f : check.focals) {
-    if (f.fx <= 0 || f.fy <= 0 || std::abs(f.fx / f.fy - 1) <= kAspect) continue;
+    if (f.fx <= 0 || f.fy <= 0) continue;
+    const double apart = std::abs(f.fx / f.fy - 1);
+    if (apart <= kAspect) continue;
     char buf[200];
     std::snprintf(buf, sizeof buf,
                   "its camera's focal lengths differ by %.1f %% (fx %.0f, fy %.0f px; at most %.0f %% expected of "
                   "square pixels)",
-                  100 * std::abs(f.fx / f.fy - 1), f.fx, f.fy, 100 * kAspect);
+                  100 * apart, f.fx, f.fy, 100 * kAspect);
     doubts.push_back(buf);
     break;
   }
