@@ -8,6 +8,7 @@
 #include <regex>
 #include <string_view>
 
+#include "common/atomic_file.h"
 #include "common/errors.h"
 #include "common/subprocess.h"
 
@@ -27,6 +28,17 @@ std::string Timestamp() {
   char buf[32];
   std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M:%S", &tm);
   return buf;
+}
+
+
+// Removes glog's files ("colmap.*", after the program's name) from `dir`, PERF's work folder.
+void RemoveGlogFiles(const fs::path& dir) {
+  std::error_code ec;
+  std::vector<fs::path> files;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    if (it->path().filename().string().rfind("colmap.", 0) == 0) files.push_back(it->path());
+  }
+  for (const fs::path& f : files) fs::remove(f, ec);
 }
 
 }  // namespace
@@ -92,8 +104,14 @@ StepResult RunColmapStep(const fs::path& colmap, const std::vector<std::string>&
       }
     }
   };
-  const ProcessResult process =
-      RunProcess(colmap, args, {"QT_QPA_PLATFORM=offscreen"}, on_output, options.idle_timeout_seconds);
+  // COLMAP's glog (and Ceres's) also writes every step's lines to files of its own, in /tmp unless
+  // told otherwise: they go to a work folder beside our log, emptied after the step (our log has
+  // the same lines).
+  const fs::path glog_dir = log.path().parent_path() / "glog";
+  EnsureWorkFolder(glog_dir);
+  const ProcessResult process = RunProcess(colmap, args, {"QT_QPA_PLATFORM=offscreen", "GLOG_log_dir=" + glog_dir.string()},
+                                           on_output, options.idle_timeout_seconds);
+  RemoveGlogFiles(glog_dir);
   handle_line(std::move(partial));
   // The last status of a step (e.g. 12/12 images) is worth showing even if it came fast.
   if (!pending_status.empty()) Report(options, stage + ": " + pending_status);

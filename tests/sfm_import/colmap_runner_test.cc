@@ -354,10 +354,20 @@ TEST(ColmapRunner, ReconstructsSyntheticArc) {
   std::vector<std::string> progress;
   options.progress = [&](const std::string& line) { progress.push_back(line); };
 
+  // COLMAP's glog writes files where TMPDIR says unless told otherwise: none may land outside
+  // the workspace.
+  const fs::path tmp = dir.path() / "tmp";
+  fs::create_directories(tmp);
+  const char* old_tmp = std::getenv("TMPDIR");
+  const std::string kept_tmp = old_tmp != nullptr ? old_tmp : "";
+  ::setenv("TMPDIR", tmp.c_str(), 1);
   const auto start = std::chrono::steady_clock::now();
   const SfmResult result = RunSfm(options);
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  old_tmp != nullptr ? ::setenv("TMPDIR", kept_tmp.c_str(), 1) : ::unsetenv("TMPDIR");
+  EXPECT_TRUE(fs::is_empty(tmp)) << "COLMAP wrote files outside the workspace, e.g. " << fs::directory_iterator(tmp)->path();
+  EXPECT_FALSE(fs::exists(options.workspace / "colmap" / "glog" / "colmap.INFO"));
   std::cout << "synthetic sfm (12 images, " << kWidth << "x" << kHeight
             << ", exhaustive): " << seconds << " s\n";
   for (const auto& line : progress) std::cout << "  progress: " << line << "\n";
