@@ -15,6 +15,7 @@
 #include "sfm_import/ghost_move.h"
 #include "sfm_import/ghost_register.h"
 #include "sfm_import/importer.h"
+#include "sfm_import/model_align.h"
 
 namespace perf {
 namespace {
@@ -43,14 +44,17 @@ nlohmann::json CheckJson(const ModelCheck& c) {
           {"poses_look_wrong", c.bad_poses.size()}, {"ghost_groups", ghosts}, {"summary", c.Describe()}};
 }
 
-// perf sfm of the photos, starting from the given camera where the model has one for all photos.
-SfmOptions SfmFromGiven(const colmap::Reconstruction& given, const fs::path& images, const fs::path& dir,
-                        const RepairOptions& o) {
+// perf sfm of the photos with its own default camera (SIMPLE_RADIAL, one focal length: the given
+// model's OPENCV camera bent bonsai's remakes, docs/tuning.md "One focal length for mapping"),
+// but a fisheye camera of the given model kept as its model and starting parameters.
+SfmOptions RepairSfmOptions(const colmap::Reconstruction& given, const fs::path& images, const fs::path& dir,
+                            const RepairOptions& o) {
   SfmOptions so;
   so.images = images;
   if (given.cameras.size() == 1) {
     const colmap::Camera& cam = given.cameras.begin()->second;
-    if (const colmap::CameraModelInfo* info = colmap::FindCameraModel(cam.model_id)) {
+    const colmap::CameraModelInfo* info = colmap::FindCameraModel(cam.model_id);
+    if (info != nullptr && info->name.find("FISHEYE") != std::string_view::npos) {
       so.camera_model = std::string(info->name);
       so.camera_params = CameraParamsArgument(cam);
     }
@@ -60,6 +64,16 @@ SfmOptions SfmFromGiven(const colmap::Reconstruction& given, const fs::path& ima
   so.check_stop = o.check_stop;
   so.progress = [&o](const std::string& line) { Say(o, "repair: " + line); };
   return so;
+}
+
+std::string DescribeAlignment(const ModelAlignment& a) {
+  if (a.photos == 0) return "the new model is left in its own frame (fewer than 3 photos in common with the given one)";
+  char buf[200];
+  std::snprintf(buf, sizeof buf,
+                "the new model put in the given model's frame by %d photos (scale %.3f; their centres %.1f %% of "
+                "the camera distance apart, median)",
+                a.photos, a.scale, 100 * a.median_error / std::max(a.camera_radius, 1e-12));
+  return buf;
 }
 
 std::string Join(const std::vector<std::string>& parts) {
@@ -117,8 +131,8 @@ RepairResult RepairModel(const RepairOptions& o) {
   }
   r.attempted = true;
   Say(o, StrCat("repair: the model has ", r.before.ghosts.size(), " ghost group(s) (", r.before.ghost_photos,
-                " photos placed as a second copy of the object): registering them again into the model without "
-                "them (COLMAP, in ", dir.string(), "; --no-repair imports the model as given)"));
+                " photos placed as a second copy of the object): repairing it (COLMAP, in ", dir.string(),
+                "; --no-repair imports the model as given)"));
   std::set<std::string> group;
   for (const GhostGroup& g : r.before.ghosts) group.insert(g.names.begin(), g.names.end());
   // `made`'s check against the given model's decides; `check` is CheckModel(made).
@@ -144,37 +158,14 @@ RepairResult RepairModel(const RepairOptions& o) {
     const std::string text = e.what();
     tried(what + " (" + text.substr(0, text.find('\n')) + ")");
   };
-  try {
-    RegisterGroupOptions ro;
-    ro.images = r.images;
-    ro.dir = dir / "register";
-    ro.threads = o.threads > 0 ? o.threads : -1;
-    ro.say = [&](const std::string& line) { Say(o, "repair: " + line); };
-    ro.check_stop = o.check_stop;
-    const GroupRegistration reg = RegisterGroupAgain(given, group, ro);
-    // A photo COLMAP placed where its pose looks wrong is left out by the import, as in any model
-    // (kept at its given pose, bonsai's DSCF5605 scored 12.3 dB, moved onto the object 12.6 dB,
-    // against 16.4 dB with the whole ghost group as given: docs/tuning.md).
-    ModelCheck check = CheckModel(reg.model);
-    const size_t placed =
-        std::count_if(reg.placed.begin(), reg.placed.end(), [&](const std::string& n) { return !check.bad_poses.count(n); });
-    if (placed == 0) {
-      tried(StrCat("COLMAP registered none of the group's ", group.size(), " photos again"));
-    } else {
-      decide("register", reg.model, std::move(check),
-             StrCat("with the group registered again (", placed, " of ", group.size(), " placed",
-                    placed < group.size() ? StrCat("; ", group.size() - placed, " left out or placed wrongly") : std::string(),
-                    ")"));
-    }
-  } catch (const Interrupted&) {
-    throw;
-  } catch (const Error& e) {
-    failed("COLMAP could not register the group again", e);
-  }
-  if (!r.used) {
-    Say(o, "repair: making the model again from the photos (perf sfm into " + dir.string() + ")");
+  // A model made again has no ghost to hide in and one focal length; put in the user's frame.
+  if (o.routes.count("sfm")) {
     try {
-      const colmap::Reconstruction made = colmap::ReadReconstruction(RunSfm(SfmFromGiven(given, r.images, dir, o)).sparse_dir);
+      Say(o, "repair: making the model again from the photos (perf sfm into " + dir.string() + ")");
+      colmap::Reconstruction made = colmap::ReadReconstruction(RunSfm(RepairSfmOptions(given, r.images, dir, o)).sparse_dir);
+      std::set<std::string> doubted = group;
+      for (const auto& [name, why] : r.before.bad_poses) doubted.insert(name);
+      Say(o, "repair: " + DescribeAlignment(AlignModelOnto(made, given, doubted)));
       decide("sfm", made, CheckModel(made), "made again by perf sfm");
     } catch (const Interrupted&) {
       throw;
@@ -182,7 +173,36 @@ RepairResult RepairModel(const RepairOptions& o) {
       failed("perf sfm could not make a model of the photos", e);
     }
   }
-  if (!r.used) {
+  if (!r.used && o.routes.count("register")) {
+    try {
+      RegisterGroupOptions ro;
+      ro.images = r.images;
+      ro.dir = dir / "register";
+      ro.threads = o.threads > 0 ? o.threads : -1;
+      ro.say = [&](const std::string& line) { Say(o, "repair: " + line); };
+      ro.check_stop = o.check_stop;
+      const GroupRegistration reg = RegisterGroupAgain(given, group, ro);
+      // A photo COLMAP placed where its pose looks wrong is left out by the import, as in any model
+      // (kept at its given pose, bonsai's DSCF5605 scored 12.3 dB, moved onto the object 12.6 dB,
+      // against 16.4 dB with the whole ghost group as given: docs/tuning.md).
+      ModelCheck check = CheckModel(reg.model);
+      const size_t placed =
+          std::count_if(reg.placed.begin(), reg.placed.end(), [&](const std::string& n) { return !check.bad_poses.count(n); });
+      if (placed == 0) {
+        tried(StrCat("COLMAP registered none of the group's ", group.size(), " photos again"));
+      } else {
+        decide("register", reg.model, std::move(check),
+               StrCat("with the group registered again (", placed, " of ", group.size(), " placed",
+                      placed < group.size() ? StrCat("; ", group.size() - placed, " left out or placed wrongly") : std::string(),
+                      ")"));
+      }
+    } catch (const Interrupted&) {
+      throw;
+    } catch (const Error& e) {
+      failed("COLMAP could not register the group again", e);
+    }
+  }
+  if (!r.used && o.routes.count("move")) {
     const colmap::Reconstruction moved = MoveGhostsOntoObject(given, r.before.ghosts);
     decide("move", moved, CheckModel(moved), "with each group moved onto the object");
   }

@@ -1,17 +1,20 @@
 // COLMAP's mistakes repaired, not only named: where a user's model (perf import / perf run
 // --colmap) holds a ghost group (ghost_groups.h) and its photos are at hand, three routes are tried
-// in turn, each checked against the user's model (model_check.h): the group registered again into
-// the model without it (ghost_register.h), the model made again from the photos (perf sfm into
-// WORKSPACE/repair/), and each group moved onto the object (ghost_move.h, for photos too small to
-// match). The first that is better goes to WORKSPACE/sparse_repaired/ and is imported instead,
-// saying why either way; the user's model is only read. WORKSPACE/repair/repair.json records the
-// tries and the decision for that model (its path and time), so that a run again does not repeat
-// them.
+// in turn, each checked against the user's model (model_check.h): the model made again from the
+// photos (perf sfm into WORKSPACE/repair/, one focal length, put in the user's frame:
+// model_align.h), the group registered again into the model without it (ghost_register.h), and
+// each group moved onto the object (ghost_move.h, for photos too small to match). On bonsai's
+// shipped model the model made again scored above the group registered again into it, whose other
+// cameras and focal length COLMAP's OPENCV fit had bent (docs/tuning.md "Ghost repair"). The first
+// that is better goes to WORKSPACE/sparse_repaired/ and is imported instead, saying why either way;
+// the user's model is only read. WORKSPACE/repair/repair.json records the tries and the decision
+// for that model (its path and time), so that a run again does not repeat them.
 #pragma once
 
 #include <filesystem>
 #include <functional>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -25,6 +28,8 @@ struct RepairOptions {
   std::filesystem::path workspace;
   bool repair = true;               // false (--no-repair): the model as given
   int threads = 0;                  // COLMAP's (0: all cores)
+  // The routes tried, in this order, until one is better: "sfm", "register", "move" (all three).
+  std::set<std::string> routes = {"sfm", "register", "move"};
   std::function<void(const std::string&)> say;  // lines for the terminal
   std::function<void()> check_stop;             // throws to stop (Ctrl-C) while COLMAP runs
 };

@@ -45,14 +45,21 @@ TEST(GhostRepair, ANewModelIsUsedOnlyWhereItIsBetter) {
   worse.mean_error = 1.2;  // above 0.6 + 0.5
   EXPECT_FALSE(RepairIsBetter(worse, user, &why));
   EXPECT_NE(why.find("px"), std::string::npos) << why;
-  // bonsai: the given camera at fx 731, fy 722; a new model at 695, 669 (4 % apart) is not the same camera.
+  // bonsai: the given camera at fx 731, fy 722 (1.2 % apart); a new model with one focal length
+  // at 819 px is used, one at 695, 669 (4 % apart) is not; 729 / 720.9 (1.1 %) is no worse.
   user.focals = {{800, 533, 731.4, 722.4}};
-  good.focals = {{800, 533, 729.0, 720.9}};
+  good.focals = {{800, 533, 819.0, 819.0}};
   EXPECT_TRUE(RepairIsBetter(good, user, &why)) << why;
-  ModelCheck other_camera = good;
-  other_camera.focals = {{800, 533, 695.2, 669.6}};
-  EXPECT_FALSE(RepairIsBetter(other_camera, user, &why));
-  EXPECT_NE(why.find("camera differs"), std::string::npos) << why;
+  ModelCheck same_camera = good;
+  same_camera.focals = {{800, 533, 729.0, 720.9}};
+  EXPECT_TRUE(RepairIsBetter(same_camera, user, &why)) << why;
+  ModelCheck bent = good;
+  bent.focals = {{800, 533, 695.2, 669.6}};
+  EXPECT_FALSE(RepairIsBetter(bent, user, &why));
+  EXPECT_NE(why.find("focal lengths differ by 3.8 %"), std::string::npos) << why;
+  ModelCheck square_user = user;
+  square_user.focals = {{800, 533, 731.0, 731.0}};
+  EXPECT_FALSE(RepairIsBetter(same_camera, square_user, &why)) << "1.1 % apart against the user's square pixels";
   // The user's cameras look at a common point; the new model's mostly do not.
   user.looked_at = 0.95;
   ModelCheck scattered = good;
@@ -165,8 +172,9 @@ TEST(GhostRepair, TheExamplesGroupIsMovedSayingWhyAndNotTriedAgain) {
   o.repair = true;
   const RepairResult r = RepairModel(o);
   EXPECT_TRUE(r.attempted);
-  ASSERT_EQ(r.tries.size(), 3u) << r.why;  // registered again, made again, moved
-  EXPECT_NE(r.tries[1].find("could not make a model"), std::string::npos) << r.tries[1];
+  ASSERT_EQ(r.tries.size(), 3u) << r.why;  // made again, registered again, moved
+  EXPECT_NE(r.tries[0].find("could not make a model"), std::string::npos) << r.tries[0];
+  EXPECT_NE(r.tries[1].find("registered none"), std::string::npos) << r.tries[1];
   EXPECT_TRUE(r.used) << r.why;
   EXPECT_EQ(r.route, "move");
   EXPECT_EQ(r.model, dir / "ws" / "sparse_repaired");
