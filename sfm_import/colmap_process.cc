@@ -30,7 +30,6 @@ std::string Timestamp() {
   return buf;
 }
 
-
 // Removes glog's files ("colmap.*", after the program's name) from `dir`, PERF's work folder.
 void RemoveGlogFiles(const fs::path& dir) {
   std::error_code ec;
