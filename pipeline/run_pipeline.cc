@@ -132,11 +132,7 @@ class Runner {
     so.force = o_.force;
     so.check_stop = [&] { CheckStop(); };
     so.check_model = ObjectModelDoubtOf;
-    if (r_->time_budget > 0) {
-      so.seconds_left = [deadline = Budget().Deadline()] {
-        return std::chrono::duration<double>(deadline - WallClock::now()).count();
-      };
-    }
+    so.seconds_left = SecondsLeft();
     so.progress = [&](const std::string& line) {
       CheckStop();
       Say(line.rfind("sfm: ", 0) == 0 ? line : "sfm: " + line);  // RunSfm's own lines already say so
@@ -160,6 +156,7 @@ class Runner {
       ro.threads = o_.threads;
       ro.say = [&](const std::string& line) { Say("import: " + line); };
       ro.check_stop = [&] { CheckStop(); };
+      ro.seconds_left = SecondsLeft();
       const RepairResult repaired = RepairModel(ro);
       r_->repair = repaired.ToJson();
       model = repaired.model;
@@ -312,6 +309,12 @@ class Runner {
       r_->test_ssim = j["mean"].value("ssim", 0.0);
       if (j.contains("masks")) r_->mask_iou = j["masks"]["pooled"].value("iou", -1.0);
     }
+  }
+
+  // The seconds left of the run's time budget, for COLMAP's steps (unset: no budget).
+  std::function<double()> SecondsLeft() const {
+    if (r_->time_budget <= 0) return {};
+    return [deadline = Budget().Deadline()] { return std::chrono::duration<double>(deadline - WallClock::now()).count(); };
   }
 
   // The budget from the run's start, with export and eval measured as this run will do them.

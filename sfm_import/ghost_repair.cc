@@ -62,6 +62,8 @@ SfmOptions RepairSfmOptions(const colmap::Reconstruction& given, const fs::path&
   so.workspace = dir;
   so.num_threads = o.threads > 0 ? o.threads : -1;
   so.check_stop = o.check_stop;
+  so.check_model = ObjectModelDoubtOf;  // made again from every pair where it looks wrong
+  so.seconds_left = o.seconds_left;
   so.progress = [&o](const std::string& line) { Say(o, "repair: " + line); };
   return so;
 }

@@ -32,6 +32,9 @@ struct RepairOptions {
   std::set<std::string> routes = {"sfm", "register", "move"};
   std::function<void(const std::string&)> say;  // lines for the terminal
   std::function<void()> check_stop;             // throws to stop (Ctrl-C) while COLMAP runs
+  // Seconds left of perf run's time budget (unset: none): the model made again matches as perf
+  // sfm does under one (SfmOptions::seconds_left).
+  std::function<double()> seconds_left;
 };
 
 struct RepairResult {
