@@ -113,13 +113,15 @@ RepairResult RepairModel(const RepairOptions& o) {
                   " photos): imported as given (--no-repair)"));
     return r;
   }
-  // A decision recorded for this model (same folder, files no newer) stands.
+  // A decision recorded for this model (same folder, files no newer) by these rules stands; one
+  // by earlier rules (before the model made again came first: no "rules") is made again.
+  constexpr int kRules = 2;
   const double model_time = ModelTime(o.model);
   const std::string model_path = fs::absolute(o.model).lexically_normal().string();
   std::error_code ec;
   if (fs::exists(record, ec)) {
     const nlohmann::json j = nlohmann::json::parse(ReadFileToString(record), nullptr, false);
-    if (j.is_object() && j.value("user_model", "") == model_path &&
+    if (j.is_object() && j.value("rules", 1) == kRules && j.value("user_model", "") == model_path &&
         j.value("user_model_time", -1.0) == model_time &&
         (!j.value("used", false) || fs::exists(repaired / "images.bin", ec))) {
       r.attempted = true;
@@ -214,6 +216,7 @@ RepairResult RepairModel(const RepairOptions& o) {
   nlohmann::json j = r.ToJson();
   j["user_model"] = model_path;
   j["user_model_time"] = model_time;
+  j["rules"] = kRules;
   WriteFileAtomically(record, j.dump(2) + "\n");
   if (!r.used) Say(o, "repair: " + r.why);
   return r;

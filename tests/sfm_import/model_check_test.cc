@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <set>
 
+#include "common/atomic_file.h"
 #include "sfm_import/colmap_pose.h"
 #include "sfm_import/ghost_move.h"
 #include "sfm_import/ghost_repair.h"
@@ -207,6 +208,18 @@ TEST(GhostRepair, TheExamplesGroupIsMovedSayingWhyAndNotTriedAgain) {
   EXPECT_EQ(again.TurnUnknown(), unknown);  // the route is recorded too
   ASSERT_FALSE(lines.empty());
   EXPECT_NE(lines.back().find("as decided before"), std::string::npos) << lines.back();
+  // A decision recorded by earlier rules (no "rules" in repair.json) is made again.
+  const fs::path record = dir / "ws" / "repair" / "repair.json";
+  nlohmann::json j = nlohmann::json::parse(ReadFileToString(record));
+  EXPECT_EQ(j.value("rules", 0), 2);
+  j.erase("rules");
+  WriteFileAtomically(record, j.dump(2));
+  lines.clear();
+  const RepairResult redone = RepairModel(o);
+  EXPECT_TRUE(redone.used) << redone.why;
+  EXPECT_TRUE(std::none_of(lines.begin(), lines.end(), [](const std::string& l) { return l.find("as decided before") != std::string::npos; }));
+  EXPECT_EQ(redone.tries.size(), 3u) << redone.why;
+  EXPECT_EQ(nlohmann::json::parse(ReadFileToString(record)).value("rules", 0), 2);
   EXPECT_EQ(test::FilesUnder(example / "sparse" / "0"), model_before);
 }
 
