@@ -16,6 +16,8 @@
 #include "sfm_import/ghost_register.h"
 #include "sfm_import/importer.h"
 #include "sfm_import/model_align.h"
+#include "sfm_import/sfm_matching_time.h"
+#include "workspace/image_io.h"
 
 namespace perf {
 namespace {
@@ -78,6 +80,32 @@ std::string DescribeAlignment(const ModelAlignment& a) {
   return buf;
 }
 
+// Whether a COLMAP route over the photos of `given` (perf sfm, or the registration, which also
+// extracts every photo's features) fits perf run's time budget: its estimate (SequentialSfmSeconds,
+// at the size of the first photo's header) at most 80 % of the time left, the rest for the
+// reconstruction. Where it does not, `why` says so.
+bool FitsBudget(const RepairOptions& o, const colmap::Reconstruction& given, const SfmOptions& so, const std::string& what,
+                std::string* why) {
+  if (!o.seconds_left || given.images.empty()) return true;
+  const colmap::Image& first = given.images.begin()->second;
+  double w = 0, h = 0;
+  try {
+    const CameraTags tags = ReadCameraTags(so.images / first.name);
+    w = tags.width, h = tags.height;
+  } catch (const Error&) {  // the camera's size instead; COLMAP will name the photo
+    if (const auto cam = given.cameras.find(first.camera_id); cam != given.cameras.end()) {
+      w = static_cast<double>(cam->second.width), h = static_cast<double>(cam->second.height);
+    }
+  }
+  const double scale = std::min(1.0, so.max_image_size / std::max({w, h, 1.0}));
+  const double needs = SequentialSfmSeconds(so, static_cast<int>(given.images.size()), w * h * scale * scale / 1e6);
+  const double left = o.seconds_left();
+  if (needs <= 0.8 * left) return true;
+  *why = StrCat(what, " would take about ", static_cast<int>(needs), " s, more than the time budget can give it (",
+                static_cast<int>(std::max(0.0, left)), " s left): not tried");
+  return false;
+}
+
 std::string Join(const std::vector<std::string>& parts) {
   std::string out;
   for (const std::string& p : parts) out += (out.empty() ? "" : "; ") + p;
@@ -114,14 +142,16 @@ RepairResult RepairModel(const RepairOptions& o) {
     return r;
   }
   // A decision recorded for this model (same folder, files no newer) by these rules stands; one
-  // by earlier rules (before the model made again came first: no "rules") is made again.
+  // by earlier rules (before the model made again came first: no "rules"), or one that left a
+  // route out for the time budget, is made again.
   constexpr int kRules = 2;
   const double model_time = ModelTime(o.model);
   const std::string model_path = fs::absolute(o.model).lexically_normal().string();
   std::error_code ec;
   if (fs::exists(record, ec)) {
     const nlohmann::json j = nlohmann::json::parse(ReadFileToString(record), nullptr, false);
-    if (j.is_object() && j.value("rules", 1) == kRules && j.value("user_model", "") == model_path &&
+    if (j.is_object() && j.value("rules", 1) == kRules && !j.value("skipped_for_time", false) &&
+        j.value("user_model", "") == model_path &&
         j.value("user_model_time", -1.0) == model_time &&
         (!j.value("used", false) || fs::exists(repaired / "images.bin", ec))) {
       r.attempted = true;
@@ -163,10 +193,17 @@ RepairResult RepairModel(const RepairOptions& o) {
     tried(what + " (" + text.substr(0, text.find('\n')) + ")");
   };
   // A model made again has no ghost to hide in and one focal length; put in the user's frame.
-  if (o.routes.count("sfm")) {
+  const SfmOptions sfm_options = RepairSfmOptions(given, r.images, dir, o);
+  std::string over;
+  bool skipped_for_time = false;
+  if (o.routes.count("sfm") && !FitsBudget(o, given, sfm_options, "making the model again", &over)) {
+    tried(over);
+    skipped_for_time = true;
+  }
+  if (o.routes.count("sfm") && over.empty()) {
     try {
       Say(o, "repair: making the model again from the photos (perf sfm into " + dir.string() + ")");
-      colmap::Reconstruction made = colmap::ReadReconstruction(RunSfm(RepairSfmOptions(given, r.images, dir, o)).sparse_dir);
+      colmap::Reconstruction made = colmap::ReadReconstruction(RunSfm(sfm_options).sparse_dir);
       std::set<std::string> doubted = group;
       for (const auto& [name, why] : r.before.bad_poses) doubted.insert(name);
       Say(o, "repair: " + DescribeAlignment(AlignModelOnto(made, given, doubted)));
@@ -177,7 +214,12 @@ RepairResult RepairModel(const RepairOptions& o) {
       failed("perf sfm could not make a model of the photos", e);
     }
   }
-  if (!r.used && o.routes.count("register")) {
+  over.clear();
+  if (!r.used && o.routes.count("register") && !FitsBudget(o, given, sfm_options, "registering the group again", &over)) {
+    tried(over);
+    skipped_for_time = true;
+  }
+  if (!r.used && o.routes.count("register") && over.empty()) {
     try {
       RegisterGroupOptions ro;
       ro.images = r.images;
@@ -217,6 +259,7 @@ RepairResult RepairModel(const RepairOptions& o) {
   j["user_model"] = model_path;
   j["user_model_time"] = model_time;
   j["rules"] = kRules;
+  j["skipped_for_time"] = skipped_for_time;
   WriteFileAtomically(record, j.dump(2) + "\n");
   if (!r.used) Say(o, "repair: " + r.why);
   return r;

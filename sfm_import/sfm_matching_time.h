@@ -19,4 +19,10 @@ int AutoExhaustiveMax(const SfmOptions& options);
 // n (overlap + log2 n) pairs with quadratic overlap) and mapping again would take, in seconds.
 double EveryPairSeconds(const SfmOptions& options, int n, double match_seconds, double map_seconds);
 
+// What a whole perf sfm of `photos` photos of `megapixels` each takes in sequence (features,
+// matching, mapping, the passes), in seconds: bonsai's 84 at 0.43 MP took 322-428 s on 2 threads,
+// about 11.6 s a megapixel a photo; scaled by the threads as PairSeconds is. The ghost repair's
+// routes under a time budget use it (ghost_repair.h).
+double SequentialSfmSeconds(const SfmOptions& options, int photos, double megapixels);
+
 }  // namespace perf

@@ -223,5 +223,38 @@ TEST(GhostRepair, TheExamplesGroupIsMovedSayingWhyAndNotTriedAgain) {
   EXPECT_EQ(test::FilesUnder(example / "sparse" / "0"), model_before);
 }
 
+// Under a time budget too short for COLMAP (perf run's seconds left), the model is not made again
+// nor the group registered again: each says so, the group is moved, and a later repair with time
+// does not follow that decision.
+TEST(GhostRepair, ABudgetTooShortForColmapMovesTheGroupAndIsNotFollowedLater) {
+  const fs::path example = fs::path(PERF_SOURCE_DIR) / "examples" / "bonsai_mini";
+  test::TempDir dir;
+  RepairOptions o;
+  o.model = example / "sparse" / "0";
+  o.images = example / "images";
+  o.workspace = dir / "ws";
+  o.seconds_left = [] { return 5.0; };  // the example's 42 photos of 200 px: about 13 s estimated
+  const auto t0 = std::chrono::steady_clock::now();
+  const RepairResult r = RepairModel(o);
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0) << "COLMAP ran";
+  ASSERT_EQ(r.tries.size(), 3u) << r.why;
+  EXPECT_NE(r.tries[0].find("making the model again would take about"), std::string::npos) << r.tries[0];
+  EXPECT_NE(r.tries[0].find("(5 s left): not tried"), std::string::npos) << r.tries[0];
+  EXPECT_NE(r.tries[1].find("registering the group again would take about"), std::string::npos) << r.tries[1];
+  EXPECT_EQ(r.route, "move");
+  EXPECT_TRUE(r.used) << r.why;
+  const nlohmann::json j = nlohmann::json::parse(ReadFileToString(dir / "ws" / "repair" / "repair.json"));
+  EXPECT_TRUE(j.value("skipped_for_time", false));
+  // Later, with time: decided again (only the move here, to stay quick), not "as decided before".
+  o.seconds_left = nullptr;
+  o.routes = {"move"};
+  std::vector<std::string> lines;
+  o.say = [&](const std::string& line) { lines.push_back(line); };
+  const RepairResult later = RepairModel(o);
+  EXPECT_EQ(later.tries.size(), 1u) << later.why;
+  EXPECT_TRUE(std::none_of(lines.begin(), lines.end(), [](const std::string& l) { return l.find("as decided before") != std::string::npos; }));
+  EXPECT_FALSE(nlohmann::json::parse(ReadFileToString(dir / "ws" / "repair" / "repair.json")).value("skipped_for_time", true));
+}
+
 }  // namespace
 }  // namespace perf
