@@ -63,6 +63,7 @@ struct TurnSearch {
   double psnr_before = 0, psnr_turned = 0, psnr_fitted = 0, psnr_moved = 0;
   bool used = false;
   std::string why;  // the decision in words
+  double turn_seconds = 0, fit_seconds = 0;  // the turns scored; the pose fits and the similarity
   nlohmann::json ToJson() const;
 };
 
