@@ -80,13 +80,11 @@ std::string DescribeAlignment(const ModelAlignment& a) {
   return buf;
 }
 
-// Whether a COLMAP route over the photos of `given` (perf sfm, or the registration, which also
-// extracts every photo's features) fits perf run's time budget: its estimate (SequentialSfmSeconds,
-// at the size of the first photo's header) at most 80 % of the time left, the rest for the
-// reconstruction. Where it does not, `why` says so.
-bool FitsBudget(const RepairOptions& o, const colmap::Reconstruction& given, const SfmOptions& so, const std::string& what,
-                std::string* why) {
-  if (!o.seconds_left || given.images.empty()) return true;
+// What a COLMAP route over the photos of `given` (perf sfm, or the registration, which also
+// extracts every photo's features) takes by SequentialSfmSeconds, at the size of the first photo's
+// header (the camera's where it cannot be read). Both routes share it.
+double ColmapRouteSeconds(const colmap::Reconstruction& given, const SfmOptions& so) {
+  if (given.images.empty()) return 0;
   const colmap::Image& first = given.images.begin()->second;
   double w = 0, h = 0;
   try {
@@ -98,12 +96,7 @@ bool FitsBudget(const RepairOptions& o, const colmap::Reconstruction& given, con
     }
   }
   const double scale = std::min(1.0, so.max_image_size / std::max({w, h, 1.0}));
-  const double needs = SequentialSfmSeconds(so, static_cast<int>(given.images.size()), w * h * scale * scale / 1e6);
-  const double left = o.seconds_left();
-  if (needs <= 0.8 * left) return true;
-  *why = StrCat(what, " would take about ", static_cast<int>(needs), " s, more than the time budget can give it (",
-                static_cast<int>(std::max(0.0, left)), " s left): not tried");
-  return false;
+  return SequentialSfmSeconds(so, static_cast<int>(given.images.size()), w * h * scale * scale / 1e6);
 }
 
 std::string Join(const std::vector<std::string>& parts) {
@@ -194,13 +187,20 @@ RepairResult RepairModel(const RepairOptions& o) {
   };
   // A model made again has no ghost to hide in and one focal length; put in the user's frame.
   const SfmOptions sfm_options = RepairSfmOptions(given, r.images, dir, o);
-  std::string over;
+  // Under perf run's time budget a COLMAP route runs only where its estimate is at most 80 % of
+  // the time left (the rest for the reconstruction); otherwise it says so and is not tried.
+  const double colmap_seconds = o.seconds_left ? ColmapRouteSeconds(given, sfm_options) : 0;
   bool skipped_for_time = false;
-  if (o.routes.count("sfm") && !FitsBudget(o, given, sfm_options, "making the model again", &over)) {
-    tried(over);
+  const auto fits_budget = [&](const std::string& what) {
+    if (!o.seconds_left) return true;
+    const double left = o.seconds_left();
+    if (colmap_seconds <= 0.8 * left) return true;
+    tried(StrCat(what, " would take about ", static_cast<int>(colmap_seconds), " s, more than the time budget can give it (",
+                 static_cast<int>(std::max(0.0, left)), " s left): not tried"));
     skipped_for_time = true;
-  }
-  if (o.routes.count("sfm") && over.empty()) {
+    return false;
+  };
+  if (o.routes.count("sfm") && fits_budget("making the model again")) {
     try {
       Say(o, "repair: making the model again from the photos (perf sfm into " + dir.string() + ")");
       colmap::Reconstruction made = colmap::ReadReconstruction(RunSfm(sfm_options).sparse_dir);
@@ -214,12 +214,7 @@ RepairResult RepairModel(const RepairOptions& o) {
       failed("perf sfm could not make a model of the photos", e);
     }
   }
-  over.clear();
-  if (!r.used && o.routes.count("register") && !FitsBudget(o, given, sfm_options, "registering the group again", &over)) {
-    tried(over);
-    skipped_for_time = true;
-  }
-  if (!r.used && o.routes.count("register") && over.empty()) {
+  if (!r.used && o.routes.count("register") && fits_budget("registering the group again")) {
     try {
       RegisterGroupOptions ro;
       ro.images = r.images;

@@ -361,9 +361,10 @@ std::vector<TurnSearch> SearchTurns(ReconstructRun& run, const TurnSearchOptions
   };
   const auto start = WallClock::now();
   SolveHierarchy(run.backend.get(), run.geometry, ViewsForHierarchy(fit_photos), h, HierarchyStart{}, cb);
-  double level_seconds = SecondsSince(start);
+  const double seconds = SecondsSince(start);
+  double level_seconds = seconds;
   for (const TurnSearch& t : found) level_seconds -= t.turn_seconds + t.fit_seconds;
-  run.Say(StrCat("turn search: ", std::lround(SecondsSince(start)), " s (the first level ", std::lround(level_seconds),
+  run.Say(StrCat("turn search: ", std::lround(seconds), " s (the first level ", std::lround(level_seconds),
                  " s; the turns and the pose fits of each group the rest)"));
   for (const TurnSearch& t : found) {
     Apply(run, t);
